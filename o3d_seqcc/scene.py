@@ -403,6 +403,10 @@ def _check_image_header(v: View) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+def _join(root: Path, rel: str) -> Path:
+    return Path(os.path.normpath(root / rel))
+
+
 def _load_json(path: Path) -> Scene:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -437,14 +441,14 @@ def _load_json(path: Path) -> Scene:
             views.append(
                 View(
                     name=d["name"],
-                    image=root / d["image"],
+                    image=_join(root, d["image"]),
                     intrinsic=np.asarray(d["intrinsic"], dtype=np.float64),
                     extrinsic=np.asarray(d["extrinsic"], dtype=np.float64),
                     width=d["width"],
                     height=d["height"],
-                    depth=None if d.get("depth") is None else root / d["depth"],
+                    depth=None if d.get("depth") is None else _join(root, d["depth"]),
                     depth_scale=d.get("depth_scale", 1000.0),
-                    point_cloud=None if d.get("point_cloud") is None else root / d["point_cloud"],
+                    point_cloud=None if d.get("point_cloud") is None else _join(root, d["point_cloud"]),
                 )
             )
         except InputError as e:
@@ -452,7 +456,7 @@ def _load_json(path: Path) -> Scene:
         except (TypeError, ValueError) as e:
             raise InputError(f"{where}: malformed entry ({e})") from None
     try:
-        return Scene(mesh=root / data["mesh"], views=tuple(views))
+        return Scene(mesh=_join(root, data["mesh"]), views=tuple(views))
     except InputError as e:
         raise InputError(f"{path}: {e}") from None
 

@@ -1,0 +1,105 @@
+#!/usr/bin/env bash
+# One-command set-up and tasks for o3d_seqcc on a fresh Debian/Ubuntu machine.
+#
+#   ./dev.sh demo    install everything (once) and run the pipeline on the built-in synthetic scene
+#   ./dev.sh test    install everything (once) and run the test suite
+#   ./dev.sh setup   only install
+#
+# Installs: the system libraries Open3D and pymeshlab need (apt, when root or with sudo), a
+# virtual environment in .venv with the package and its test extra, and the Khronos glTF
+# validator (npm) into .cache/node. Re-running is cheap: each step is skipped when done.
+set -euo pipefail
+cd "$(dirname "$0")"
+ROOT=$(pwd)
+VENV=${VENV:-$ROOT/.venv}
+APT_PACKAGES=(libusb-1.0-0 libgomp1 libgl1 libegl1 xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm)
+
+log() { printf '\033[1m[dev.sh]\033[0m %s\n' "$*" >&2; }
+
+setup_system() {
+  local missing=()
+  if command -v dpkg-query >/dev/null 2>&1; then
+    for p in "${APT_PACKAGES[@]}"; do
+      # node/npm may come from elsewhere (nvm, the image): only install when absent
+      if [[ $p == nodejs && -n $(command -v node || true) ]]; then continue; fi
+      if [[ $p == npm && -n $(command -v npm || true) ]]; then continue; fi
+      dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+    done
+  fi
+  [[ ${#missing[@]} -eq 0 ]] && return 0
+  local SUDO=""
+  if [[ $(id -u) -ne 0 ]]; then
+    if command -v sudo >/dev/null 2>&1; then SUDO=sudo; else
+      log "missing system packages: ${missing[*]}; install them as root: apt-get install -y ${missing[*]}"
+      return 0
+    fi
+  fi
+  log "installing system packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+find_python() {
+  for py in "${PYTHON:-}" python3.13 python3.12 python3.11 python3.10 python3; do
+    [[ -z $py ]] && continue
+    if command -v "$py" >/dev/null 2>&1 && "$py" -c 'import sys; sys.exit(sys.version_info < (3, 10))' 2>/dev/null; then
+      echo "$py"; return 0
+    fi
+  done
+  log "Python >= 3.10 not found"; exit 1
+}
+
+setup_python() {
+  local stamp="$VENV/.o3d_seqcc-installed"
+  local want
+  want=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
+  if [[ -f $stamp && $(cat "$stamp") == "$want" ]]; then return 0; fi
+  if [[ ! -x $VENV/bin/python ]]; then
+    local py; py=$(find_python)
+    log "creating $VENV with $py"
+    "$py" -m venv "$VENV"
+  fi
+  log "installing o3d_seqcc and its dependencies into $VENV"
+  "$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+  "$VENV/bin/python" -m pip install -q -e ".[test]" 2>&1 | grep -v '^WARNING: Location' || true
+  "$VENV/bin/python" -c "import o3d_seqcc, open3d, pymeshlab, cv2, sklearn, xatlas" || { log "install failed"; exit 1; }
+  echo "$want" > "$stamp"
+}
+
+setup_node() {
+  local dir="$ROOT/.cache/node"
+  [[ -f $dir/node_modules/gltf-validator/package.json ]] && return 0
+  if command -v npm >/dev/null 2>&1; then
+    log "installing the Khronos glTF validator (npm gltf-validator) into $dir"
+    mkdir -p "$dir"
+    npm install --silent --no-audit --no-fund --prefix "$dir" gltf-validator >/dev/null 2>&1 \
+      || log "npm install gltf-validator failed: the GLB validation test will be skipped"
+  else
+    log "npm not found: the GLB validation test will be skipped"
+  fi
+}
+
+setup() { setup_system; setup_python; setup_node; }
+
+# pymeshlab's raster filters need an OpenGL context and a Qt platform plugin
+export QT_QPA_PLATFORM=${QT_QPA_PLATFORM:-xcb}
+[[ -d /usr/lib/x86_64-linux-gnu/qt5/plugins ]] && export QT_PLUGIN_PATH=${QT_PLUGIN_PATH:-/usr/lib/x86_64-linux-gnu/qt5/plugins}
+export GLTF_VALIDATOR_DIR=${GLTF_VALIDATOR_DIR:-$ROOT/.cache/node/node_modules/gltf-validator}
+export MPLBACKEND=Agg
+
+with_display() {
+  if [[ -z ${DISPLAY:-} ]] && command -v xvfb-run >/dev/null 2>&1; then
+    xvfb-run -a -s "-screen 0 1280x1024x24 +extension GLX" "$@"
+  else
+    "$@"
+  fi
+}
+
+cmd=${1:-help}; shift || true
+case $cmd in
+  setup) setup ;;
+  demo) setup; with_display "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
+  test) setup; with_display "$VENV/bin/python" -m pytest "$@" ;;
+  *) sed -n '2,12p' "$0"; exit 2 ;;
+esac

@@ -1,0 +1,75 @@
+"""Real datasets.
+
+``fountain`` is the "Fountain" key-frame set of Zhou & Koltun (SIGGRAPH 2014), distributed by
+Open3D as ``open3d.data.SampleFountainRGBDImages``: 33 RGB-D key frames (640x480, PrimeSense
+intrinsics) with camera-to-world poses in ``scene/key.log``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .scene import Scene, load_rgbd_folder
+
+__all__ = ["fountain"]
+
+logger = logging.getLogger(__name__)
+
+#: meshes looked for, in order, in ``root/scene`` when ``mesh`` is not given
+FOUNTAIN_MESHES = ("mesh_decimated_uv_blender.ply", "integrated.ply", "tsdf_mesh.ply")
+
+
+def fountain(
+    root: str | os.PathLike | None = None,
+    *,
+    mesh: str | os.PathLike | None = None,
+    intrinsic: np.ndarray | None = None,
+) -> Scene:
+    """The Fountain RGB-D key frames as a :class:`~o3d_seqcc.scene.Scene`.
+
+    Parameters
+    ----------
+    root : path-like, optional
+        A folder in the ``SampleFountainRGBDImages`` layout (``image/``, ``depth/``,
+        ``scene/key.log``). When omitted, Open3D's own copy is used (``open3d.data`` downloads
+        it on first use, which needs internet access).
+    mesh : path-like, optional
+        Mesh file, absolute or relative to ``root``; default: the first of
+        :data:`FOUNTAIN_MESHES` found in ``root/scene``.
+    intrinsic : (3, 3) array, optional
+        Default: PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5).
+
+    Returns
+    -------
+    Scene
+        33 views named after their image files, with depth maps (depth_scale 1000).
+    """
+    if root is None:
+        import open3d as o3d
+
+        try:
+            data = o3d.data.SampleFountainRGBDImages()
+        except Exception as e:  # network failures surface as RuntimeError in Open3D
+            raise InputError(
+                f"could not get Open3D's SampleFountainRGBDImages ({e}); pass root= a local copy of the folder"
+            ) from None
+        root = Path(data.extract_dir if hasattr(data, "extract_dir") else Path(data.color_paths[0]).parents[1])
+        if mesh is None and hasattr(data, "reconstruction_path"):
+            mesh = data.reconstruction_path
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"fountain dataset folder not found: {root}")
+    if mesh is None:
+        found = [root / "scene" / m for m in FOUNTAIN_MESHES if (root / "scene" / m).is_file()]
+        if not found:
+            raise InputError(f"{root}/scene holds none of {FOUNTAIN_MESHES}; pass mesh=")
+        mesh = found[0]
+    scene = load_rgbd_folder(root, mesh=mesh, intrinsic=intrinsic)
+    scene.validate()
+    logger.info("fountain: %d views, mesh %s", len(scene.views), scene.mesh)
+    return scene
