@@ -85,7 +85,7 @@ setup() { setup_system; setup_python; setup_node; }
 # pymeshlab's raster filters need an OpenGL context and a Qt platform plugin
 export QT_QPA_PLATFORM=${QT_QPA_PLATFORM:-xcb}
 [[ -d /usr/lib/x86_64-linux-gnu/qt5/plugins ]] && export QT_PLUGIN_PATH=${QT_PLUGIN_PATH:-/usr/lib/x86_64-linux-gnu/qt5/plugins}
-export GLTF_VALIDATOR_DIR=${GLTF_VALIDATOR_DIR:-$ROOT/.cache/node/node_modules/gltf-validator}
+export GLTF_VALIDATOR_DIR=${GLTF_VALIDATOR_DIR:-$ROOT/.cache/node}
 export MPLBACKEND=Agg
 
 with_display() {

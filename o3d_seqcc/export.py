@@ -1,0 +1,325 @@
+"""Export of a :class:`~o3d_seqcc.texturing.TexturedMesh`: OBJ + MTL + PNG, glTF 2.0 binary (GLB), PLY.
+
+UV conventions. ``TexturedMesh.uv`` has its origin at the top-left corner of the atlas with v
+pointing down (texel (X, Y) centre at ((X + 0.5) / S, (Y + 0.5) / S)).
+
+- OBJ/MTL: origin bottom-left, v up, so ``vt = (u, 1 - v)``.
+- glTF 2.0: origin top-left (the first pixel of the image), so ``TEXCOORD_0 = (u, v)`` unchanged.
+
+Every file is written atomically (temporary file in the destination folder, then rename), and
+for OBJ the texture and material are written before the ``.obj`` that refers to them.
+
+The GLB holds one mesh with one primitive (POSITION, NORMAL, TEXCOORD_0, uint32 indices), one
+material (``baseColorTexture`` = the embedded PNG, ``metallicFactor`` 0, ``roughnessFactor`` 1,
+optionally ``KHR_materials_unlit``), a sampler with linear mip-mapped filtering and
+clamp-to-edge wrapping; every bufferView starts on a 4-byte boundary and both chunks are padded
+as the specification requires (JSON with spaces, BIN with zeros). It passes the Khronos
+glTF-Validator without errors (see ``tests/test_export.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import struct
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from ._io import atomic_write_bytes
+from .errors import InputError
+
+__all__ = ["FORMATS", "encode_png", "export_glb", "export_obj", "export_ply", "export_textured_mesh"]
+
+logger = logging.getLogger(__name__)
+
+#: formats known to :func:`export_textured_mesh`
+FORMATS = ("glb", "obj", "ply")
+
+
+def _check(textured: Any) -> None:
+    for name in ("vertices", "faces", "uv", "texture"):
+        if getattr(textured, name, None) is None:
+            raise InputError(f"export: the textured mesh has no {name!r}")
+    v, f, uv, tex = textured.vertices, textured.faces, textured.uv, textured.texture
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or uv.shape != (len(v), 2):
+        raise InputError(f"export: inconsistent shapes vertices {v.shape}, faces {f.shape}, uv {uv.shape}")
+    if len(f) == 0:
+        raise InputError("export: the mesh has no faces")
+    if f.min() < 0 or f.max() >= len(v):
+        raise InputError("export: face indices outside the vertex array")
+    if tex.ndim != 3 or tex.shape[2] != 3 or tex.dtype != np.uint8:
+        raise InputError(f"export: texture must be (H, W, 3) uint8, got {tex.shape} {tex.dtype}")
+
+
+def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 RGB image (OpenCV encoder; ``compression`` 0-9)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1]), [cv2.IMWRITE_PNG_COMPRESSION, int(compression)])
+    if not ok:  # pragma: no cover
+        raise OSError("OpenCV could not encode the texture as PNG")
+    return buf.tobytes()
+
+
+def _normals(textured: Any) -> np.ndarray:
+    n = getattr(textured, "normals", None)
+    v, f = textured.vertices, textured.faces
+    if n is None or np.shape(n) != v.shape:
+        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        n = np.zeros_like(v, dtype=np.float64)
+        np.add.at(n, f.reshape(-1), np.repeat(fn, 3, axis=0))
+    n = np.asarray(n, dtype=np.float64)
+    ln = np.linalg.norm(n, axis=1)
+    bad = ~(ln > 1e-12)
+    n = np.where(bad[:, None], [0.0, 0.0, 1.0], n / np.where(bad, 1.0, ln)[:, None])
+    return n
+
+
+def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
+    if len(a) == 0:
+        return ""
+    row = prefix + " " + " ".join([fmt] * a.shape[1]) + "\n"
+    return (row * len(a)) % tuple(a.ravel().tolist())
+
+
+def export_obj(textured: Any, path: str | os.PathLike, *, png_compression: int = 1, png: bytes | None = None) -> Path:
+    """Write ``path`` (.obj) with ``<stem>.mtl`` and ``<stem>.png`` next to it.
+
+    Parameters
+    ----------
+    textured : TexturedMesh
+        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2) top-left origin, ``texture``
+        (S, S, 3) uint8, optionally ``normals`` (M, 3).
+    path : path-like
+        Destination ``.obj``.
+    png_compression : int, default 1
+        zlib level of the PNG (0-9; 1 is fast and close in size).
+    png : bytes, optional
+        Already encoded texture (:func:`encode_png`), to encode it once for several formats.
+
+    Returns
+    -------
+    pathlib.Path
+        The OBJ path.
+    """
+    _check(textured)
+    path = Path(path)
+    stem = path.stem
+    png_name, mtl_name = f"{stem}.png", f"{stem}.mtl"
+    if png is None:
+        png = encode_png(textured.texture, compression=png_compression)
+    atomic_write_bytes(path.with_name(png_name), png)
+    mtl = (
+        "# o3d_seqcc texture atlas\n"
+        "newmtl material_0\n"
+        "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
+        f"d 1.0\nillum 1\nmap_Kd {png_name}\n"
+    )
+    atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
+    uv = np.asarray(textured.uv, dtype=np.float64)
+    vt = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
+    f1 = np.asarray(textured.faces, dtype=np.int64) + 1
+    fidx = np.repeat(f1, 3, axis=1)  # a/a/a b/b/b c/c/c
+    parts = [
+        "# o3d_seqcc textured mesh\n",
+        f"mtllib {mtl_name}\n",
+        _fmt_rows("v", np.asarray(textured.vertices, dtype=np.float64), "%.9g"),
+        _fmt_rows("vt", vt, "%.7f"),
+        _fmt_rows("vn", _normals(textured), "%.5f"),
+        "usemtl material_0\n",
+        (("f" + " %d/%d/%d" * 3 + "\n") * len(fidx)) % tuple(fidx.ravel().tolist()),
+    ]
+    atomic_write_bytes(path, "".join(parts).encode("ascii"))
+    logger.info("wrote %s (+ %s, %s)", path, mtl_name, png_name)
+    return path
+
+
+def _pad4(b: bytes, fill: bytes = b"\x00") -> bytes:
+    return b + fill * ((-len(b)) % 4)
+
+
+def glb_bytes(textured: Any, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None) -> bytes:
+    """The GLB file content of a textured mesh (see :func:`export_glb`)."""
+    _check(textured)
+    pos = np.ascontiguousarray(textured.vertices, dtype=np.float32)
+    nrm = np.ascontiguousarray(_normals(textured), dtype=np.float32)
+    # float32 rounding can leave |n| a hair off 1; renormalise in float32
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    uv = np.ascontiguousarray(textured.uv, dtype=np.float32)
+    idx = np.ascontiguousarray(textured.faces, dtype=np.uint32).reshape(-1)
+    if png is None:
+        png = encode_png(textured.texture, compression=png_compression)
+    blobs: list[bytes] = []
+    views: list[dict] = []
+    offset = 0
+
+    def add_view(data: bytes, target: int | None) -> int:
+        nonlocal offset
+        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        views.append(view)
+        padded = _pad4(data)
+        blobs.append(padded)
+        offset += len(padded)
+        return len(views) - 1
+
+    v_pos = add_view(pos.tobytes(), 34962)
+    v_nrm = add_view(nrm.tobytes(), 34962)
+    v_uv = add_view(uv.tobytes(), 34962)
+    v_idx = add_view(idx.tobytes(), 34963)
+    v_png = add_view(png, None)
+    n = len(pos)
+    accessors = [
+        {"bufferView": v_pos, "componentType": 5126, "count": n, "type": "VEC3",
+         "min": pos.min(axis=0).astype(float).tolist(), "max": pos.max(axis=0).astype(float).tolist()},
+        {"bufferView": v_nrm, "componentType": 5126, "count": n, "type": "VEC3"},
+        {"bufferView": v_uv, "componentType": 5126, "count": n, "type": "VEC2"},
+        {"bufferView": v_idx, "componentType": 5125, "count": int(idx.size), "type": "SCALAR"},
+    ]
+    material: dict[str, Any] = {
+        "name": "atlas",
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0, "roughnessFactor": 1.0},
+        "doubleSided": False,
+    }
+    gltf: dict[str, Any] = {
+        "asset": {"version": "2.0", "generator": "o3d_seqcc"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": "textured_mesh"}],
+        "meshes": [{"name": "textured_mesh", "primitives": [
+            {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0, "mode": 4}
+        ]}],
+        "materials": [material],
+        "textures": [{"sampler": 0, "source": 0}],
+        "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}],
+        "images": [{"bufferView": v_png, "mimeType": "image/png"}],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{"byteLength": offset}],
+    }
+    if unlit:
+        material["extensions"] = {"KHR_materials_unlit": {}}
+        gltf["extensionsUsed"] = ["KHR_materials_unlit"]
+    js = _pad4(json.dumps(gltf, separators=(",", ":")).encode("utf-8"), b" ")
+    binc = b"".join(blobs)
+    total = 12 + 8 + len(js) + 8 + len(binc)
+    out = bytearray()
+    out += struct.pack("<4sII", b"glTF", 2, total)
+    out += struct.pack("<I4s", len(js), b"JSON") + js
+    out += struct.pack("<I4s", len(binc), b"BIN\x00") + binc
+    return bytes(out)
+
+
+def export_glb(
+    textured: Any, path: str | os.PathLike, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None
+) -> Path:
+    """Write a glTF 2.0 binary (.glb) with the atlas embedded as ``baseColorTexture``.
+
+    Parameters
+    ----------
+    textured : TexturedMesh
+    path : path-like
+        Destination ``.glb``.
+    unlit : bool, default False
+        Add ``KHR_materials_unlit`` (viewers then show the photo colours without shading);
+        the material is otherwise metallic 0 / roughness 1.
+    png_compression : int, default 1
+    png : bytes, optional
+        Already encoded texture (:func:`encode_png`).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    path = Path(path)
+    atomic_write_bytes(path, glb_bytes(textured, unlit=unlit, png_compression=png_compression, png=png))
+    logger.info("wrote %s", path)
+    return path
+
+
+def export_ply(textured: Any, path: str | os.PathLike) -> Path:
+    """Write a binary PLY with per-vertex colours sampled from the atlas (bilinear).
+
+    Vertices are the textured mesh's (duplicated along chart borders), so colours stay exact at
+    every vertex; detail inside a face is lost (vertex colours are interpolated).
+    """
+    _check(textured)
+    path = Path(path)
+    tex = textured.texture.astype(np.float64)
+    s_h, s_w = tex.shape[:2]
+    x = np.clip(textured.uv[:, 0] * s_w - 0.5, 0, s_w - 1)
+    y = np.clip(textured.uv[:, 1] * s_h - 0.5, 0, s_h - 1)
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, s_w - 1), np.minimum(y0 + 1, s_h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    col = (tex[y0, x0] * (1 - fx) * (1 - fy) + tex[y0, x1] * fx * (1 - fy) + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
+    n = _normals(textured)
+    vdt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
+                    ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    va = np.empty(len(textured.vertices), dtype=vdt)
+    for i, k in enumerate("xyz"):
+        va[k] = textured.vertices[:, i]
+        va["n" + k] = n[:, i]
+    c8 = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+    va["red"], va["green"], va["blue"] = c8[:, 0], c8[:, 1], c8[:, 2]
+    fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
+    fa = np.empty(len(textured.faces), dtype=fdt)
+    fa["n"] = 3
+    fa["i"] = textured.faces
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment o3d_seqcc vertex colours from the texture atlas\n"
+        f"element vertex {len(va)}\nproperty float x\nproperty float y\nproperty float z\n"
+        "property float nx\nproperty float ny\nproperty float nz\n"
+        "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        f"element face {len(fa)}\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    atomic_write_bytes(path, header.encode("ascii") + va.tobytes() + fa.tobytes())
+    logger.info("wrote %s", path)
+    return path
+
+
+_WRITERS = {"glb": ("mesh.glb", export_glb), "obj": ("mesh.obj", export_obj), "ply": ("mesh_colors.ply", export_ply)}
+
+
+def export_textured_mesh(
+    textured: Any,
+    out_dir: str | os.PathLike,
+    *,
+    formats: Iterable[str] = ("glb", "obj"),
+    stem: str = "mesh",
+    unlit: bool = False,
+) -> dict[str, Path]:
+    """Write ``out_dir/<stem>.glb``, ``<stem>.obj`` (+ .mtl, .png), ``<stem>_colors.ply`` as asked.
+
+    The PNG is encoded once for GLB and OBJ.
+
+    Parameters
+    ----------
+    formats : iterable of {"glb", "obj", "ply"}, default ("glb", "obj")
+    stem : str, default "mesh"
+    unlit : bool, default False
+        GLB material with ``KHR_materials_unlit``.
+
+    Returns
+    -------
+    dict
+        Format -> written path.
+    """
+    fmts = [f.strip().lower() for f in formats if f.strip()]
+    bad = [f for f in fmts if f not in _WRITERS]
+    if bad or not fmts:
+        raise InputError(f"unknown export format(s) {bad or fmts}; valid: {', '.join(FORMATS)}")
+    out_dir = Path(out_dir)
+    out: dict[str, Path] = {}
+    png = encode_png(textured.texture) if {"glb", "obj"} & set(fmts) else None
+    for f in dict.fromkeys(fmts):
+        name, fn = _WRITERS[f]
+        kw: dict[str, Any] = {"png": png} if f in ("glb", "obj") else {}
+        if f == "glb" and unlit:
+            kw["unlit"] = True
+        out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+    return out

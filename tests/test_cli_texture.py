@@ -1,0 +1,74 @@
+"""Tests of the ``o3d-seqcc texture`` and ``o3d-seqcc run`` sub-commands on a small synthetic scene."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from o3d_seqcc.cli import main
+
+
+@pytest.fixture(scope="module")
+def syn(tmp_path_factory):
+    from o3d_seqcc.synthetic import make_synthetic_scene
+
+    return make_synthetic_scene(tmp_path_factory.mktemp("syn") / "scene", n_views=12, width=160, height=120, seed=0)
+
+
+def _report(out) -> dict:
+    return json.loads((out / "report.json").read_text())
+
+
+def test_texture_writes_outputs_and_refuses_existing_folder(syn, tmp_path, capsys):
+    scene_json = str(syn.root / "scene.json")
+    out = tmp_path / "tex"
+    assert main(["-q", "texture", scene_json, "--out", str(out), "--format", "glb,obj", "--selection", "largest-area"]) == 0
+    for name in ("mesh.glb", "mesh.obj", "mesh.mtl", "mesh.png", "selection.npy", "report.json"):
+        assert (out / name).is_file(), name
+    rep = _report(out)
+    sel = rep["selection"]
+    assert sel["method"] == "largest-area" and sel["faces"] == len(np.load(out / "selection.npy"))
+    assert sel["unseen_faces"] == int((np.load(out / "selection.npy") < 0).sum())
+    assert {"transitions", "interior_edges", "views_used"} <= set(sel)
+    assert rep["seams"]["n_edges"] > 0 and 0 <= rep["seams"]["frac_above_5"] <= 1
+    assert rep["timings_s"]["total"] > 0
+    # existing output folder: refused (exit code 2, clear message), accepted with --overwrite
+    capsys.readouterr()
+    assert main(["-q", "texture", scene_json, "--out", str(out)]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main(["-q", "texture", scene_json, "--out", str(out), "--overwrite", "--selection", "mrf",
+                 "--format", "glb", "--no-seams"]) == 0
+    rep_mrf = _report(out)
+    assert rep_mrf["selection"]["method"] == "mrf" and rep_mrf["seams"] is None
+    assert rep_mrf["selection"]["transitions"] <= sel["transitions"]
+
+
+def test_texture_bad_format(syn, tmp_path, capsys):
+    scene_json = str(syn.root / "scene.json")
+    assert main(["-q", "texture", scene_json, "--out", str(tmp_path / "x"), "--format", "fbx", "--no-seams"]) == 2
+    assert "fbx" in capsys.readouterr().err
+
+
+def test_texture_with_images_folder(syn, tmp_path):
+    """--images: texture with other images named after the views (here the ground-truth renders)."""
+    gt_dir = next(iter(syn.gt_images.values())).parent
+    out = tmp_path / "gt"
+    assert main(["-q", "texture", str(syn.root / "scene.json"), "--out", str(out), "--images", str(gt_dir),
+                 "--format", "glb"]) == 0
+    assert _report(out)["images"] == str(gt_dir)
+    assert main(["-q", "texture", str(syn.root / "scene.json"), "--out", str(tmp_path / "bad"), "--images",
+                 str(tmp_path)]) == 2
+
+
+def test_run_corrects_and_textures(syn, tmp_path):
+    scene_json = str(syn.root / "scene.json")
+    out = tmp_path / "run"
+    assert main(["-q", "run", scene_json, "--out", str(out), "--format", "glb", "--compare-original"]) == 0
+    rep = _report(out)
+    assert rep["command"] == "run" and rep["correction"]["reference"] in syn.scene.names
+    assert (out / "mesh.glb").is_file()
+    for key in ("visibility", "correction", "selection", "bake", "export", "seams", "total"):
+        assert key in rep["timings_s"], key
+    assert rep["seams"]["mean"] >= 0 and rep["seams_original_images"]["mean"] >= 0

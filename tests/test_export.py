@@ -1,0 +1,203 @@
+"""Tests of o3d_seqcc.export: OBJ+MTL+PNG, GLB (glTF 2.0, Khronos validator), PLY."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from o3d_seqcc.errors import InputError
+from o3d_seqcc.export import export_glb, export_obj, export_ply, export_textured_mesh, glb_bytes
+from o3d_seqcc.texturing import TexturedMesh
+
+trimesh = pytest.importorskip("trimesh")
+
+
+@pytest.fixture
+def textured(rng) -> TexturedMesh:
+    """Two charts (a quad split in two triangles, each its own chart) on a 16 x 16 atlas."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [3, 4, 5]], dtype=np.int64)
+    S = 16
+    tex = rng.integers(0, 256, size=(S, S, 3), dtype=np.uint8)
+    texel = np.array([[1, 1], [6, 1], [6, 6], [9, 9], [14, 14], [9, 14]], dtype=np.float64)
+    uv = (texel + 0.5) / S
+    n = np.tile([0.0, 0.0, 1.0], (6, 1))
+    return TexturedMesh(vertices=v, faces=f, uv=uv, normals=n, texture=tex, face_view=np.array([0, 1]),
+                        vertex_index=np.array([0, 1, 2, 0, 2, 3]), face_chart=np.array([0, 1]), stats={})
+
+
+def _texel_of_vertex(mesh, uv_obj: np.ndarray, k: int, tex: np.ndarray) -> np.ndarray:
+    """Texture colour at vertex k given OBJ-convention uv (v up)."""
+    S = tex.shape[0]
+    x = int(round(uv_obj[k, 0] * S - 0.5))
+    y = int(round((1.0 - uv_obj[k, 1]) * S - 0.5))
+    return tex[y, x]
+
+
+def _loaded_texture(m) -> np.ndarray:
+    mat = m.visual.material
+    img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
+    assert img is not None, "texture missing"
+    return np.asarray(img.convert("RGB"))
+
+
+@pytest.mark.parametrize("fmt", ["obj", "glb"])
+def test_roundtrip_trimesh(tmp_path, textured, fmt):
+    path = (export_obj if fmt == "obj" else export_glb)(textured, tmp_path / f"mesh.{fmt}")
+    if fmt == "obj":
+        assert (tmp_path / "mesh.mtl").is_file() and (tmp_path / "mesh.png").is_file()
+        assert "map_Kd mesh.png" in (tmp_path / "mesh.mtl").read_text()
+    m = trimesh.load(str(path), force="mesh", process=False)
+    assert len(m.vertices) == len(textured.vertices) and len(m.faces) == len(textured.faces)
+    np.testing.assert_allclose(m.vertices, textured.vertices, atol=1e-6)
+    uv = np.asarray(m.visual.uv)
+    assert uv.min() >= 0 and uv.max() <= 1
+    tex = _loaded_texture(m)
+    np.testing.assert_array_equal(tex, textured.texture)  # PNG is lossless
+    # trimesh gives OBJ-convention UVs for both formats: the texel under every vertex must match
+    for k in range(len(textured.vertices)):
+        x, y = (textured.uv[k] * 16 - 0.5).round().astype(int)
+        np.testing.assert_array_equal(_texel_of_vertex(m, uv, k, tex), textured.texture[y, x])
+    assert not list(tmp_path.glob(".*.tmp")), "temporary files left behind"
+
+
+def test_obj_vt_convention(tmp_path, textured):
+    export_obj(textured, tmp_path / "m.obj")
+    vt = np.array([[float(x) for x in ln.split()[1:]] for ln in (tmp_path / "m.obj").read_text().splitlines()
+                   if ln.startswith("vt ")])
+    np.testing.assert_allclose(vt[:, 0], textured.uv[:, 0], atol=1e-6)
+    np.testing.assert_allclose(vt[:, 1], 1.0 - textured.uv[:, 1], atol=1e-6)
+
+
+def _json_chunk(data: bytes) -> dict:
+    jlen = int(np.frombuffer(data[12:16], dtype="<u4")[0])
+    return json.loads(data[20:20 + jlen])
+
+
+def test_glb_layout(textured):
+    data = glb_bytes(textured)
+    magic, version, length = np.frombuffer(data[:12], dtype="<u4")
+    assert data[:4] == b"glTF" and version == 2 and length == len(data) and len(data) % 4 == 0
+    jlen = int(np.frombuffer(data[12:16], dtype="<u4")[0])
+    assert jlen % 4 == 0 and data[16:20] == b"JSON"
+    gltf = json.loads(data[20:20 + jlen])
+    assert all(bv["byteOffset"] % 4 == 0 for bv in gltf["bufferViews"])
+    prim = gltf["meshes"][0]["primitives"][0]
+    assert set(prim["attributes"]) == {"POSITION", "NORMAL", "TEXCOORD_0"}
+    pbr = gltf["materials"][0]["pbrMetallicRoughness"]
+    assert pbr["baseColorTexture"]["index"] == 0 and pbr["metallicFactor"] == 0
+    assert gltf["images"][0]["mimeType"] == "image/png"
+    # glTF UV origin is top-left: TEXCOORD_0 == our uv unchanged
+    acc = gltf["accessors"][prim["attributes"]["TEXCOORD_0"]]
+    bv = gltf["bufferViews"][acc["bufferView"]]
+    start = 20 + jlen + 8 + bv["byteOffset"]
+    uv = np.frombuffer(data[start:start + bv["byteLength"]], dtype="<f4").reshape(-1, 2)
+    np.testing.assert_allclose(uv, textured.uv, atol=1e-7)
+    unlit = _json_chunk(glb_bytes(textured, unlit=True))
+    assert "KHR_materials_unlit" in unlit["extensionsUsed"]
+    assert "KHR_materials_unlit" in unlit["materials"][0]["extensions"]
+
+
+def _validator_dir() -> Path | None:
+    """Folder holding node_modules/gltf-validator: $GLTF_VALIDATOR_DIR (dev.sh: .cache/node), the repo, npm's global root."""
+    cands = [os.environ.get("GLTF_VALIDATOR_DIR"), str(Path(__file__).resolve().parents[1] / ".cache" / "node")]
+    npm = shutil.which("npm")
+    if npm:
+        try:
+            root = subprocess.run([npm, "root", "-g"], capture_output=True, text=True, timeout=30).stdout.strip()
+            if root:
+                cands.append(str(Path(root).parent))
+        except (subprocess.SubprocessError, OSError):
+            pass
+    for c in cands:
+        if c and (Path(c) / "node_modules" / "gltf-validator" / "package.json").is_file():
+            return Path(c).resolve()
+    return None
+
+
+VALIDATE_JS = """
+const fs = require('fs');
+const validator = require(process.argv[3] + '/node_modules/gltf-validator');
+validator.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), {maxIssues: 100}).then(
+  (r) => console.log(JSON.stringify(r.issues)),
+  (e) => { console.error(String(e)); process.exit(3); });
+"""
+
+
+def _baked(rng) -> TexturedMesh:
+    """A real bake: a 6 x 6 grid seen by two cameras, one face seen by none (fallback colour)."""
+    from types import SimpleNamespace
+
+    from o3d_seqcc.scene import Mesh
+    from o3d_seqcc.texturing import bake_texture, select_views
+
+    xs = np.linspace(-1, 1, 7)
+    gx, gy = np.meshgrid(xs, xs)
+    v = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], 1)
+    a = (np.arange(6)[:, None] * 7 + np.arange(6)[None, :]).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + 8], 1), np.stack([a, a + 8, a + 7], 1)])
+    mesh = Mesh(vertices=v, faces=f, vertex_normals=np.tile([0.0, 0.0, -1.0], (len(v), 1)))
+    uv, area = [], []
+    for cx, d in ((0.0, 2.5), (0.3, 2.2)):
+        p = (v[:, :2] - [cx, 0.0]) / d * 60.0 + [63.5, 47.5]
+        e1, e2 = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+        uv.append(p)
+        area.append(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
+    usable = np.ones((2, len(f)), bool)
+    usable[:, 0] = False
+    vis = SimpleNamespace(uv=np.array(uv, np.float32), usable=usable, area=np.array(area, np.float32),
+                          cos_angle=np.ones((2, len(f)), np.float32), mesh=mesh)
+    images = [rng.integers(0, 256, size=(96, 128, 3), dtype=np.uint8) for _ in range(2)]
+    return bake_texture(mesh, images, vis, select_views(vis, method="random"), atlas_size=128)
+
+
+def test_glb_passes_khronos_validator(tmp_path, textured, rng):
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("Node.js not installed (CI: apt-get install nodejs npm)")
+    vdir = _validator_dir()
+    if vdir is None:
+        pytest.skip("npm package gltf-validator not found (npm install --prefix $GLTF_VALIDATOR_DIR gltf-validator)")
+    (tmp_path / "v.js").write_text(VALIDATE_JS)
+    baked = _baked(rng)
+    assert baked.stats["unseen_faces"] == 1
+    for k, (tm, unlit) in enumerate(((textured, False), (textured, True), (baked, False))):
+        path = export_glb(tm, tmp_path / f"m{k}.glb", unlit=unlit)
+        r = subprocess.run([node, str(tmp_path / "v.js"), str(path), str(vdir)], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        issues = json.loads(r.stdout)
+        assert issues["numErrors"] == 0, issues["messages"]
+        assert issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_ply_vertex_colours(tmp_path, textured):
+    path = export_ply(textured, tmp_path / "m.ply")
+    m = trimesh.load(str(path), process=False)
+    assert len(m.vertices) == 6 and len(m.faces) == 2
+    cols = np.asarray(m.visual.vertex_colors)[:, :3]
+    for k in range(6):
+        x, y = (textured.uv[k] * 16 - 0.5).round().astype(int)
+        np.testing.assert_array_equal(cols[k], textured.texture[y, x])
+
+
+def test_export_textured_mesh_formats(tmp_path, textured):
+    out = export_textured_mesh(textured, tmp_path, formats=["glb", "obj", "ply"])
+    assert {k: p.name for k, p in out.items()} == {"glb": "mesh.glb", "obj": "mesh.obj", "ply": "mesh_colors.ply"}
+    with pytest.raises(InputError, match="fbx"):
+        export_textured_mesh(textured, tmp_path, formats=["fbx"])
+
+
+def test_export_bad_input(tmp_path, textured):
+    from dataclasses import replace
+
+    with pytest.raises(InputError, match="texture"):
+        export_glb(replace(textured, texture=textured.texture.astype(np.float32)), tmp_path / "x.glb")
+    with pytest.raises(InputError, match="face indices"):
+        export_obj(replace(textured, faces=textured.faces + 10), tmp_path / "x.obj")
+    assert not (tmp_path / "x.glb").exists() and not (tmp_path / "x.obj").exists()
