@@ -1,0 +1,313 @@
+"""Pictures of textured meshes: ray-cast renders from a scene view, selection colouring, sharpness.
+
+Paper Figures 9 (per-face image selection coloured by image) and 12-13 (textured mesh from
+chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
+first hit of each pixel's ray gives a face and barycentric coordinates, from which the face's
+texture coordinates are interpolated and the texture looked up bilinearly. No lighting, no
+mip-mapping: a render from a view's own camera is directly comparable with that view's photo.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+from .scene import View
+from .seams import load_textured_mesh, sample_texture
+
+__all__ = [
+    "RayHits",
+    "raycast",
+    "render_selection",
+    "render_textured",
+    "selection_palette",
+    "sharpness",
+    "supersampled_view",
+]
+
+logger = logging.getLogger(__name__)
+
+_INVALID = np.iinfo(np.uint32).max
+
+
+@dataclass(frozen=True, eq=False)
+class RayHits:
+    """First hits of a view's pixel rays.
+
+    Attributes
+    ----------
+    face_ids : (H, W) int64
+        Face hit by each pixel's ray, -1 for background.
+    bary : (H, W, 3) float64
+        Barycentric weights of the hit point w.r.t. the face's three corners (0 for background).
+    depth : (H, W) float64
+        Camera z of the hit point (metres), ``inf`` for background.
+    cos_angle : (H, W) float64
+        Cosine between the face normal and the direction to the camera (negative = back face).
+    """
+
+    face_ids: np.ndarray
+    bary: np.ndarray
+    depth: np.ndarray
+    cos_angle: np.ndarray
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(H, W) bool: pixels that see the mesh."""
+        return self.face_ids >= 0
+
+
+def _arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(mesh, tuple) and len(mesh) == 2:
+        v, f = mesh
+    elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        v, f = mesh.vertices, mesh.faces
+    else:
+        tm = load_textured_mesh(mesh)
+        v, f = tm.vertices, tm.faces
+    v = np.asarray(v, dtype=np.float64)
+    f = np.asarray(f, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise InputError(f"mesh must have (N, 3) vertices and (F, 3) faces, got {v.shape} and {f.shape}")
+    return v, f
+
+
+def raycast(mesh: Any, view: View) -> RayHits:
+    """Cast one ray through every pixel centre of ``view`` and record the first hit.
+
+    Parameters
+    ----------
+    mesh : Mesh, ColoredMesh, trimesh.Trimesh, (vertices, faces) or path
+        Anything with ``vertices`` (N, 3) and ``faces`` (F, 3).
+    view : View
+        Camera (intrinsic, world-to-camera extrinsic in OpenCV axes, width x height).
+
+    Returns
+    -------
+    RayHits
+    """
+    import open3d as o3d
+
+    v, f = _arrays(mesh)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.ascontiguousarray(v, dtype=np.float32)),
+        o3d.core.Tensor(np.ascontiguousarray(f, dtype=np.uint32)),
+    )
+    K, R, C = view.intrinsic, view.rotation, view.center
+    xs, ys = np.meshgrid(np.arange(view.width, dtype=np.float64), np.arange(view.height, dtype=np.float64))
+    pix = np.stack([xs, ys, np.ones_like(xs)], axis=-1)  # pixel centres at integers
+    d_cam = pix @ np.linalg.inv(K).T  # z = 1: t_hit is the camera depth
+    d_world = d_cam @ R  # R^T d for each pixel
+    rays = np.concatenate([np.broadcast_to(C, d_world.shape), d_world], axis=-1).astype(np.float32)
+    ans = scene.cast_rays(o3d.core.Tensor(rays))
+    prim = ans["primitive_ids"].numpy().astype(np.int64)
+    hit = prim != _INVALID
+    face_ids = np.where(hit, prim, -1)
+    uvs = ans["primitive_uvs"].numpy().astype(np.float64)
+    bary = np.stack([1.0 - uvs[..., 0] - uvs[..., 1], uvs[..., 0], uvs[..., 1]], axis=-1)
+    bary[~hit] = 0.0
+    depth = ans["t_hit"].numpy().astype(np.float64)
+    depth[~hit] = np.inf
+    normals = ans["primitive_normals"].numpy().astype(np.float64)
+    dn = d_world / np.linalg.norm(d_world, axis=-1, keepdims=True)
+    cos = -np.sum(normals * dn, axis=-1)
+    cos[~hit] = 0.0
+    return RayHits(face_ids=face_ids, bary=bary, depth=depth, cos_angle=cos)
+
+
+def _background(background: Sequence[int]) -> np.ndarray:
+    bg = np.asarray(background, dtype=np.float64).reshape(-1)
+    if bg.shape != (3,) or np.any(bg < 0) or np.any(bg > 255):
+        raise InputError(f"background must be an RGB triple in 0..255, got {background!r}")
+    return bg
+
+
+def render_textured(
+    mesh: Any,
+    view: View,
+    *,
+    background: Sequence[int] = (255, 255, 255),
+    cull_backfaces: bool = False,
+    supersample: int = 1,
+    hits: RayHits | None = None,
+) -> np.ndarray:
+    """Render a textured mesh from a view's camera by ray casting and bilinear texture lookup.
+
+    Bilinear lookup without mip-mapping aliases where the texture is minified (texels smaller
+    than pixels); ``supersample`` > 1 renders s x s rays per pixel and averages them (box
+    filter), which is what a viewer with mip-mapping / multisampling shows.
+
+    Parameters
+    ----------
+    mesh : path-like, trimesh.Trimesh or ColoredMesh
+        Textured OBJ / GLB (or a mesh with vertex colours).
+    view : View
+        Camera to render from (its own width x height).
+    background : RGB triple, default white
+        Colour of pixels that see no face.
+    cull_backfaces : bool, default False
+        Paint pixels whose first hit is a back face (normal away from the camera) as background
+        (paper section 3.8 hides faces facing away in a closed room).
+    supersample : int, default 1
+        Rays per pixel along each axis (s x s rays, averaged).
+    hits : RayHits, optional
+        Reuse a previous :func:`raycast` of the same mesh and of ``supersampled_view(view, s)``.
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    tm = load_textured_mesh(mesh)
+    bg = _background(background)
+    s = int(supersample)
+    if s < 1:
+        raise InputError(f"supersample must be a positive integer, got {supersample!r}")
+    rview = supersampled_view(view, s)
+    if hits is None:
+        hits = raycast(tm, rview)
+    elif hits.face_ids.shape != (rview.height, rview.width):
+        raise InputError(f"hits are {hits.face_ids.shape[::-1]} but the render needs {rview.width}x{rview.height}")
+    mask = hits.mask & ((hits.cos_angle > 0) if cull_backfaces else True)
+    out = np.empty((rview.height, rview.width, 3), dtype=np.float64)
+    out[:] = bg / 255.0
+    fid = hits.face_ids[mask]
+    w = hits.bary[mask]
+    corners = tm.faces[fid]
+    if tm.has_texture:
+        uv = np.einsum("nk,nkd->nd", w, tm.uv[corners])
+        out[mask] = sample_texture(tm.texture, uv)
+    else:
+        out[mask] = np.einsum("nk,nkd->nd", w, tm.vertex_colors[corners])
+    if s > 1:
+        out = out.reshape(view.height, s, view.width, s, 3).mean(axis=(1, 3))
+    return np.clip(np.rint(out * 255.0), 0, 255).astype(np.uint8)
+
+
+def supersampled_view(view: View, s: int) -> View:
+    """The camera of ``view`` with s x s pixels per pixel (same field of view, pixel centres at integers).
+
+    Sub-pixel ``i`` of the new image is centred on ``(i + 0.5) / s - 0.5`` of the original, so
+    ``fx' = s fx`` and ``cx' = s (cx + 0.5) - 0.5``; averaging s x s blocks gives back the
+    original pixel grid.
+    """
+    from dataclasses import replace
+
+    s = int(s)
+    if s == 1:
+        return view
+    K = np.array(view.intrinsic)
+    K[0, :] *= s
+    K[1, :] *= s
+    K[0, 2] = s * (view.intrinsic[0, 2] + 0.5) - 0.5
+    K[1, 2] = s * (view.intrinsic[1, 2] + 0.5) - 0.5
+    K[2] = [0.0, 0.0, 1.0]
+    return replace(view, intrinsic=K, width=view.width * s, height=view.height * s)
+
+
+def selection_palette(n: int, *, cmap: str = "tab20") -> np.ndarray:
+    """(n, 3) uint8 qualitative colours, one per image index (cycled through ``cmap``)."""
+    import matplotlib
+
+    cm = matplotlib.colormaps[cmap]
+    k = getattr(cm, "N", 20)
+    idx = np.arange(max(int(n), 0))
+    if k <= 32:  # listed (qualitative) map: cycle its entries, alternate darker on the 2nd cycle
+        rgb = np.asarray(cm(idx % k))[:, :3] * np.where((idx // k) % 2 == 1, 0.6, 1.0)[:, None]
+    else:
+        rgb = np.asarray(cm((idx + 0.5) / max(n, 1)))[:, :3]
+    return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+
+
+def render_selection(
+    mesh: Any,
+    faces_view: np.ndarray,
+    view: View,
+    *,
+    n_views: int | None = None,
+    background: Sequence[int] = (255, 255, 255),
+    unseen_color: Sequence[int] = (40, 40, 40),
+    shade: bool = True,
+    cmap: str = "tab20",
+    hits: RayHits | None = None,
+) -> np.ndarray:
+    """Render the per-face image selection, each face coloured by its selected image (Fig. 9a/d).
+
+    Parameters
+    ----------
+    mesh : Mesh, ColoredMesh, trimesh.Trimesh, (vertices, faces) or path
+    faces_view : (F,) int array
+        Selected view index per face, -1 for faces seen by no view.
+    view : View
+        Camera to render from.
+    n_views : int, optional
+        Number of images (palette size); default ``faces_view.max() + 1``.
+    background, unseen_color : RGB triples
+        Colours of empty pixels and of faces with no selected image.
+    shade : bool, default True
+        Darken faces by the angle to the camera (0.55 + 0.45 |cos|) so geometry stays readable.
+    cmap : str, default "tab20"
+        Matplotlib qualitative colormap.
+    hits : RayHits, optional
+        Reuse a previous :func:`raycast`.
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    v, f = _arrays(mesh)
+    sel = np.asarray(faces_view).reshape(-1)
+    if len(sel) != len(f):
+        raise InputError(f"faces_view has {len(sel)} entries but the mesh has {len(f)} faces")
+    bg = _background(background)
+    n = int(n_views) if n_views is not None else int(max(sel.max(initial=-1) + 1, 1))
+    pal = np.vstack([selection_palette(n, cmap=cmap).astype(np.float64), _background(unseen_color)])
+    if hits is None:
+        hits = raycast((v, f), view)
+    out = np.empty((view.height, view.width, 3), dtype=np.float64)
+    out[:] = bg
+    m = hits.mask
+    s = sel[hits.face_ids[m]]
+    col = pal[np.where((s >= 0) & (s < n), s, n)]
+    if shade:
+        col = col * (0.55 + 0.45 * np.abs(hits.cos_angle[m]))[:, None]
+    out[m] = col
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int = 2) -> float:
+    """Variance of the Laplacian of the grey image inside a mask (a focus / detail measure).
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) uint8 / uint16 / float array
+        RGB image; integers are scaled to [0, 1] first so 8- and 16-bit images compare.
+    mask : (H, W) bool array, optional
+        Pixels to use (e.g. the mesh silhouette of a render); default all.
+    erode : int, default 2
+        Erode the mask by this many pixels so its border (e.g. the silhouette edge against the
+        background) does not count.
+
+    Returns
+    -------
+    float
+        Variance of ``cv2.Laplacian`` (3x3) of the grey image over the mask, in [0,1]^2 units.
+    """
+    img = np.asarray(image)
+    scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype, 1.0)
+    img = img.astype(np.float32) / np.float32(scale)
+    grey = (cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img).astype(np.float64)
+    lap = cv2.Laplacian(grey, cv2.CV_64F, ksize=1)
+    m = np.ones(grey.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if m.shape != grey.shape:
+        raise InputError(f"mask shape {m.shape} does not match the image {grey.shape}")
+    if erode > 0:
+        m = cv2.erode(m.astype(np.uint8), np.ones((2 * erode + 1, 2 * erode + 1), np.uint8), borderValue=0).astype(bool)
+    if not m.any():
+        raise InputError("sharpness: the (eroded) mask is empty")
+    return float(np.var(lap[m]))

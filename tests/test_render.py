@@ -1,0 +1,122 @@
+"""Tests of o3d_seqcc.render: ray-cast textured renders, selection colouring, sharpness."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from o3d_seqcc.errors import InputError
+from o3d_seqcc.render import raycast, render_selection, render_textured, selection_palette, sharpness
+from o3d_seqcc.scene import View
+
+trimesh = pytest.importorskip("trimesh")
+PIL = pytest.importorskip("PIL.Image")
+pytest.importorskip("open3d")
+
+W, H = 160, 80
+
+
+def plane_and_camera(seed: int = 0):
+    """Plane z = 0, x in [0, 2], y in [0, 1] (two triangles), a random texture of W x H texels,
+    and a camera at (1, 0.5, -2) looking along +z whose pixel centres land on the texel centres."""
+    rng = np.random.default_rng(seed)
+    tex = rng.integers(0, 256, size=(H, W, 3), dtype=np.uint8)
+    v = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], float)
+    uv = np.c_[v[:, 0] / 2, 1 - v[:, 1]]  # image row 0 (world y = 0) at the texture's top (v = 1)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    mesh = trimesh.Trimesh(v, f, visual=trimesh.visual.TextureVisuals(uv=uv, image=PIL.fromarray(tex)), process=False)
+    ext = np.eye(4)
+    ext[:3, 3] = -np.array([1.0, 0.5, -2.0])
+    fx = W / 2 * 2  # plane half-width 1 at depth 2 covers W / 2 pixels
+    K = np.array([[fx, 0, (W - 1) / 2], [0, fx, (H - 1) / 2], [0, 0, 1]])
+    view = View(name="top", image="unused.png", intrinsic=K, extrinsic=ext, width=W, height=H)
+    return mesh, tex, view
+
+
+def test_render_reproduces_texture(tmp_path):
+    mesh, tex, view = plane_and_camera()
+    img = render_textured(mesh, view)
+    assert img.shape == (H, W, 3) and img.dtype == np.uint8
+    diff = np.abs(img.astype(int) - tex.astype(int))
+    assert diff.max() <= 1, diff.max()
+    # the same through a GLB file
+    path = tmp_path / "plane.glb"
+    mesh.export(path)
+    assert np.abs(render_textured(path, view).astype(int) - tex.astype(int)).max() <= 1
+
+
+def test_raycast_depth_and_background():
+    mesh, _, view = plane_and_camera()
+    hits = raycast(mesh, view)
+    assert hits.mask.all()
+    np.testing.assert_allclose(hits.depth, 2.0, atol=1e-5)
+    np.testing.assert_allclose(hits.bary.sum(-1), 1.0, atol=1e-5)
+    assert np.all(hits.cos_angle != 0)
+    # move the camera sideways: the right part of the image sees nothing
+    ext = np.array(view.extrinsic)
+    ext[0, 3] -= 1.0  # camera centre x = 2: the plane covers the left half only
+    v2 = View(name="side", image="unused.png", intrinsic=view.intrinsic, extrinsic=ext, width=W, height=H)
+    img = render_textured(mesh, v2, background=(0, 0, 255))
+    assert np.all(img[:, W // 2 + 1 :] == [0, 0, 255])
+    assert raycast(mesh, v2).mask[:, : W // 2 - 1].all()
+
+
+def test_backface_culling():
+    mesh, _, view = plane_and_camera()
+    flipped = trimesh.Trimesh(mesh.vertices, mesh.faces[:, ::-1], visual=mesh.visual, process=False)
+    a = render_textured(mesh, view, cull_backfaces=True, background=(1, 2, 3))
+    b = render_textured(flipped, view, cull_backfaces=True, background=(1, 2, 3))
+    assert (np.all(a == [1, 2, 3], axis=-1).all()) != (np.all(b == [1, 2, 3], axis=-1).all())
+
+
+def test_render_selection_colours_faces():
+    mesh, _, view = plane_and_camera()
+    img = render_selection((mesh.vertices, mesh.faces), np.array([0, 3]), view, n_views=4, shade=False)
+    pal = selection_palette(4)
+    hits = raycast(mesh, view)
+    for face, k in [(0, 0), (1, 3)]:
+        px = img[hits.face_ids == face]
+        assert len(px) and np.all(px == pal[k])
+    unseen = render_selection(mesh, np.array([-1, -1]), view, unseen_color=(9, 9, 9), shade=False)
+    assert np.all(unseen == 9)
+    with pytest.raises(InputError, match="faces"):
+        render_selection(mesh, np.array([0]), view)
+
+
+def test_palette_distinct():
+    pal = selection_palette(24)
+    assert pal.shape == (24, 3) and pal.dtype == np.uint8
+    assert len({tuple(c) for c in pal}) == 24
+
+
+def test_sharpness_blur_lower():
+    rng = np.random.default_rng(1)
+    img = cv2.resize(rng.integers(0, 256, (60, 80, 3), dtype=np.uint8), (320, 240), interpolation=cv2.INTER_NEAREST)
+    blurred = cv2.GaussianBlur(img, (0, 0), 2.0)
+    mask = np.zeros(img.shape[:2], bool)
+    mask[20:200, 30:300] = True
+    s, b = sharpness(img, mask), sharpness(blurred, mask)
+    assert b < 0.5 * s
+    # 16-bit version of the same image measures the same
+    np.testing.assert_allclose(sharpness(img.astype(np.uint16) * 257, mask), s, rtol=1e-6)
+    with pytest.raises(InputError):
+        sharpness(img, np.zeros(img.shape[:2], bool))
+
+
+def test_supersampled_render_is_box_filtered():
+    mesh, tex, view = plane_and_camera()
+    img = render_textured(mesh, view, supersample=2)
+    # the plane fills the view: 2x2 rays per pixel sample the texture at +-0.25 px, whose
+    # bilinear average is a 2x2-tap blur of the texture (interior pixels)
+    t = tex.astype(np.float64)
+    k = np.array([0.25, 0.5, 0.25])
+    blur = cv2.sepFilter2D(t, -1, k, k, borderType=cv2.BORDER_REPLICATE)
+    inner = (slice(2, -2), slice(2, -2))
+    # bilinear at +-1/4 px: weights (3/4, 1/4) on each side -> mean of the two = (1/8, 3/4, 1/8)
+    k2 = np.array([0.125, 0.75, 0.125])
+    expect = cv2.sepFilter2D(t, -1, k2, k2, borderType=cv2.BORDER_REPLICATE)
+    assert np.abs(img[inner] - expect[inner]).max() <= 1.0
+    assert np.abs(img[inner] - blur[inner]).mean() > np.abs(img[inner] - expect[inner]).mean()
+    with pytest.raises(InputError):
+        render_textured(mesh, view, supersample=0)

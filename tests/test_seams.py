@@ -1,0 +1,168 @@
+"""Tests of the seam metric (o3d_seqcc.seams) on synthetic textured planes with known seams."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from o3d_seqcc.errors import InputError
+from o3d_seqcc.seams import delta_e_2000, load_textured_mesh, sample_texture, seam_metric
+
+trimesh = pytest.importorskip("trimesh")
+PIL = pytest.importorskip("PIL.Image")
+
+RED = np.array([200, 30, 30], dtype=np.uint8)
+GREEN = np.array([40, 180, 60], dtype=np.uint8)
+
+
+def two_chart_plane(n: int = 4, left=RED, right=GREEN, tex_size: int = 64, smooth: bool = False):
+    """A 2n x n grid of quads on z = 0 (x in [0, 2], y in [0, 1]), split in two UV charts.
+
+    The left half (x <= 1) maps to the left half of the texture, the right half to the right
+    half, with a gap between the charts; vertices on x = 1 are duplicated (one copy per chart),
+    as in any OBJ with UV seams. Returns (trimesh.Trimesh, texture uint8).
+    """
+    verts, uvs, faces = [], [], []
+    for chart, (x0, u0) in enumerate([(0.0, 0.05), (1.0, 0.55)]):
+        base = len(verts)
+        for j in range(n + 1):
+            for i in range(n + 1):
+                verts.append([x0 + i / n, j / n, 0.0])
+                uvs.append([u0 + 0.4 * i / n, 0.05 + 0.9 * j / n])
+        for j in range(n):
+            for i in range(n):
+                a = base + j * (n + 1) + i
+                b, c, d = a + 1, a + n + 2, a + n + 1
+                faces += [[a, b, c], [a, c, d]]
+    tex = np.empty((tex_size, tex_size, 3), dtype=np.uint8)
+    if smooth:
+        # a horizontal ramp continuous across the charts in 3D: colour depends on y (v) only
+        ramp = np.linspace(100, 160, tex_size).astype(np.uint8)[::-1]
+        tex[:] = np.stack([ramp, 255 - ramp, np.full_like(ramp, 100)], axis=1)[:, None, :]
+    else:
+        tex[:, : tex_size // 2] = left
+        tex[:, tex_size // 2 :] = right
+    visual = trimesh.visual.TextureVisuals(uv=np.array(uvs), image=PIL.fromarray(tex))
+    mesh = trimesh.Trimesh(np.array(verts, float), np.array(faces), visual=visual, process=False)
+    return mesh, tex
+
+
+def _on_chart_seam(mesh, rep) -> np.ndarray:
+    """(n_edges,) bool: measured edges lying on x = 1 (between the charts)."""
+    tm = load_textured_mesh(mesh)
+    # merged ids are the rows of np.unique over positions rounded to merge_tol (as in seam_metric)
+    q = np.round(tm.vertices / 1e-6).astype(np.int64)
+    _, first = np.unique(q, axis=0, return_index=True)
+    pos = tm.vertices[first]
+    return np.all(np.isclose(pos[rep.edges][:, :, 0], 1.0), axis=1)
+
+
+def expected_seam_de() -> float:
+    return float(delta_e_2000(RED / 255.0, GREEN / 255.0))
+
+
+def test_sample_texture_texel_centres():
+    tex = np.zeros((2, 4, 3), np.uint8)
+    tex[0, 1] = [255, 0, 0]  # top row, second column
+    tex[1, 3] = [0, 255, 0]  # bottom row, last column
+    uv = np.array([[(1 + 0.5) / 4, 1 - 0.5 / 2], [(3 + 0.5) / 4, 1 - 1.5 / 2], [2 / 4, 1 - 0.5 / 2]])
+    c = sample_texture(tex, uv)
+    np.testing.assert_allclose(c[0], [1, 0, 0])
+    np.testing.assert_allclose(c[1], [0, 1, 0])
+    np.testing.assert_allclose(c[2], [0.5, 0, 0])  # halfway between texel 1 (red) and texel 2 (black)
+
+
+def test_constant_texture_has_no_seams():
+    mesh, _ = two_chart_plane(left=RED, right=RED)
+    rep = seam_metric(mesh)
+    assert rep.n_edges > 0
+    assert rep.mean < 1e-6 and rep.p99 < 1e-6 and rep.frac_above_5 == 0.0
+
+
+def test_smooth_texture_continuous_across_charts_is_near_zero():
+    mesh, _ = two_chart_plane(n=8, smooth=True, tex_size=256)
+    rep = seam_metric(mesh, keep_per_edge=True, merge_tol=1e-6)
+    assert rep.mean < 0.5, rep
+    assert rep.frac_above_5 == 0.0
+    # the edges between the two charts (x = 1) see the same colour on both sides
+    on_seam = _on_chart_seam(mesh, rep)
+    assert on_seam.sum() == 8
+    assert rep.per_edge[on_seam].max() < 0.5
+
+
+def test_two_colour_charts_known_seam():
+    n = 4
+    mesh, _ = two_chart_plane(n=n)
+    rep = seam_metric(mesh, keep_per_edge=True, merge_tol=1e-6)
+    # interior edges of the 2n x n grid (each quad split in two): all edges minus boundary edges
+    W, H = 2 * n, n
+    n_interior = W * (H + 1) + (W + 1) * H + W * H - 2 * (W + H)
+    assert rep.n_edges == n_interior
+    assert rep.n_boundary_edges == 2 * (W + H)
+    de = expected_seam_de()
+    assert de > 5
+    # edges on x = 1 are the chart seam: they carry the red/green difference, the others 0
+    on_seam = _on_chart_seam(mesh, rep)
+    assert on_seam.sum() == n
+    np.testing.assert_allclose(rep.per_edge[on_seam], de, rtol=1e-6)
+    np.testing.assert_allclose(rep.per_edge[~on_seam], 0.0, atol=1e-6)
+    np.testing.assert_allclose(rep.mean, n * de / n_interior, rtol=1e-6)
+    np.testing.assert_allclose(rep.frac_above_5, n / n_interior)
+    d = rep.to_dict()
+    assert "per_edge" not in d and json.dumps(d)
+
+
+@pytest.mark.parametrize("ext", [".obj", ".glb"])
+def test_files_written_by_trimesh(tmp_path: Path, ext: str):
+    n = 4
+    mesh, _ = two_chart_plane(n=n)
+    path = tmp_path / f"plane{ext}"
+    mesh.export(path)
+    assert path.is_file()
+    rep_file = seam_metric(path)
+    rep_mem = seam_metric(mesh)
+    assert rep_file.n_edges == rep_mem.n_edges
+    np.testing.assert_allclose(rep_file.mean, rep_mem.mean, rtol=1e-3)
+    np.testing.assert_allclose(rep_file.frac_above_5, rep_mem.frac_above_5)
+
+
+def test_vertex_colours(tmp_path: Path):
+    mesh, _ = two_chart_plane(n=2)
+    colors = np.tile(np.array([[10, 200, 30, 255]], np.uint8), (len(mesh.vertices), 1))
+    vc = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=colors, process=False)
+    rep = seam_metric(vc)
+    assert rep.mean < 1e-6
+
+
+def test_cli_seams(tmp_path: Path, capsys):
+    from o3d_seqcc.cli import main
+
+    mesh, _ = two_chart_plane(n=2)
+    path = tmp_path / "plane.glb"
+    mesh.export(path)
+    out = tmp_path / "seams.json"
+    assert main(["seams", str(path), "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["n_edges"] > 0 and d["frac_above_5"] > 0
+    assert "mean" in json.loads(capsys.readouterr().out)
+
+
+def test_bad_input(tmp_path: Path):
+    with pytest.raises(InputError, match="not found"):
+        seam_metric(tmp_path / "nope.obj")
+    bare = trimesh.Trimesh(np.eye(3), [[0, 1, 2]], process=False)
+    with pytest.raises(InputError, match="neither a texture"):
+        seam_metric(bare)
+    mesh, _ = two_chart_plane(n=2)
+    with pytest.raises(InputError, match="offset"):
+        seam_metric(mesh, offset=0.7)
+    # a single textured triangle: no interior edge
+    one = trimesh.Trimesh(
+        np.eye(3), [[0, 1, 2]], visual=trimesh.visual.TextureVisuals(uv=np.eye(3)[:, :2], image=mesh.visual.material.image),
+        process=False,
+    )
+    with pytest.raises(InputError, match="no interior edge"):
+        seam_metric(one)
