@@ -15,7 +15,7 @@ import sys
 from ..errors import InputError
 
 # sub-command modules, in the order --help lists them
-COMMANDS: tuple[str, ...] = ("info",)
+COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate", "texture", "run", "demo", "synthetic")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,239 @@
+"""Sequential pairwise colour correction and the pairwise baselines on known photometric changes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from o3d_seqcc.cmf import apply_lut, fit_cmf
+from o3d_seqcc.correction import (
+    METHODS,
+    FunctionTransform,
+    IdentityTransform,
+    LutTransform,
+    correct,
+    from_float,
+    to_float,
+)
+from o3d_seqcc.errors import InputError
+from o3d_seqcc.jih import jih_samples, joint_histogram
+from o3d_seqcc.mappings import Mappings, PairMapping
+from o3d_seqcc.scene import Scene, View
+
+H, W = 48, 64
+K = np.array([[50.0, 0, 31.5], [0, 50.0, 23.5], [0, 0, 1]])
+
+
+def _albedo(rng) -> np.ndarray:
+    """Smooth colourful image in [0.03, 0.97]."""
+    low = rng.random((6, 8, 3))
+    yy, xx = np.mgrid[0:H, 0:W]
+    fy, fx = yy / (H - 1) * 5, xx / (W - 1) * 7
+    y0, x0 = np.floor(fy).astype(int).clip(0, 4), np.floor(fx).astype(int).clip(0, 6)
+    ty, tx = (fy - y0)[..., None], (fx - x0)[..., None]
+    img = (
+        low[y0, x0] * (1 - ty) * (1 - tx)
+        + low[y0 + 1, x0] * ty * (1 - tx)
+        + low[y0, x0 + 1] * (1 - ty) * tx
+        + low[y0 + 1, x0 + 1] * ty * tx
+    )
+    img = img + 0.05 * rng.standard_normal(img.shape)
+    return 0.03 + 0.94 * np.clip(img, 0, 1)
+
+
+def _photometric(img: np.ndarray, gain, gamma) -> np.ndarray:
+    return np.clip(img * np.asarray(gain), 0, 1) ** np.asarray(gamma)
+
+
+# view 0: reference look; chain 0-1-2-3 well connected; (0, 3) below t_npm; view 4 isolated
+PARAMS = [
+    ((1.0, 1.0, 1.0), (1.0, 1.0, 1.0)),
+    ((0.8, 0.9, 0.75), (1.2, 0.9, 1.1)),
+    ((0.7, 0.85, 0.95), (0.8, 1.3, 1.0)),
+    ((0.9, 0.75, 0.8), (1.4, 1.1, 0.85)),
+    ((0.6, 0.6, 0.6), (1.0, 1.0, 1.0)),
+]
+COUNTS = {(0, 1): 3000, (1, 2): 3000, (2, 3): 3000, (0, 3): 100, (3, 4): 50}
+
+
+def _scene(n: int) -> Scene:
+    views = tuple(
+        View(name=f"v{i}", image=Path(f"/nonexistent/v{i}.png"), intrinsic=K, extrinsic=np.eye(4), width=W, height=H)
+        for i in range(n)
+    )
+    return Scene(Path("/nonexistent/mesh.ply"), views)
+
+
+def _mappings(rng, counts=COUNTS, n_views=5) -> Mappings:
+    """Pairs map identical pixel coordinates (the views see the same image up to photometry)."""
+    pairs = {}
+    for (a, b), n in counts.items():
+        uv = np.stack([rng.integers(0, W, n), rng.integers(0, H, n)], axis=1).astype(np.float64)
+        pairs[(a, b)] = PairMapping(a, b, uv, uv.copy(), np.arange(n) // 3)
+    return Mappings(pairs=pairs, view_names=tuple(f"v{i}" for i in range(n_views)), mode="vertices")
+
+
+@pytest.fixture
+def problem(rng):
+    albedo = _albedo(rng)
+    floats = [_photometric(albedo, g, gm) for g, gm in PARAMS]
+    images = [from_float(f, np.uint8) for f in floats]
+    return _scene(5), images, _mappings(rng), from_float(albedo, np.uint8)
+
+
+def _mae(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a.astype(np.float64) - b.astype(np.float64)).mean())
+
+
+def test_seqcc_recovers_the_reference_colours(problem):
+    scene, images, mappings, truth = problem
+    before = [_mae(images[v], truth) for v in (1, 2, 3)]
+    with pytest.warns(UserWarning, match="v4"):
+        res = correct(scene, images=images, mappings=mappings, reference="v0")
+    assert res.reference == 0 and res.method == "seqcc"
+    assert res.paths == {0: [0], 1: [1, 0], 2: [2, 1, 0], 3: [3, 2, 1, 0]}
+    assert res.unreachable == [4]
+    after = [_mae(res.images[v], truth) for v in (1, 2, 3)]
+    assert min(before) > 15  # 8-bit levels
+    assert max(after) < 2.0, after  # < 2/255 after up to 3 sequential steps
+    # reference and unreachable view untouched, bit for bit; inputs not modified
+    np.testing.assert_array_equal(res.images[0], images[0])
+    np.testing.assert_array_equal(res.images[4], images[4])
+    assert isinstance(res.transforms[4], IdentityTransform)
+    assert all(im.dtype == np.uint8 for im in res.images)
+    assert {e["a"] for e in res.graph_edges} == {0, 1, 2}
+    assert set(res.timings) >= {"load_images", "mappings", "graph", "fit", "apply", "total"}
+
+
+@pytest.mark.filterwarnings("ignore:1 view")
+def test_sequential_composition_equals_one_by_one(problem):
+    scene, images, mappings, _ = problem
+    res = correct(scene, images=images, mappings=mappings, reference=0)
+    fl = [to_float(im) for im in images]
+    img = fl[3].copy()
+    for t, s in ((3, 2), (2, 1), (1, 0)):
+        pm = mappings.pairs[(min(t, s), max(t, s))]
+        uv_t = pm.uv_a if t < s else pm.uv_b
+        uv_s = pm.uv_b if t < s else pm.uv_a
+        ct = fl[t][uv_t[:, 1].astype(int), uv_t[:, 0].astype(int)]
+        cs = fl[s][uv_s[:, 1].astype(int), uv_s[:, 0].astype(int)]
+        jih = joint_histogram(ct, cs)
+        for c in range(3):
+            x, y, w = jih_samples(jih[c])
+            img[..., c] = apply_lut(fit_cmf(x, y, weights=w), img[..., c])
+    assert isinstance(res.transforms[3], LutTransform)
+    assert np.abs(res.images[3].astype(int) - from_float(img, np.uint8).astype(int)).max() <= 1
+
+
+def test_auto_reference_and_reference_by_index(problem):
+    scene, images, mappings, _ = problem
+    res = correct(scene, images=images, mappings=mappings, reference="auto", method="none")
+    assert res.reference == 1  # chain 0-1-2-3: views 1 and 2 tie, lowest index wins
+    res = correct(scene, images=images, mappings=mappings, reference=2, method="none")
+    assert res.reference == 2 and res.paths[0] == [0, 1, 2]
+    for a, b in zip(res.images, images):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.filterwarnings("ignore:1 view")
+def test_sixteen_bit_in_sixteen_bit_out(problem, rng):
+    scene, images, mappings, truth = problem
+    img16 = [im.astype(np.uint16) * 257 for im in images]
+    res = correct(scene, images=img16, mappings=mappings, reference="v0")
+    assert all(im.dtype == np.uint16 for im in res.images)
+    assert res.transforms[1].lut.shape == (3, 4096)
+    for v in (1, 2, 3):
+        assert _mae(res.images[v] / 257.0, truth) < 2.0
+
+
+@pytest.mark.parametrize("method", ["reinhard", "root-polynomial", "vandermonde"])
+def test_pairwise_baselines_undo_a_known_gain(rng, method):
+    albedo = _albedo(rng)
+    gains = [(1.0, 1.0, 1.0), (0.8, 0.9, 0.7), (0.9, 0.7, 0.85)]
+    images = [from_float(albedo * np.array(g), np.uint8) for g in gains]
+    counts = {(0, 1): 3000, (1, 2): 3000}
+    res = correct(_scene(3), images=images, mappings=_mappings(rng, counts, 3), reference=0, method=method)
+    truth = images[0]
+    for v in (1, 2):
+        before, after = _mae(images[v], truth), _mae(res.images[v], truth)
+        if method == "reinhard":  # global mean/std transfer in log-LMS: an approximation
+            assert after < 0.5 * before
+        else:  # a per-channel gain is in both models: recovered
+            assert after < 1.0, (v, after)
+    kind = LutTransform if method == "vandermonde" else FunctionTransform
+    assert isinstance(res.transforms[1], kind)
+
+
+def test_every_registered_method_runs_without_nan(problem):
+    scene, images, mappings, _ = problem
+    # a constant view and a saturated view join the chain
+    images = list(images)
+    images[4] = np.full_like(images[4], 255)
+    images[3] = np.full_like(images[3], 128)
+    maps = _mappings(np.random.default_rng(1), {(0, 1): 3000, (1, 2): 3000, (2, 3): 3000, (3, 4): 3000})
+    for method in sorted(METHODS):
+        res = correct(scene, images=images, mappings=maps, reference="v0", method=method)
+        for im in res.images:
+            assert im.dtype == np.uint8 and im.shape == (H, W, 3)
+        for tr in res.transforms:
+            out = tr.apply(to_float(images[1]))
+            assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
+
+
+def test_bad_input_messages(problem):
+    scene, images, mappings, _ = problem
+    with pytest.raises(InputError, match="v3"):
+        correct(scene, images=images, mappings=mappings, reference="nope")
+    with pytest.raises(InputError, match="3000"):
+        correct(scene, images=images, mappings=mappings, t_npm=10**6)
+    with pytest.raises(InputError, match="no edge"):
+        correct(scene, images=images, mappings=mappings, reference="v4")
+    with pytest.raises(ValueError, match="seqcc"):
+        correct(scene, images=images, mappings=mappings, method="magic")
+    with pytest.raises(TypeError, match="bogus"):
+        correct(scene, images=images, mappings=mappings, bogus=3)
+    with pytest.raises(InputError, match="grey"):
+        correct(scene, images=[im[..., 0] for im in images], mappings=mappings)
+    with pytest.raises(InputError, match="RGB"):
+        correct(scene, images=[np.dstack([im, im[..., :1]]) for im in images], mappings=mappings)
+    with pytest.raises(InputError, match="images for"):
+        correct(scene, images=images[:3], mappings=mappings)
+
+
+def test_transforms():
+    lut = np.stack([np.linspace(0, 1, 256) ** g for g in (1.0, 2.0, 0.5)])
+    t = LutTransform(lut)
+    x = np.full((2, 2, 3), 0.25)
+    np.testing.assert_allclose(t.apply(x)[0, 0], [0.25, 0.0625, 0.5], atol=1e-4)
+    with pytest.raises(ValueError):
+        LutTransform(np.zeros((2, 5)))
+    f = FunctionTransform(lambda im: im * 3 - 0.5)
+    assert f.apply(x).max() == 0.25 and f.apply(np.zeros((1, 1, 3))).min() == 0.0
+    np.testing.assert_array_equal(IdentityTransform().apply(x), x)
+    np.testing.assert_array_equal(from_float(to_float(np.arange(256, dtype=np.uint8).reshape(1, -1, 1).repeat(3, 2)), np.uint8)[0, :, 0], np.arange(256))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_lut_apply_levels_matches_float_path(rng, dtype):
+    top = np.iinfo(dtype).max
+    img = rng.integers(0, top + 1, (20, 30, 3)).astype(dtype)
+    lut = np.stack([np.linspace(0, 1, 300) ** g for g in (1.3, 0.7, 1.0)])
+    t = LutTransform(lut)
+    np.testing.assert_array_equal(t.apply_levels(img), from_float(t.apply(to_float(img)), dtype))
+
+
+def test_seqcc_on_a_synthetic_room_gets_close_to_ground_truth(tmp_path):
+    synthetic = pytest.importorskip("o3d_seqcc.synthetic")
+    from o3d_seqcc._io import read_image
+    from o3d_seqcc.metrics import image_delta_e
+
+    ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=6, width=160, height=120, seed=3)
+    scene = ss.scene
+    gt = [read_image(ss.gt_images[n]) for n in scene.names]
+    masks = [np.load(ss.face_ids[n]) >= 0 for n in scene.names]
+    res = {m: correct(scene, reference=0, method=m) for m in ("none", "seqcc")}
+    de = {m: np.mean([image_delta_e(r.images[i], gt[i], mask=masks[i]) for i in range(len(gt))]) for m, r in res.items()}
+    assert de["seqcc"] < 0.5 * de["none"], de
+    assert image_delta_e(res["seqcc"].images[0], gt[0], mask=masks[0]) < 0.5  # the reference stays itself
