@@ -1,15 +1,83 @@
 """o3d_seqcc: sequential pairwise colour correction and texture mapping of 3D meshes.
 
-Implements Dal'Col et al., "A Sequential Color Correction Approach for Texture Mapping of 3D
-Meshes", Sensors 2023, 23(2), 607, on top of Open3D, scikit-learn and networkx.
+Implements L. Dal'Col et al., "A Sequential Color Correction Approach for Texture Mapping of
+3D Meshes", Sensors 2023, 23(2), 607, on top of Open3D, scikit-learn and networkx, and textures
+the mesh sharply (one photo per face, xatlas-packed atlas, OBJ/GLB export).
+
+The pipeline, one module per stage::
+
+    scene = o3d_seqcc.load_scene("scene.json")                        # scene
+    vis = o3d_seqcc.compute_visibility(scene)                          # visibility (3.1-3.2)
+    maps = o3d_seqcc.compute_mappings(scene, visibility=vis)           # mappings (3.1)
+    res = o3d_seqcc.correct(scene, reference="auto", mappings=maps)    # graph, jih, cmf, correction (3.3-3.7)
+    ev = o3d_seqcc.evaluate(res.images, maps)                          # metrics (4.2)
+    sel = o3d_seqcc.select_views(vis, method="mrf")                    # texturing (3.8)
+
+Heavy dependencies are imported on first use of a name (PEP 562), so ``import o3d_seqcc`` is
+cheap.
 """
 
 from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from .errors import InputError
 from .scene import FORMAT, PRIMESENSE_INTRINSIC, Mesh, Scene, View, load_mesh, load_scene, save_scene
 
 __version__ = "0.1.0"
+
+# public name -> module that defines it
+_LAZY: dict[str, str] = {
+    # synthetic test / demo scenes
+    "SyntheticScene": "synthetic",
+    "make_synthetic_scene": "synthetic",
+    "load_synthetic": "synthetic",
+    # visibility and mappings (paper 3.1-3.2)
+    "Visibility": "visibility",
+    "compute_visibility": "visibility",
+    "project_points": "visibility",
+    "Mappings": "mappings",
+    "PairMapping": "mappings",
+    "compute_mappings": "mappings",
+    "load_mappings": "mappings",
+    "sample_colors": "mappings",
+    # graph, JIH, CMF, correction (3.3-3.7)
+    "build_graph": "graph",
+    "correction_paths": "graph",
+    "choose_reference": "graph",
+    "joint_histogram": "jih",
+    "fit_cmf": "cmf",
+    "CMF_METHODS": "cmf",
+    "correct": "correction",
+    "available_methods": "correction",
+    "register_method": "correction",
+    "METHODS": "correction",
+    "CorrectionContext": "correction",
+    "CorrectionResult": "correction",
+    "LutTransform": "correction",
+    "FunctionTransform": "correction",
+    "IdentityTransform": "correction",
+    # evaluation (4.2)
+    "evaluate": "metrics",
+    "evaluate_method": "metrics",
+    "Evaluation": "metrics",
+    "MethodEvaluation": "metrics",
+    # texturing, export, seams, renders (3.8)
+    "SELECTION_METHODS": "texturing",
+    "TexturedMesh": "texturing",
+    "select_views": "texturing",
+    "bake_texture": "texturing",
+    "export_obj": "export",
+    "export_glb": "export",
+    "export_ply": "export",
+    "export_textured_mesh": "export",
+    "SeamReport": "seams",
+    "seam_metric": "seams",
+    "render_textured": "render",
+    "render_selection": "render",
+    "sharpness": "render",
+}
 
 __all__ = [
     "FORMAT",
@@ -22,4 +90,18 @@ __all__ = [
     "load_mesh",
     "load_scene",
     "save_scene",
+    *_LAZY,
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'o3d_seqcc' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -8,9 +8,13 @@ results, and puts what it wants reported into ``state.summary[<stage name>]``. T
    already holds a scene generated with the same parameters);
 2. ``load``: load it back with :func:`o3d_seqcc.load_scene` (validates every file);
 3. ``summary``: views, faces, the per-view photometric parameters and the mean absolute
-   difference between the images and the ground-truth renders.
+   difference between the images and the ground-truth renders;
+4. ``run``: the main job, ``o3d-seqcc run`` (mappings, graph, sequential correction toward the
+   unchanged view ``v00``, MRF view selection, atlas, GLB + OBJ, seam metric with and without
+   correction) into ``OUT/run``;
+5. ``ground_truth``: mean CIEDE2000 between each view and its ground-truth render, over the
+   pixels the mesh covers, before and after correction.
 
-Later pipeline stages (mappings, correction, texturing, ...) are appended to :data:`STAGES`.
 Writes ``OUT/demo_summary.json`` (summary + timings) and prints a readable summary.
 """
 
@@ -124,11 +128,59 @@ def stage_summary(state: DemoState) -> None:
     }
 
 
-#: The demo pipeline, in order: (name, stage function). Later stages append here.
+def stage_run(state: DemoState) -> None:
+    """The main job: correct + texture through ``o3d-seqcc run``, into ``OUT/run``."""
+    from . import main
+
+    out = state.out / "run"
+    argv = ["run", str(state.scene_dir / "scene.json"), "--reference", state.scene.names[0], "--out", str(out),
+            "--mappings", "dense", "--save-images", "--compare-original", "--overwrite"]
+    code = main(["-q", *argv]) if not state.args.verbose else main(argv)
+    if code != 0:
+        raise InputError(f"o3d-seqcc {' '.join(argv)} failed with exit code {code}")
+    report = json.loads((out / "report.json").read_text())
+    state.extra["run_dir"] = out
+    corr, sel = report.get("correction", {}), report.get("selection", {})
+    state.summary["run"] = {
+        "reference": corr.get("reference"),
+        "unreachable": corr.get("unreachable"),
+        "selection": sel.get("method"),
+        "transitions": sel.get("transitions"),
+        "unseen_faces": sel.get("unseen_faces"),
+        "seams": report.get("seams"),
+        "seams_original": report.get("seams_original_images"),
+        "timings": report.get("timings_s"),
+        "outputs": sorted(p.name for p in out.iterdir() if p.is_file()),
+    }
+
+
+def stage_ground_truth(state: DemoState) -> None:
+    """Mean CIEDE2000 to the ground-truth renders, before and after correction."""
+    from .._io import read_image
+    from ..metrics import image_delta_e
+
+    syn, out = state.synthetic, state.extra["run_dir"]
+    rows = []
+    for v in state.scene.views:
+        gt = syn.load_gt(v.name)
+        mask = syn.load_face_ids(v.name) >= 0
+        before = image_delta_e(v.load_image(), gt, mask=mask)
+        after = image_delta_e(read_image(out / "images" / f"{v.name}.png"), gt, mask=mask)
+        rows.append({"name": v.name, "before": round(before, 2), "after": round(after, 2)})
+    state.summary["ground_truth"] = {
+        "views": rows,
+        "mean_before": round(float(np.mean([r["before"] for r in rows])), 2),
+        "mean_after": round(float(np.mean([r["after"] for r in rows])), 2),
+    }
+
+
+#: The demo pipeline, in order: (name, stage function).
 STAGES: list[tuple[str, Callable[[DemoState], None]]] = [
     ("synthetic", stage_synthetic),
     ("load", stage_load),
     ("summary", stage_summary),
+    ("run", stage_run),
+    ("ground_truth", stage_ground_truth),
 ]
 
 
@@ -149,8 +201,24 @@ def _print_summary(state: DemoState) -> None:
             ga = " ".join(f"{x:.2f}" for x in r["gamma"])
             print(f"  {r['name']:<6}{r['gain']:>7.2f}  {wb:<21}{ga:<21}{r['s_curve']:>6.2f}{r['mean_abs_diff']:>9.2f}")
         print(f"  mean |diff| over views: {summ['mean_abs_diff_mean']:.2f} DN")
+    run_ = s.get("run")
+    if run_:
+        seams, seams0 = run_.get("seams") or {}, run_.get("seams_original") or {}
+        print(f"run: reference {run_.get('reference')}, outputs in {state.extra.get('run_dir')}: {', '.join(run_['outputs'])}")
+        if seams:
+            print(
+                "  seam CIEDE2000 mean / p99 / share > 5: "
+                f"{seams.get('mean', float('nan')):.2f} / {seams.get('p99', float('nan')):.2f} / {seams.get('frac_above_5', float('nan')):.3f}"
+                + (f"  (uncorrected images: {seams0.get('mean', float('nan')):.2f} / {seams0.get('p99', float('nan')):.2f} / "
+                   f"{seams0.get('frac_above_5', float('nan')):.3f})" if seams0 else "")
+            )
+    gt = s.get("ground_truth")
+    if gt:
+        print("mean CIEDE2000 to the ground-truth renders (covered pixels), per view before -> after:")
+        print("  " + ", ".join(f"{r['name']} {r['before']:.1f}->{r['after']:.1f}" for r in gt["views"]))
+        print(f"  mean over views: {gt['mean_before']:.2f} -> {gt['mean_after']:.2f}")
     for name, fn in STAGES:
-        if name not in ("synthetic", "load", "summary") and name in s:
+        if name not in ("synthetic", "load", "summary", "run", "ground_truth") and name in s:
             print(f"{name}: {json.dumps(s[name], default=str)}")
     print("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in state.timings.items()))
 
