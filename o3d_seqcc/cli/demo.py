@@ -134,7 +134,7 @@ def stage_run(state: DemoState) -> None:
 
     out = state.out / "run"
     argv = ["run", str(state.scene_dir / "scene.json"), "--reference", state.scene.names[0], "--out", str(out),
-            "--mappings", "dense", "--save-images", "--compare-original", "--overwrite"]
+            "--mappings", "dense", "--t-npm", str(state.args.t_npm), "--save-images", "--compare-original", "--overwrite"]
     code = main(["-q", *argv]) if not state.args.verbose else main(argv)
     if code != 0:
         raise InputError(f"o3d-seqcc {' '.join(argv)} failed with exit code {code}")
@@ -249,6 +249,8 @@ def register(sub) -> argparse.ArgumentParser:
         "summarise it; later stages of the pipeline run on it too.",
     )
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    p.add_argument("--t-npm", type=int, default=400,
+                   help="minimum pairwise mappings (vertex units) for a graph edge (default 400; lower it for tiny scenes)")
     add_synthetic_arguments(p, views=12)
     p.set_defaults(func=run)
     return p
