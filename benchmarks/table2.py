@@ -10,14 +10,18 @@ gain-compensation, histogram-matching, seqcc) it prints PSNR and CIEDE2000 over 
 pairs' filtered vertex mappings -- mean, weighted mean (by number of mappings), std -- in two
 protocols: *in-sample* (the paper's: fitted on all mappings, scored on all) and *held-out*
 (fitted on the mappings of half of the mesh faces, scored on the other half), plus the wall
-time of the ``correct`` call and the improvement over "none" in per cent.
+time of the ``correct`` call and the improvement over "none" in per cent, and (in-sample) the
+*contrast ratio* of every method (:func:`contrast_ratios`: std of the corrected target over std
+of the corrected source at the mappings, ~1.0 for an honest correction, < 1 for a method that
+washes images out -- pairwise scores at misregistered mappings reward such shrinkage, so read
+PSNR / CIEDE2000 together with it).
 
 Fountain (``fountain_small``, decimated 16k-face mesh, reference "auto" resolved once and
 printed): the corrected images are blurred by ``--blur`` px (default 1.5, scoring only) to
 soften the few pixels of colour/depth registration error. Synthetic scene
 (``make_synthetic_scene(photometric="camera")``, 12 views, view 0 unchanged and used as the
-reference, dense mappings, t_npm 20 in vertex units -- its ring of views shares only
-27-670 vertex mappings per neighbouring pair): no blur; additionally the mean CIEDE2000 between each corrected view and its
+reference, in the middle of a full ring of views 30 deg apart; dense mappings, t_npm 20 in
+vertex units): no blur; additionally the mean CIEDE2000 between each corrected view and its
 ground-truth render over the pixels the mesh covers (mean over the non-reference views).
 
 Timings are wall time on a shared machine: compare methods within one run only.
@@ -41,6 +45,9 @@ sys.path.insert(0, str(REPO))
 from o3d_seqcc._io import write_json  # noqa: E402
 from o3d_seqcc.mappings import compute_mappings  # noqa: E402
 from o3d_seqcc.metrics import evaluate_method, image_delta_e  # noqa: E402
+from o3d_seqcc.correction import to_float  # noqa: E402
+from o3d_seqcc.graph import build_graph, correction_paths, scale_t_npm  # noqa: E402
+from o3d_seqcc.mappings import sample_colors  # noqa: E402
 
 METHODS = ("none", "reinhard", "root-polynomial", "vandermonde", "gain-compensation", "histogram-matching", "seqcc")
 DEFAULT_FOUNTAIN = REPO.parent / "shared" / "datasets" / "fountain_small"
@@ -67,6 +74,30 @@ def _header(extra: str = "") -> str:
         f"{'method':<20} {'mean':>6} {'w.mean':>6} {'std':>5} | {'mean':>6} {'w.mean':>6} {'std':>5} | "
         f"{'PSNR':>7} {'PSNRw':>7} {'dE':>7} {'dEw':>7} | {'time':>7}" + extra
     )
+
+
+def contrast_ratios(corrected, mappings, reference: int, *, t_npm: int, min_n: int = 50) -> np.ndarray:
+    """Per-pair contrast ratio of corrected images: std(target) / std(source) at the mappings.
+
+    For every pair whose views are at different hop distances from the reference in the
+    colour-correction graph, the *target* is the view farther from the reference and the
+    *source* the nearer one; the ratio is the per-channel standard deviation of the corrected
+    target's colours at the pair's mappings over the corrected source's, averaged over the
+    channels. About 1 for an honest correction; a method that shrinks colours toward the mean
+    (washes images out, which pairwise PSNR / CIEDE2000 at misregistered mappings reward)
+    gives < 1, compounding along the paths.
+    """
+    g = build_graph({k: int(v) for k, v in mappings.counts.items()}, len(corrected), t_npm=scale_t_npm(t_npm, mappings))
+    hops = {v: len(p) - 1 for v, p in correction_paths(g, reference).items()}
+    fl = [to_float(im) for im in corrected]
+    out = []
+    for (a, b), pm in sorted(mappings.pairs.items()):
+        if pm.n < min_n or a not in hops or b not in hops or hops[a] == hops[b]:
+            continue
+        (t, uvt), (s, uvs) = ((a, pm.uv_a), (b, pm.uv_b)) if hops[a] > hops[b] else ((b, pm.uv_b), (a, pm.uv_a))
+        ct, cs = sample_colors(fl[t], np.asarray(uvt)), sample_colors(fl[s], np.asarray(uvs))
+        out.append(float(np.mean(ct.std(0) / np.maximum(cs.std(0), 1e-6))))
+    return np.array(out)
 
 
 def run_scene(
@@ -98,6 +129,7 @@ def run_scene(
             )
         ref = r.reference
         entry = {"result": r, "wall": time.perf_counter() - t0}
+        entry["contrast"] = contrast_ratios(r.corrected, mappings, r.reference, t_npm=t_npm)
         if gt is not None:
             de = []
             for v, (truth, mask) in enumerate(gt):
@@ -108,12 +140,15 @@ def run_scene(
         results[m] = entry
         logging.getLogger("table2").info("%s / %s done in %.1f s", label, m, entry["wall"])
 
+    print("contrast = mean over pairs of std(corrected target) / std(corrected source) at the mappings, the target "
+          "being the view farther from the reference (ideal ~1.0; < 1 = washed out, see contrast_ratios)")
     print(f"\n=== {label}: reference {scene.names[ref]!r} (index {ref}), {len(mappings.pairs)} pairs, "
           f"{mappings.total} {mappings.mode} mappings, t_npm {t_npm} (vertex units), blur {blur:g} px (scoring only) ===")
     gt_extra = f" | {'dE00 to GT':>10} {'max view':>8}" if gt is not None else ""
+    cr_extra = f" | {'contrast':>8} {'min':>5}"
     for proto in ("in-sample", f"held-out {holdout:g}"):
         print(f"\n-- {proto} --")
-        print(_header(gt_extra if proto == "in-sample" else ""))
+        print(_header((cr_extra + gt_extra) if proto == "in-sample" else ""))
         base = results["none"]["result"] if "none" in results else None
         base_ev = None if base is None else (base.in_sample if proto == "in-sample" else base.held_out)
         for m, e in results.items():
@@ -121,12 +156,17 @@ def run_scene(
             ev = r.in_sample if proto == "in-sample" else r.held_out
             secs = r.fit_seconds if proto == "in-sample" else r.holdout_fit_seconds
             extra = ""
+            if proto == "in-sample":
+                cr = e["contrast"]
+                extra += f" | {cr.mean():8.3f} {cr.min():5.2f}" if cr.size else f" | {'-':>8} {'-':>5}"
             if gt is not None and proto == "in-sample":
-                extra = f" | {e['gt_de'].mean():10.2f} {e['gt_de'].max():8.2f}"
+                extra += f" | {e['gt_de'].mean():10.2f} {e['gt_de'].max():8.2f}"
             print(_fmt_row(m, ev, secs, base_ev, extra))
     out = {}
     for m, e in results.items():
         d = e["result"].to_dict()
+        d["contrast_ratio_mean"] = float(e["contrast"].mean()) if e["contrast"].size else None
+        d["contrast_ratio_min"] = float(e["contrast"].min()) if e["contrast"].size else None
         if "gt_de" in e:
             d["gt_ciede2000_mean"] = float(e["gt_de"].mean())
             d["gt_ciede2000_per_view"] = e["gt_de"].tolist()

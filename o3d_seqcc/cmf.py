@@ -38,16 +38,25 @@ Common pre-processing and guards (``guard=True``, the default, for every method)
 1. Saturated observations (x or y within ``saturation=1.5/255`` of 0 or 1) are dropped: they
    are censored and would bend the curve (a view that clips at 1 says nothing about how bright
    the other view's pixel would have been).
-2. Observations are aggregated before fitting, so the SVRs fit in milliseconds.
-   ``aggregate="columns"`` (default): one sample per JIH column (256 columns over x), the
-   weighted mean of y in the column at the mean x, weighted by the column's count
-   (:func:`o3d_seqcc.jih.column_samples`). The CMF then estimates the conditional *mean* of
-   y given x, which is what the PSNR / CIEDE2000 scores reward: fitted on the raw cells, the
-   epsilon-insensitive SVR loss tracks a conditional median, which on real data with
-   misregistered mappings was ~0.5 dB worse on fountain than a plain least-squares line.
-   ``aggregate="cells"``: the paper's literal input, the occupied JIH cells with their counts
-   as weights, merged into at most ``max_points`` cells (centroids,
-   :func:`o3d_seqcc.jih.weighted_samples`).
+2. Pairing and aggregation, so the SVRs fit in milliseconds on at most ``max_points`` (256)
+   weighted samples. ``pairing="quantile"`` (default): the JIH's two marginal histograms are
+   matched, i.e. the weighted quantiles of x at 256 evenly spaced levels are paired with the
+   same quantiles of y (:func:`quantile_samples`), and the regressor is fitted on these pairs.
+   Why not the joint cells: real correspondences are misregistered by a few pixels (fountain:
+   2-17 px), so the source value y at a mapping is the true mapped colour plus texture detail
+   from a neighbouring surface point. A regression of y on x (the conditional mean the JIH
+   cells estimate) is then flattened toward the mean of y (regression dilution): on fountain
+   every edge's CMF compressed the contrast to 0.3-0.9 of the source's, chained along the
+   paths, and the corrected images came out as a flat haze -- which the pairwise PSNR /
+   CIEDE2000 at the same misregistered mappings *reward* (an MSE-optimal predictor shrinks).
+   Misregistration does not change the two views' value distributions over the shared
+   surface, so matching the distributions recovers the monotone photometric change without
+   attenuation, is symmetric (swapping x and y gives the inverse function) and is exact on clean
+   data. ``pairing="joint"``: the paper's literal input, the JIH's joint observations,
+   aggregated by ``aggregate="columns"`` (one sample per JIH column: the weighted mean of y in
+   the column at the mean x, weighted by the column's count, :func:`o3d_seqcc.jih.column_samples`)
+   or ``aggregate="cells"`` (the occupied JIH cells with their counts as weights, merged into at
+   most ``max_points`` centroids, :func:`o3d_seqcc.jih.weighted_samples`).
 3. Fallbacks, logged at INFO: fewer than ``min_count`` (30) observations left -> identity; the
    target values (x) span less than 4/255 (a constant image) -> offset ``x + mean(y) - mean(x)``.
 4. Where the data are sparse (fewer than ``sparse_count`` (20) observations in the 1/32-wide x
@@ -55,29 +64,27 @@ Common pre-processing and guards (``guard=True``, the default, for every method)
    toward a line in proportion to the missing support (csvr: its linear SVR, shifted to the RBF
    curve outside the switch points; other methods: the weighted least-squares line), so an RBF
    cannot run wild across gaps and at the ends.
-4b. Noise-aware shrinkage (``reliability=(0.6, 0.85)``): the correlation ratio
-   eta^2 = var(E[y|x]) / var(y) of the observations measures how much of the source values a
-   function of the target value can explain. With noisy correspondences (registration error:
-   eta^2 ~ 0.3-0.7 on fountain's path pairs, against 0.85-1.0 on the synthetic room) the
-   curvature of the conditional mean is mostly regression-dilution artefact (it flattens at the
-   extremes) and does not carry over to the other pairs, so the curve's deviation from its line
-   is kept in proportion ``(eta^2 - 0.6) / (0.85 - 0.6)`` clipped to [0, 1]. On fountain this
-   raised the mean pairwise PSNR from 24.05 to 24.26 dB and lowered CIEDE2000 from 5.39 to 5.15.
-5. The curve is clamped to [0, 1] (unless ``clamp=False``) and made monotone non-decreasing by
+5. Contrast guard (``contrast_guard=0.95``): if the weighted standard deviation of f(x) at the
+   observations is below 0.95 times that of y, f is rescaled around the mean of f(x) so the two
+   match (:func:`contrast_ratio` is that ratio). With quantile pairing this rarely triggers;
+   with ``pairing="joint"`` on noisy correspondences it undoes the regression dilution to first
+   order. A CMF never washes an image out.
+6. The curve is clamped to [0, 1] (unless ``clamp=False``) and made monotone non-decreasing by
    isotonic regression on the lookup table, so it cannot fold back.
 
 With ``guard=False`` only the fallbacks of step 3 for degenerate input and the clamp remain (the
-baselines use this to stay faithful to their papers; ``symmetric="auto"`` is then off too).
+baselines use this, with ``pairing="joint"``, to stay faithful to their papers).
 
-Errors in both variables (``symmetric``): the regression of y on x is flattened where x is
-noisy (regression dilution), and along a path of several CMFs the flattening compounds. The
-inverse of the regression of x on y is steepened by about the same amount. ``symmetric=True``
-averages the two; ``"auto"`` (default) gives the inverse a weight of
-``0.5 * clip((eta^2 - 0.6) / (0.85 - 0.6), 0, 1)`` (none on noisy pairs, where the inverse is
-far too steep: forcing it on fountain dropped PSNR from 24.0 to 19.5 dB) that fades to 0 where
-the inverse differs from the forward fit by more than ``sym_tol=0.3`` (one-sided data, wrong
-correspondences). On the synthetic room (12 views, paths up to 8 steps) it lowered the mean
-CIEDE2000 to ground truth from 6.9 to 5.6.
+Measured with ``benchmarks/table2.py`` (seqcc): fountain, mean contrast ratio of corrected
+target over source at the mappings 0.63 (min 0.34; joint regression with the former
+noise-aware shrinkage) -> 1.00 (min 0.97), while the pairwise mean CIEDE2000 at the
+misregistered mappings went from 5.16 to 6.88 (none: 7.70) because that score rewards
+shrinkage; the synthetic room (clean correspondences), CIEDE2000 to ground truth 1.53.
+
+``symmetric=True`` averages the fit of y on x with the inverse of the fit of x on y (a classic
+errors-in-variables correction). It is off by default: on fountain the inverse regression is
+far too steep (contrast ratio 1.24, worse than no correction), while quantile pairing is
+symmetric by construction.
 """
 
 from __future__ import annotations
@@ -95,9 +102,11 @@ __all__ = [
     "CMF_METHODS",
     "apply_lut",
     "compose_luts",
+    "contrast_ratio",
     "correlation_ratio",
     "fit_cmf",
     "interp_extrapolate",
+    "quantile_samples",
     "register_cmf",
 ]
 
@@ -106,7 +115,10 @@ logger = logging.getLogger(__name__)
 #: name -> ``fn(x, y, w, grid, **options) -> (curve, linear_or_None)`` on the grid
 CMF_METHODS: dict[str, Callable] = {}
 
-_COMMON = ("guard", "symmetric", "sym_tol", "clamp", "reliability", "saturation", "aggregate", "max_points", "min_count", "sparse_count", "min_span")
+_COMMON = (
+    "guard", "symmetric", "clamp", "contrast_guard", "pairing", "saturation", "aggregate", "max_points", "min_count",
+    "sparse_count", "min_span",
+)
 
 
 def register_cmf(name: str) -> Callable[[Callable], Callable]:
@@ -260,15 +272,15 @@ def fit_cmf(
     n_out: int = 256,
     guard: bool = True,
     saturation: float = 1.5 / 255,
+    pairing: str = "quantile",
     aggregate: str = "columns",
     max_points: int = 256,
     min_count: float = 30,
     sparse_count: float = 20,
     min_span: float = 4 / 255,
-    symmetric: bool | str = "auto",
+    contrast_guard: float | None = 0.95,
+    symmetric: bool = False,
     clamp: bool = True,
-    reliability: tuple[float, float] | None = (0.6, 0.85),
-    sym_tol: float = 0.3,
     **options,
 ) -> np.ndarray:
     """Fit a colour mapping function ``y ~ f(x)`` and return it as a lookup table.
@@ -286,11 +298,16 @@ def fit_cmf(
     n_out : int, default 256
         Lookup-table length (256 for 8-bit images, 4096+ for 16-bit).
     guard : bool, default True
-        Apply the sparse-data blend and the monotonicity guard (module docstring).
+        Apply the sparse-data blend, the contrast guard and the monotonicity guard (module
+        docstring).
     saturation : float, default 1.5/255
         Observations with x or y within this distance of 0 or 1 are dropped (0 keeps them).
+    pairing : {"joint", "quantile"}, default "joint"
+        ``"joint"``: regress on the joint observations (the paper's JIH). ``"quantile"``: regress
+        on the weighted quantiles of x paired with the same quantiles of y (a symmetric,
+        errors-in-variables-free pairing that matches the two distributions; module docstring).
     aggregate : {"columns", "cells"}, default "columns"
-        How observations are reduced before fitting (module docstring, step 2).
+        How joint observations are reduced before fitting (module docstring, step 2).
     max_points : int, default 256
         Bound on the aggregated weighted samples the regressor sees.
     min_count : float, default 30
@@ -299,25 +316,21 @@ def fit_cmf(
         Observations per 1/32-wide x bin below which the curve is blended toward the line.
     min_span : float, default 4/255
         Smaller spread (1st-99th weighted percentile) of x -> offset fallback.
-    symmetric : bool or "auto", default "auto"
-        Average the fit of y on x with the inverse of the fit of x on y (module docstring);
-        "auto" weights the inverse by the correlation ratio (0 below ``reliability[0]``, one
-        half above ``reliability[1]``).
-    reliability : (float, float) or None, default (0.6, 0.85)
-        Noise-aware shrinkage toward the line (module docstring, step 4b): with the correlation
-        ratio eta^2 of the observations below the first value the CMF is the line, above the
-        second the full curve, linear in between. None disables it.
-    sym_tol : float, default 0.3
-        With ``symmetric="auto"``, the inverse fit's share fades to 0 where it differs from the
-        forward fit by ``sym_tol`` or more.
+    contrast_guard : float or None, default 0.95
+        When the weighted standard deviation of ``f(x)`` at the observations is below
+        ``contrast_guard`` times that of ``y`` (the fit compresses the contrast, e.g. by
+        regression dilution on misregistered correspondences), ``f`` is rescaled around the
+        mean of ``f(x)`` so the two spreads match (module docstring, step 5). None disables it.
+    symmetric : bool, default False
+        Average the fit of y on x with the inverse of the fit of x on y.
     clamp : bool, default True
         Clip the table to [0, 1]. ``clamp=False`` keeps values beyond (the linear extrapolation
         of a curve whose data stop before 0 or 1, e.g. above the point where the source view
         saturates), so a chain of CMFs composed with :func:`compose_luts` can carry colours a
         middle view clipped to the next view instead of losing them.
     **options
-        Method hyper-parameters (csvr: ``C``, ``epsilon``, ``gamma``, ``n_dense``;
-        polynomial: ``degree``); unknown names raise ``TypeError``.
+        Method hyper-parameters (csvr: ``C``, ``epsilon``, ``gamma``, ``switch``, ``support``,
+        ``n_dense``; polynomial: ``degree``); unknown names raise ``TypeError``.
 
     Returns
     -------
@@ -328,7 +341,7 @@ def fit_cmf(
     Raises
     ------
     ValueError
-        Unknown method (lists the valid ones).
+        Unknown method, pairing or aggregate (lists the valid ones).
     TypeError
         Unknown option.
     InputError
@@ -336,6 +349,10 @@ def fit_cmf(
     """
     if method not in CMF_METHODS:
         raise ValueError(f"unknown CMF method {method!r}; valid: {', '.join(sorted(CMF_METHODS))}")
+    if pairing not in ("joint", "quantile"):
+        raise ValueError(f"pairing must be 'joint' or 'quantile', got {pairing!r}")
+    if symmetric not in (True, False):
+        raise ValueError(f"symmetric must be True or False, got {symmetric!r}")
     fn = CMF_METHODS[method]
     _check_options(fn, method, options)
     n_out = int(n_out)
@@ -358,36 +375,129 @@ def fit_cmf(
             logger.debug("fit_cmf: dropped %.0f saturated observation(s) of %.0f", w[~ok].sum(), w.sum())
         x, y, w = x[ok], y[ok], w[ok]
     common = dict(
-        method=method, guard=guard, aggregate=aggregate, max_points=max_points, min_count=min_count,
-        sparse_count=sparse_count, min_span=min_span, clamp=clamp, reliability=reliability, options=options,
+        method=method, guard=guard, pairing=pairing, aggregate=aggregate, max_points=max_points, min_count=min_count,
+        sparse_count=sparse_count, min_span=min_span, clamp=clamp, options=options,
     )
-    curve = _fit_direction(x, y, w, grid, **common)
-    if symmetric == "auto":
-        if guard:
-            lo_r, hi_r = reliability if reliability is not None else (0.6, 0.85)
-            eta2 = correlation_ratio(x, y, w) if x.size else 0.0
-            beta = 0.5 * float(np.clip((eta2 - lo_r) / max(hi_r - lo_r, 1e-9), 0.0, 1.0))
-        else:
-            beta = 0.0
-    elif symmetric in (True, False):
-        beta = 0.5 if symmetric else 0.0
-    else:
-        raise ValueError(f"symmetric must be True, False or 'auto', got {symmetric!r}")
-    if beta > 0:
+    curve, fitted = _fit_direction(x, y, w, grid, **common)
+    if symmetric and fitted:
         # errors in both variables: the regression of y on x is flattened where x is noisy
         # (regression dilution), the inverse of the regression of x on y is steepened by the
         # same first-order amount; their average cancels it
-        back = _fit_direction(y, x, w, grid, **{**common, "clamp": False})  # unclipped: invertible
+        back, _ = _fit_direction(y, x, w, grid, **{**common, "clamp": False})  # unclipped: invertible
         back = np.maximum.accumulate(back) + grid * 1e-9  # strictly increasing for the inverse
-        inv = interp_extrapolate(grid, back, grid)
-        if symmetric == "auto":
-            # dilution corrections are small: where the inverse disagrees with the forward fit by
-            # more than sym_tol (wrong correspondences, one-sided data), keep the forward fit
-            beta = beta * np.clip(1.0 - np.abs(inv - curve) / sym_tol, 0.0, 1.0)
-        curve = (1.0 - beta) * curve + beta * inv
-        if guard:
-            curve = np.maximum.accumulate(curve)
+        curve = 0.5 * curve + 0.5 * interp_extrapolate(grid, back, grid)
+    if fitted and guard and contrast_guard is not None and x.size:
+        curve = _contrast_guard(curve, grid, x, y, w, float(contrast_guard))
+    if guard:
+        if clamp:
+            curve = np.clip(curve, 0.0, 1.0)
+        from sklearn.isotonic import isotonic_regression
+
+        curve = isotonic_regression(curve, increasing=True)
     return np.clip(curve, 0.0, 1.0) if clamp else curve
+
+
+def contrast_ratio(lut: np.ndarray, x: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """Spread of the mapped target values over the spread of the source values at the mappings.
+
+    ``std_w(f(x)) / std_w(y)`` with ``f`` the lookup table (weighted standard deviations).
+    About 1 for a faithful CMF; below 1 the CMF compresses the contrast (washes the image out),
+    as a regression of y on x does when x is noisy. 1 when y is constant.
+
+    Parameters
+    ----------
+    lut : (L,) float array
+    x, y : (n,) float arrays in [0, 1]
+    weights : (n,) float array, optional
+
+    Returns
+    -------
+    float
+    """
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    w = np.ones_like(x) if weights is None else np.asarray(weights, dtype=np.float64).ravel()
+    sy = _wstd(y, w)
+    return float(_wstd(apply_lut(lut, x), w) / sy) if sy > 0 else 1.0
+
+
+def _wstd(v: np.ndarray, w: np.ndarray) -> float:
+    sw = w.sum()
+    if sw <= 0:
+        return 0.0
+    m = (w * v).sum() / sw
+    return float(np.sqrt(max((w * (v - m) ** 2).sum() / sw, 0.0)))
+
+
+def _contrast_guard(curve, grid, x, y, w, threshold: float):
+    """Rescale ``curve`` around the mean of f(x) when it compresses the spread of y (see fit_cmf)."""
+    fx = np.interp(x, grid, curve)
+    sf, sy = _wstd(fx, w), _wstd(y, w)
+    if sy <= 0 or sf <= 0 or sf >= threshold * sy:
+        return curve
+    k = sy / sf
+    m = float((w * fx).sum() / w.sum())
+    logger.debug("fit_cmf: contrast guard: f compresses the spread to %.0f %%, rescaled by %.3f", 100 * sf / sy, k)
+    return m + k * (curve - m)
+
+
+def _column_median(col: np.ndarray, v: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:
+    """Weighted median of ``v`` per integer column ``col`` in [0, n) (0 for empty columns)."""
+    o = np.lexsort((v, col))
+    cs, vs, ws = col[o], v[o], w[o]
+    tot = np.bincount(cs, weights=ws, minlength=n)
+    start = np.concatenate([[0.0], np.cumsum(tot)[:-1]])
+    cw = np.cumsum(ws) - start[cs]
+    half = 0.5 * tot[cs]
+    first = (cw >= half) & (cw - ws < half)
+    med = np.zeros(n)
+    med[cs[first]] = vs[first]
+    return med
+
+
+def _column_inliers(x: np.ndarray, y: np.ndarray, w: np.ndarray, *, columns: int = 64, k: float = 6.0) -> np.ndarray:
+    """Mask of observations within ``k`` robust sigmas (1.4826 MAD, at least 2/255) of their x column's median y.
+
+    Removes wrong correspondences (occlusions missed by the filters) before the marginals are
+    matched; the spread of misregistered texture stays (it is within a few MADs).
+    """
+    if x.size == 0:
+        return np.ones(0, dtype=bool)
+    col = np.clip((x * columns).astype(np.int64), 0, columns - 1)
+    med = _column_median(col, y, w, columns)
+    dev = np.abs(y - med[col])
+    mad = _column_median(col, dev, w, columns)
+    return dev <= k * np.maximum(1.4826 * mad[col], 2.0 / 255) + 1e-12
+
+
+def quantile_samples(
+    x: np.ndarray, y: np.ndarray, w: np.ndarray, *, n: int = 256, trim: float = 0.002
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pair the weighted quantiles of x with the same quantiles of y.
+
+    Parameters
+    ----------
+    x, y : (m,) float arrays
+    w : (m,) non-negative weights
+    n : int, default 256
+        Number of quantile levels, evenly spaced in ``[trim, 1 - trim]``.
+    trim : float, default 0.002
+        Quantile levels this close to 0 or 1 are left out (isolated extremes).
+
+    Returns
+    -------
+    xq, yq, wq : (n,) float64
+        Quantiles of x and of y at the same levels; each gets weight ``sum(w) / n``.
+    """
+    levels = np.linspace(trim, 1.0 - trim, int(n))
+
+    def wq(v):
+        o = np.argsort(v, kind="stable")
+        cw = np.cumsum(w[o])
+        cw = (cw - 0.5 * w[o]) / cw[-1]
+        return np.interp(levels, cw, v[o])
+
+    return wq(x), wq(y), np.full(levels.size, w.sum() / levels.size)
 
 
 def correlation_ratio(x: np.ndarray, y: np.ndarray, w: np.ndarray, *, columns: int = 64) -> float:
@@ -410,15 +520,18 @@ def correlation_ratio(x: np.ndarray, y: np.ndarray, w: np.ndarray, *, columns: i
 
 
 def _fit_direction(
-    x, y, w, grid, *, method, guard, aggregate, max_points, min_count, sparse_count, min_span, clamp, reliability,
-    options,
+    x, y, w, grid, *, method, guard, pairing, aggregate, max_points, min_count, sparse_count, min_span, clamp, options,
 ):
+    """Fit y ~ f(x) on the grid; returns ``(curve, fitted)`` (fitted False for a fallback)."""
     fn = CMF_METHODS[method]
     total = float(w.sum())
     if total < min_count:
         logger.info("fit_cmf: only %.0f usable observation(s) (< min_count=%s): identity CMF", total, min_count)
-        return grid.copy()
-    if aggregate == "columns":
+        return grid.copy(), False
+    if pairing == "quantile":
+        keep = _column_inliers(x, y, w) & _column_inliers(y, x, w)  # symmetric: no bias of either marginal
+        xs, ys, ws = quantile_samples(x[keep], y[keep], w[keep], n=min(int(max_points), 256))
+    elif aggregate == "columns":
         xs, ys, ws = column_samples(x, y, w, columns=min(int(max_points), 256))
     elif aggregate == "cells":
         xs, ys, ws = weighted_samples(x, y, w, max_points=max_points)
@@ -428,7 +541,7 @@ def _fit_direction(
     if span < min_span or np.unique(xs).size < 2:
         off = float((ws * ys).sum() / ws.sum() - (ws * xs).sum() / ws.sum())
         logger.info("fit_cmf: target values are (nearly) constant (span %.4f): offset CMF x %+.4f", span, off)
-        return np.clip(grid + off, 0.0, 1.0) if clamp else grid + off
+        return (np.clip(grid + off, 0.0, 1.0) if clamp else grid + off), False
     wn = ws * (ws.size / ws.sum())  # mean 1: C keeps its meaning whatever the counts
     curve, line = fn(xs, ys, wn, grid, **options)
     curve = np.asarray(curve, dtype=np.float64)
@@ -439,27 +552,14 @@ def _fit_direction(
         if line is None:
             a, b = _wls_line(xs, ys, wn)
             line = a * grid + b
+        # support of the raw observations (quantile samples are spaced by probability already)
         nb = 32
-        hist = np.bincount(np.clip((xs * nb).astype(np.int64), 0, nb - 1), weights=ws, minlength=nb)
+        hist = np.bincount(np.clip((x * nb).astype(np.int64), 0, nb - 1), weights=w, minlength=nb)
         centres = (np.arange(nb) + 0.5) / nb
         support = np.interp(grid, centres, hist)
         alpha = np.clip(support / float(sparse_count), 0.0, 1.0) if sparse_count > 0 else 1.0
-        if reliability is not None:
-            lo_r, hi_r = reliability
-            eta2 = correlation_ratio(x, y, w)
-            trust = float(np.clip((eta2 - lo_r) / max(hi_r - lo_r, 1e-9), 0.0, 1.0))
-            if trust < 1.0:
-                logger.debug("fit_cmf: eta^2 = %.2f -> %.0f %% of the curve's deviation from its line kept", eta2, 100 * trust)
-            alpha = alpha * trust
         curve = alpha * curve + (1.0 - alpha) * line
-        if clamp:
-            curve = np.clip(curve, 0.0, 1.0)
-        from sklearn.isotonic import isotonic_regression
-
-        curve = isotonic_regression(curve, increasing=True)
-    return np.clip(curve, 0.0, 1.0) if clamp else curve
-
-
+    return curve, True
 
 
 def apply_lut(lut: np.ndarray, values: np.ndarray) -> np.ndarray:

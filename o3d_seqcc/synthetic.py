@@ -3,7 +3,8 @@
 :func:`make_synthetic_scene` builds a closed room (inward-facing walls, floor and ceiling) with
 occluding furniture (a table, a tall cabinet, a sideboard), textures every planar side with a
 real photo shipped by scikit-image (planar projection, bilinear sampling), renders ``n_views``
-pinhole cameras placed on a ring inside the room and looking outwards with Open3D's
+pinhole cameras placed on a ring inside the room (view 0 in the middle of the chain) and
+looking outwards with Open3D's
 ``RaycastingScene``, and writes::
 
     out_dir/
@@ -41,6 +42,7 @@ from .errors import InputError
 from .scene import Scene, View, load_scene, save_scene
 
 __all__ = [
+    "ALBEDO_RANGE",
     "DEFAULT_CELL_SIZE",
     "PHOTOMETRIC_MODES",
     "SYNTHETIC_FORMAT",
@@ -49,6 +51,7 @@ __all__ = [
     "identity_photometric",
     "load_synthetic",
     "make_synthetic_scene",
+    "ring_slots",
     "sample_photometric",
 ]
 
@@ -86,8 +89,17 @@ TEXTURES = (
 _TILE = 1.2
 # camera ring (centre x, y; radii x, y)
 _RING = (2.5, 2.0, 0.4, 0.3)
-# largest yaw step between consecutive views (fewer views cover an arc, not the full circle)
-_MAX_STEP = np.deg2rad(25.0)
+# yaw step between ring neighbours: a full ring (360 / n_views) when n_views * 30 deg >= 360,
+# otherwise an arc of 25 deg steps centred on view 0. The horizontal field of view is
+# 2 atan(0.5 / 0.8) = 64 deg, so neighbours 25-30 deg apart share about half of the image and
+# views two steps apart little or nothing: the colour-correction graph is a connected ring or
+# chain, not complete.
+_MAX_STEP = np.deg2rad(30.0)
+_ARC_STEP = np.deg2rad(25.0)
+#: Albedo range of the textures: photos are scaled linearly from [0, 1] into [lo, hi]. Real
+#: surfaces rarely reflect more than ~80 % or less than ~3 %, so an exposure of up to 1.6x
+#: (what a camera's auto-exposure allows) clips only the brightest patches, as in real photos.
+ALBEDO_RANGE = (0.03, 0.8)
 _MAX_TEXTURE_SIDE = 512
 
 
@@ -170,6 +182,12 @@ def identity_photometric() -> dict[str, Any]:
 def sample_photometric(rng: np.random.Generator) -> dict[str, Any]:
     """Draw random camera-like photometric parameters.
 
+    Every parameter spans the documented range, but like a camera's auto exposure and tone
+    curve most draws are moderate: log exposure and the view's log tone-curve gamma, and the white-balance factors, are drawn
+    from triangular distributions peaking at 1 (the identity) over the full range; the channels'
+    gammas are that gamma times a small per-channel factor (log-normal, sigma 0.06, clipped to
+    the range), so the colour cast comes mostly from the white balance, as in a camera.
+
     Parameters
     ----------
     rng : numpy.random.Generator
@@ -177,13 +195,14 @@ def sample_photometric(rng: np.random.Generator) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``gain`` exposure factor in [0.6, 1.6] (log-uniform); ``white_balance`` three
-        per-channel factors in [0.8, 1.2]; ``gamma`` three per-channel exponents in
-        [0.65, 1.5] (log-uniform); ``s_curve`` strength in [0, 0.5].
+        ``gain`` exposure factor in [0.6, 1.6]; ``white_balance`` three per-channel factors in
+        [0.8, 1.2] (triangular, peak 1); ``gamma`` three per-channel exponents in [0.65, 1.5];
+        ``s_curve`` strength in [0, 0.5] (uniform).
     """
-    gain = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
-    wb = rng.uniform(0.8, 1.2, size=3)
-    gamma = np.exp(rng.uniform(np.log(0.65), np.log(1.5), size=3))
+    gain = float(np.exp(rng.triangular(np.log(0.6), 0.0, np.log(1.6))))
+    wb = rng.triangular(0.8, 1.0, 1.2, size=3)
+    g0 = np.exp(rng.triangular(np.log(0.65), 0.0, np.log(1.5)))
+    gamma = np.clip(g0 * np.exp(rng.normal(0.0, 0.06, size=3)), 0.65, 1.5)
     s = float(rng.uniform(0.0, 0.5))
     return {"gain": gain, "white_balance": wb.tolist(), "gamma": gamma.tolist(), "s_curve": s}
 
@@ -353,7 +372,7 @@ def _build_geometry(cell: float = DEFAULT_CELL_SIZE) -> _Geometry:
 
 @lru_cache(maxsize=None)
 def _texture(name: str) -> np.ndarray:
-    """A photo bundled with scikit-image as (H, W, 3) float32 in [0, 1] (longest side <= 512)."""
+    """A photo bundled with scikit-image as (H, W, 3) float32 albedo in :data:`ALBEDO_RANGE` (longest side <= 512)."""
     import cv2
     import skimage.data
 
@@ -365,7 +384,8 @@ def _texture(name: str) -> np.ndarray:
     scale = _MAX_TEXTURE_SIDE / max(h, w)
     if scale < 1:
         img = cv2.resize(img, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA)
-    out = img.astype(np.float32) / 255.0
+    lo, hi = ALBEDO_RANGE
+    out = (lo + (hi - lo) * (img.astype(np.float32) / 255.0)).astype(np.float32)
     out.setflags(write=False)
     return out
 
@@ -425,13 +445,30 @@ def _look_extrinsic(center: np.ndarray, yaw: float, pitch: float, roll: float) -
     return T
 
 
+def ring_slots(n_views: int) -> np.ndarray:
+    """Ring position (in steps from view 0) of each view: ``0, 1, ..., n//2, -(n - n//2 - 1), ..., -1``.
+
+    View ``i`` sits ``i`` steps counter-clockwise of view 0 for ``i <= n // 2`` and ``n - i``
+    steps clockwise otherwise, so view 0 (the unchanged reference) is in the middle of the chain
+    and cyclically consecutive indices are ring neighbours; with ``n * step = 360`` deg the two
+    halves close into a full ring.
+    """
+    i = np.arange(int(n_views))
+    return np.where(i <= n_views // 2, i, i - n_views)
+
+
 def _sample_cameras(rng: np.random.Generator, n_views: int) -> list[tuple[np.ndarray, float, float, float]]:
-    """Camera centres and angles on a jittered ring inside the room, looking outwards."""
+    """Camera centres and angles on a jittered ring inside the room, looking outwards.
+
+    Neighbours are ``360 / n_views`` deg apart when that is at most 30 (12 or more views: a
+    full ring), else 25 deg (an arc); view 0 is in the middle of the chain (:func:`ring_slots`).
+    """
     cx, cy, rx, ry = _RING
-    step = min(2 * np.pi / n_views, _MAX_STEP)
+    step = 2 * np.pi / n_views if 2 * np.pi / n_views <= _MAX_STEP + 1e-9 else _ARC_STEP
+    slots = ring_slots(n_views)
     out = []
     for i in range(n_views):
-        theta = i * step + rng.uniform(-0.1, 0.1) * step
+        theta = slots[i] * step + rng.uniform(-0.1, 0.1) * step
         c = np.array(
             [
                 cx + rx * np.cos(theta) + rng.uniform(-0.05, 0.05),
@@ -572,7 +609,9 @@ def make_synthetic_scene(
         Output folder; created. Must not exist or be empty unless ``overwrite``.
     n_views : int, default 12
         Number of views (>= 1), named ``v00``, ``v01``, ... on a ring of cameras looking
-        outwards: consecutive views overlap, far-apart views do not.
+        outwards: 12 or more views make a full ring (360 / n_views deg apart), fewer an arc of
+        25 deg steps; view 0 (the unchanged reference) is in the middle of the chain
+        (:func:`ring_slots`), ring neighbours overlap, far-apart views do not.
     width, height : int, default 320, 240
         Image size in pixels (>= 8). Intrinsic: fx = fy = 0.8 * width, principal point at the
         image centre ((width - 1) / 2, (height - 1) / 2).
@@ -581,7 +620,9 @@ def make_synthetic_scene(
         the output is byte-identical for a given seed.
     photometric : {"camera", "none"}, default "camera"
         ``"camera"``: every view but view 0 gets random exposure (0.6-1.6x), white balance
-        (+-20 % per channel), per-channel gamma (0.65-1.5) and an S-curve (strength 0-0.5);
+        (+-20 % per channel), per-channel gamma (0.65-1.5) and an S-curve (strength 0-0.5),
+        drawn camera-like (:func:`sample_photometric`); the textures' albedo is in
+        :data:`ALBEDO_RANGE` so exposure clips only a little;
         ``"none"``: the images are the ground-truth renders.
     overwrite : bool, default False
         Allow writing into a non-empty ``out_dir`` (files of earlier views are replaced,

@@ -174,8 +174,8 @@ def test_symmetric_fit_undoes_regression_dilution(rng):
     y = np.clip(0.8 * t + 0.1 + rng.normal(0, 0.05, t.size), 0, 1)
     sel = (GRID > 0.2) & (GRID < 0.8)
     slope = lambda lut: np.polyfit(GRID[sel], lut[sel], 1)[0]  # noqa: E731
-    fwd = slope(fit_cmf(x, y, method="linear", symmetric=False))
-    sym = slope(fit_cmf(x, y, method="linear", symmetric=True))
+    fwd = slope(fit_cmf(x, y, method="linear", pairing="joint", contrast_guard=None))
+    sym = slope(fit_cmf(x, y, method="linear", pairing="joint", contrast_guard=None, symmetric=True))
     assert fwd < 0.775  # attenuated by the reliability ratio var(t) / var(x) ~ 0.955
     assert sym == pytest.approx(0.8, abs=0.015) and abs(sym - 0.8) < abs(fwd - 0.8)
 
@@ -193,7 +193,64 @@ def test_unclamped_tables_compose_through_a_clipped_view():
     assert lut[-1] == pytest.approx(1.5, abs=1e-6)
 
 
-def test_noisy_correspondences_shrink_the_curve_toward_its_line(rng):
+def _misregistered(rng, g, shift=(3, 2), n=30000):
+    """Target x = I(p), source y = g(I(p + shift)): a textured photo seen through a known tone
+    curve ``g`` with a few pixels of registration error (unrelated texture detail paired)."""
+    import skimage.data
+
+    img = 0.05 + 0.9 * skimage.data.astronaut()[..., 1].astype(np.float64) / 255.0  # unsaturated
+    h, w = img.shape
+    r = rng.integers(10, h - 10, n)
+    c = rng.integers(10, w - 10, n)
+    x = img[r, c]
+    y = np.round(np.clip(g(img[r + shift[0], c + shift[1]]), 0, 1) * 255) / 255
+    return x, y
+
+
+@pytest.mark.parametrize(
+    "name,g",
+    [("gain 0.7 + 0.1", lambda v: 0.7 * v + 0.1), ("gamma 1.3", lambda v: v**1.3), ("gain 1.25", lambda v: 1.25 * v)],
+)
+def test_misregistered_correspondences_are_not_attenuated(rng, name, g):
+    from o3d_seqcc.cmf import contrast_ratio
+
+    x, y = _misregistered(rng, g)
+    sel = (GRID > 0.15) & (GRID < 0.75)
+    slope = lambda lut: np.polyfit(GRID[sel], lut[sel], 1)[0]  # noqa: E731
+    true = slope(np.clip(g(GRID), 0, 1))
+    lut = fit_cmf(x, y)  # default: quantile pairing, contrast guard
+    assert slope(lut) == pytest.approx(true, rel=0.05), name
+    assert contrast_ratio(lut, x, y) == pytest.approx(1.0, abs=0.05)
+    # the paper's literal joint regression without the guard is flattened (regression dilution)
+    raw = fit_cmf(x, y, pairing="joint", contrast_guard=None)
+    assert slope(raw) < 0.9 * true and contrast_ratio(raw, x, y) < 0.93
+    # the contrast guard alone restores the spread of the joint fit
+    guarded = fit_cmf(x, y, pairing="joint")
+    ok = (y > 0.01) & (y < 0.99) & (x > 0.01) & (x < 0.99)  # the guard measures unsaturated observations
+    assert contrast_ratio(guarded, x[ok], y[ok]) >= 0.95 - 0.01
+    assert abs(slope(guarded) - true) < abs(slope(raw) - true)
+
+
+def test_quantile_pairing_is_exact_on_clean_data_and_symmetric(rng):
+    x, y = _observations(rng, lambda v: v**1.4, noise=0.0)
+    fwd = fit_cmf(x, y)
+    assert np.abs(fwd - GRID**1.4)[MID].max() < 0.01
+    back = fit_cmf(y, x)  # swapping the views gives the inverse function
+    assert np.abs(apply_lut(back, fwd) - GRID)[MID].max() < 0.02
+
+
+def test_quantile_samples_and_pairing_option(rng):
+    from o3d_seqcc.cmf import quantile_samples
+
+    x = rng.random(1000)
+    xq, yq, wq = quantile_samples(x, 2 * x, np.ones_like(x), n=50)
+    np.testing.assert_allclose(yq, 2 * xq, atol=1e-9)
+    assert wq.sum() == pytest.approx(1000)
+    with pytest.raises(ValueError, match="pairing"):
+        fit_cmf(x, x, pairing="nope")
+
+
+def test_correlation_ratio(rng):
     from o3d_seqcc.cmf import correlation_ratio
 
     x = rng.random(20000)
@@ -201,10 +258,17 @@ def test_noisy_correspondences_shrink_the_curve_toward_its_line(rng):
     noisy = np.clip(clean + rng.normal(0, 0.3, x.size), 0, 1)
     assert correlation_ratio(x, clean, np.ones_like(x)) > 0.98
     assert correlation_ratio(x, noisy, np.ones_like(x)) < 0.6
-    curved = fit_cmf(x, clean, saturation=0)
-    assert np.abs(curved - GRID**1.6)[MID].max() < 0.015  # clean: the curve is kept
-    lut = fit_cmf(x, noisy, saturation=0)
-    free = fit_cmf(x, noisy, saturation=0, reliability=None)
-    # noisy: the CMF is (nearly) straight, the unshrunk fit is not
-    resid = lambda l: np.abs(l - np.polyval(np.polyfit(GRID[MID], l[MID], 1), GRID))[MID].max()  # noqa: E731
-    assert resid(lut) < 0.3 * resid(free)
+
+
+def test_contrast_guard_rescales_a_compressing_fit(rng):
+    from o3d_seqcc.cmf import contrast_ratio
+
+    # noise in the target values only: the joint regression is flattened
+    t = rng.uniform(0.1, 0.9, 20000)
+    x = np.clip(t + rng.normal(0, 0.12, t.size), 0, 1)
+    y = np.clip(0.9 * t + 0.05, 0, 1)
+    flat = fit_cmf(x, y, pairing="joint", contrast_guard=None, saturation=0)
+    guarded = fit_cmf(x, y, pairing="joint", saturation=0)
+    assert contrast_ratio(flat, x, y) < 0.9
+    assert contrast_ratio(guarded, x, y) == pytest.approx(1.0, abs=0.03)
+    assert np.all(np.diff(guarded) >= 0) and guarded.min() >= 0 and guarded.max() <= 1

@@ -10,7 +10,7 @@ import pytest
 from o3d_seqcc import load_scene
 from o3d_seqcc._io import read_depth, read_image
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.synthetic import ROOM, apply_photometric, load_synthetic, make_synthetic_scene
+from o3d_seqcc.synthetic import ALBEDO_RANGE, ROOM, apply_photometric, load_synthetic, make_synthetic_scene
 
 W, H, N = 160, 120, 6
 
@@ -156,9 +156,27 @@ def test_consecutive_views_overlap_far_views_do_not(syn):
     for v in syn.scene.views:
         f = syn.load_face_ids(v.name)
         seen.append(set(np.unique(f[f >= 0]).tolist()))
-    for i in range(N - 1):
-        assert len(seen[i] & seen[i + 1]) > 0.2 * min(len(seen[i]), len(seen[i + 1]))
-    assert len(seen[0] & seen[N - 1]) == 0  # the ring does not see everything from everywhere
+    # N = 6 views 25 deg apart: an arc centred on view 0, ring order 0, 1, 2, 3 | 4, 5 (= -2, -1)
+    ends = (N // 2, N // 2 + 1)
+    for i in range(N):
+        j = (i + 1) % N
+        if (i, j) == ends:
+            continue
+        assert len(seen[i] & seen[j]) > 0.2 * min(len(seen[i]), len(seen[j])), (i, j)
+    assert len(seen[ends[0]] & seen[ends[1]]) == 0  # the ring does not see everything from everywhere
+    # the unchanged reference view 0 is in the middle of the chain: every view within N // 2 steps
+    yaw = np.array([v["yaw_deg"] for v in syn.metadata["views"]])
+    off = (yaw - yaw[0] + 180.0) % 360.0 - 180.0
+    assert np.all(np.abs(off) <= 25.0 * (N // 2) + 14.0)  # + jitter of both views
+    assert (off > 10).sum() >= 2 and (off < -10).sum() >= 2
+
+
+def test_ring_slots_put_view_0_in_the_middle():
+    from o3d_seqcc.synthetic import ring_slots
+
+    assert ring_slots(6).tolist() == [0, 1, 2, 3, -2, -1]
+    assert ring_slots(12).tolist() == [0, 1, 2, 3, 4, 5, 6, -5, -4, -3, -2, -1]
+    assert ring_slots(1).tolist() == [0]
 
 
 def test_gt_colour_is_view_independent(syn):
@@ -188,9 +206,12 @@ def test_gt_colour_is_view_independent(syn):
 def test_textures_are_varied(syn):
     g = np.concatenate([syn.load_gt(i).reshape(-1, 3) for i in range(N)]).astype(float)
     lum = g.mean(1)
-    assert np.quantile(lum, 0.05) < 40 and np.quantile(lum, 0.95) > 200
+    # realistic albedo: textures span ALBEDO_RANGE = [0.03, 0.8] (8 to 204 in 8 bits)
+    lo, hi = ALBEDO_RANGE
+    assert g.min() >= np.floor(255 * lo) - 1 and g.max() <= np.ceil(255 * hi) + 1
+    assert np.quantile(lum, 0.05) < 40 and np.quantile(lum, 0.95) > 150
     sat = g.max(1) - g.min(1)
-    assert np.quantile(sat, 0.9) > 100
+    assert np.quantile(sat, 0.9) > 75
 
 
 # ------------------------------------------------------------------ photometry
