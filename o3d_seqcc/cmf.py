@@ -302,7 +302,7 @@ def fit_cmf(
         docstring).
     saturation : float, default 1.5/255
         Observations with x or y within this distance of 0 or 1 are dropped (0 keeps them).
-    pairing : {"joint", "quantile"}, default "joint"
+    pairing : {"joint", "quantile"}, default "quantile"
         ``"joint"``: regress on the joint observations (the paper's JIH). ``"quantile"``: regress
         on the weighted quantiles of x paired with the same quantiles of y (a symmetric,
         errors-in-variables-free pairing that matches the two distributions; module docstring).
