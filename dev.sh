@@ -58,7 +58,15 @@ setup_python() {
   if [[ ! -x $VENV/bin/python ]]; then
     local py; py=$(find_python)
     log "creating $VENV with $py"
-    "$py" -m venv "$VENV"
+    if ! "$py" -m venv "$VENV" 2>/dev/null; then
+      # Debian's python3 ships venv/ensurepip separately
+      local ver; ver=$("$py" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')
+      log "python venv module missing: installing python3-venv python${ver}-venv"
+      rm -rf "$VENV"
+      local SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO=sudo
+      $SUDO apt-get update -qq && $SUDO apt-get install -y -qq "python${ver}-venv" python3-venv >/dev/null
+      "$py" -m venv "$VENV"
+    fi
   fi
   log "installing o3d_seqcc and its dependencies into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
