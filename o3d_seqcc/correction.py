@@ -570,23 +570,36 @@ def _method_none(ctx: CorrectionContext) -> list:
     return [IdentityTransform() for _ in ctx.images]
 
 
-def _lut_per_path(ctx: CorrectionContext, edge_lut: Callable[[int, int], np.ndarray], *, extrapolate: bool = False) -> list:
-    """Compose per-edge (3, L) tables along every path (each edge fitted once)."""
-    cache: dict[tuple[int, int], np.ndarray] = {}
-    out: list = []
+def _path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any]) -> list[list | None]:
+    """Per view, the per-edge steps ``make_step(t, s)`` along its path (each directed edge made
+    once, even when several paths share it); None for the reference and unreachable views."""
+    cache: dict[tuple[int, int], Any] = {}
+    out: list[list | None] = []
     for v in range(len(ctx.images)):
         path = ctx.paths.get(v)
         if path is None or len(path) < 2:
-            out.append(IdentityTransform())
+            out.append(None)
             continue
-        luts = []
+        steps = []
         for t, s in zip(path[:-1], path[1:]):
             if (t, s) not in cache:
-                cache[(t, s)] = edge_lut(t, s)
-            luts.append(cache[(t, s)])
-        out.append(LutTransform(np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])))
+                cache[(t, s)] = make_step(t, s)
+            steps.append(cache[(t, s)])
+        out.append(steps)
     logger.debug("fitted %d directed edge(s) for %d path(s)", len(cache), len(ctx.paths))
     return out
+
+
+def _lut_per_path(ctx: CorrectionContext, edge_lut: Callable[[int, int], np.ndarray], *, extrapolate: bool = False) -> list:
+    """Compose per-edge (3, L) tables along every path into one table per view."""
+    return [
+        IdentityTransform()
+        if luts is None
+        else LutTransform(
+            np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])
+        )
+        for luts in _path_steps(ctx, edge_lut)
+    ]
 
 
 class _BlurredImages:
@@ -677,19 +690,8 @@ def _method_vandermonde(ctx: CorrectionContext, *, degree: int = 3) -> list:
 
 def _sequential(ctx: CorrectionContext, make_step: Callable[[int, int], Callable[[np.ndarray], np.ndarray]]) -> list:
     """FunctionTransforms applying per-edge colour transforms in order along each path."""
-    cache: dict[tuple[int, int], Callable] = {}
-    out: list = []
-    for v in range(len(ctx.images)):
-        path = ctx.paths.get(v)
-        if path is None or len(path) < 2:
-            out.append(IdentityTransform())
-            continue
-        steps = []
-        for t, s in zip(path[:-1], path[1:]):
-            if (t, s) not in cache:
-                cache[(t, s)] = make_step(t, s)
-            steps.append(cache[(t, s)])
 
+    def chain(steps: list) -> FunctionTransform:
         def fn(img: np.ndarray, steps=tuple(steps)) -> np.ndarray:
             shape = img.shape
             x = img.reshape(-1, 3)
@@ -697,8 +699,9 @@ def _sequential(ctx: CorrectionContext, make_step: Callable[[int, int], Callable
                 x = np.clip(st(x), 0.0, 1.0)
             return x.reshape(shape)
 
-        out.append(FunctionTransform(fn))
-    return out
+        return FunctionTransform(fn)
+
+    return [IdentityTransform() if steps is None else chain(steps) for steps in _path_steps(ctx, make_step)]
 
 
 # Reinhard et al. 2001 l-alpha-beta

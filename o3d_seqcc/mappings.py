@@ -28,7 +28,7 @@ from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from ._io import atomic_write_bytes
+from ._io import atomic_write_bytes, to_jsonable
 from .errors import InputError
 
 __all__ = [
@@ -604,7 +604,7 @@ class Mappings:
             "mode": np.array(self.mode),
             "pairs": np.array(keys, dtype=np.int32).reshape(-1, 2),
             "counts": np.array([self.counts[k] for k in keys], dtype=np.int64),
-            "filter_stats": np.array(json.dumps(_jsonable(self.filter_stats))),
+            "filter_stats": np.array(json.dumps(to_jsonable(self.filter_stats))),
         }
         if lazy and format != "arrays":
             src = self.pairs._source
@@ -661,20 +661,6 @@ class _StoredVisibility:
     @property
     def n_faces(self) -> int:
         return int(self.usable.shape[1])
-
-
-def _jsonable(o: Any) -> Any:
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    return o
 
 
 def load_mappings(path: str | os.PathLike) -> Mappings:

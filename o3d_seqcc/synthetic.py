@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ._io import atomic_write_bytes, read_image, write_image, write_json
+from ._io import atomic_path, atomic_write_bytes, read_image, write_image, write_json
 from .errors import InputError
 from .scene import Scene, View, load_scene, save_scene
 
@@ -546,27 +546,15 @@ def _write_depth(path: Path, depth_m: np.ndarray, depth_scale: float) -> Path:
 
 
 def _write_mesh(path: Path, geom: _Geometry) -> Path:
-    import tempfile
-
     import open3d as o3d
 
     m = o3d.geometry.TriangleMesh(
         o3d.utility.Vector3dVector(geom.vertices), o3d.utility.Vector3iVector(geom.faces.astype(np.int32))
     )
     m.vertex_normals = o3d.utility.Vector3dVector(geom.normals)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        if not o3d.io.write_triangle_mesh(tmp, m, write_ascii=False, compressed=False, print_progress=False):
+    with atomic_path(path) as tmp:
+        if not o3d.io.write_triangle_mesh(str(tmp), m, write_ascii=False, compressed=False, print_progress=False):
             raise OSError(f"Open3D could not write {path}")
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
     return path
 
 
