@@ -25,9 +25,19 @@ def test_texture_writes_outputs_and_refuses_existing_folder(syn, tmp_path, capsy
     scene_json = str(syn.root / "scene.json")
     out = tmp_path / "tex"
     assert main(["-q", "texture", scene_json, "--out", str(out), "--format", "glb,obj", "--selection", "largest-area"]) == 0
-    for name in ("mesh.glb", "mesh.obj", "mesh.mtl", "mesh.png", "selection.npy", "report.json"):
+    for name in ("mesh.glb", "mesh.obj", "mesh.mtl", "mesh.png", "selection.npy", "selection.png", "report.json"):
         assert (out / name).is_file(), name
     rep = _report(out)
+    # selection picture (Figure 9a) from the view that sees the most faces, at that view's size
+    from o3d_seqcc._io import read_image
+
+    pic = read_image(out / "selection.png")
+    assert pic.shape == (syn.scene.views[0].height, syn.scene.views[0].width, 3)
+    assert rep["selection"]["picture_view"] in syn.scene.names
+    assert len(np.unique(pic.reshape(-1, 3), axis=0)) > 3
+    # global seam leveling on by default
+    lev = rep["atlas"]["leveling"]
+    assert lev is not None and lev["seam_pairs"] > 0 and lev["seam_step_after"] < lev["seam_step_before"]
     sel = rep["selection"]
     assert sel["method"] == "largest-area" and sel["faces"] == len(np.load(out / "selection.npy"))
     assert sel["unseen_faces"] == int((np.load(out / "selection.npy") < 0).sum())
@@ -39,9 +49,10 @@ def test_texture_writes_outputs_and_refuses_existing_folder(syn, tmp_path, capsy
     assert main(["-q", "texture", scene_json, "--out", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert main(["-q", "texture", scene_json, "--out", str(out), "--overwrite", "--selection", "mrf",
-                 "--format", "glb", "--no-seams"]) == 0
+                 "--format", "glb", "--no-seams", "--no-leveling", "--selection-view", "none"]) == 0
     rep_mrf = _report(out)
     assert rep_mrf["selection"]["method"] == "mrf" and rep_mrf["seams"] is None
+    assert rep_mrf["atlas"]["leveling"] is None and "picture_view" not in rep_mrf["selection"]
     assert rep_mrf["selection"]["transitions"] <= sel["transitions"]
 
 

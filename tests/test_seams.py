@@ -111,6 +111,10 @@ def test_two_colour_charts_known_seam():
     np.testing.assert_allclose(rep.per_edge[~on_seam], 0.0, atol=1e-6)
     np.testing.assert_allclose(rep.mean, n * de / n_interior, rtol=1e-6)
     np.testing.assert_allclose(rep.frac_above_5, n / n_interior)
+    # only the chart seam is a UV seam; its mean is the known difference
+    np.testing.assert_array_equal(rep.is_seam, on_seam)
+    assert rep.n_seam_edges == n
+    np.testing.assert_allclose(rep.seam_mean, de, rtol=1e-6)
     d = rep.to_dict()
     assert "per_edge" not in d and json.dumps(d)
 
@@ -158,7 +162,9 @@ def test_bad_input(tmp_path: Path):
         seam_metric(bare)
     mesh, _ = two_chart_plane(n=2)
     with pytest.raises(InputError, match="offset"):
-        seam_metric(mesh, offset=0.7)
+        seam_metric(mesh, offset=0.0)
+    with pytest.raises(InputError, match="offset"):
+        seam_metric(mesh, offset=-1.0)
     # a single textured triangle: no interior edge
     one = trimesh.Trimesh(
         np.eye(3), [[0, 1, 2]], visual=trimesh.visual.TextureVisuals(uv=np.eye(3)[:, :2], image=mesh.visual.material.image),
@@ -166,3 +172,86 @@ def test_bad_input(tmp_path: Path):
     )
     with pytest.raises(InputError, match="no interior edge"):
         seam_metric(one)
+
+
+def single_chart_photo_plane(n: int = 8, tex_size: int = 128, seed: int = 0, split: bool = False):
+    """A 2 x 1 plane of 2n x n quads mapped onto ONE UV chart of a noisy "photo" texture."""
+    rng = np.random.default_rng(seed)
+    verts, uvs, faces = [], [], []
+    for j in range(n + 1):
+        for i in range(2 * n + 1):
+            verts.append([i / n, j / n, 0.0])
+            uvs.append([0.05 + 0.9 * i / (2 * n), 0.05 + 0.9 * j / n])
+    for j in range(n):
+        for i in range(2 * n):
+            a = j * (2 * n + 1) + i
+            b, c, d = a + 1, a + 2 * n + 2, a + 2 * n + 1
+            faces += [[a, b, c], [a, c, d]]
+    verts, uvs, faces = np.array(verts, float), np.array(uvs), np.array(faces)
+    if split:  # split vertices (one copy per face, same UVs): still one continuous chart
+        verts, uvs = verts[faces.reshape(-1)], uvs[faces.reshape(-1)]
+        faces = np.arange(len(verts)).reshape(-1, 3)
+    tex = rng.integers(0, 256, size=(tex_size, tex_size, 3), dtype=np.uint8)  # texel-level detail
+    visual = trimesh.visual.TextureVisuals(uv=uvs, image=PIL.fromarray(tex))
+    return trimesh.Trimesh(verts, faces, visual=visual, process=False)
+
+
+@pytest.mark.parametrize("split", [False, True])
+@pytest.mark.parametrize("offset", [0.5, 1.0])
+def test_photo_textured_single_chart_scores_zero(split, offset):
+    """Edges inside a chart (same UVs on both sides) carry no seam, whatever the texture detail."""
+    mesh = single_chart_photo_plane(split=split)
+    rep = seam_metric(mesh, offset=offset, keep_per_edge=True)
+    assert rep.n_edges > 0 and rep.n_seam_edges == 0
+    assert rep.mean == 0.0 and rep.p99 == 0.0 and rep.frac_above_5 == 0.0
+    assert not rep.is_seam.any()
+
+
+@pytest.mark.parametrize("offset", [0.5, 1.0, 2.0])
+def test_known_jump_independent_of_offset(offset):
+    """Constant-colour charts: the seam value is the colours' CIEDE2000 at any inward offset."""
+    mesh, _ = two_chart_plane(n=4, tex_size=128)
+    rep = seam_metric(mesh, offset=offset, keep_per_edge=True, merge_tol=1e-6)
+    np.testing.assert_allclose(rep.per_edge[rep.is_seam], expected_seam_de(), rtol=1e-6)
+    assert rep.offset == offset
+
+
+def test_offset_is_in_texels():
+    """A chart textured with a 1-texel border of another colour: half a texel inside reads the
+    border blended 50/50 with the interior; two texels inside reads the interior only."""
+    n, size = 4, 64
+    mesh, tex = two_chart_plane(n=n, left=RED, right=RED, tex_size=size)
+    # chart 1 spans u in [0.55, 0.95]: paint the texel column at its left edge (u = 0.55) green
+    col = int(np.floor(0.55 * size))
+    tex = tex.copy()
+    tex[:, col] = GREEN
+    mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, image=PIL.fromarray(tex))
+    far = seam_metric(mesh, offset=2.0, keep_per_edge=True, merge_tol=1e-6)
+    np.testing.assert_allclose(far.per_edge[far.is_seam], 0.0, atol=1e-6)
+    near = seam_metric(mesh, offset=0.1, keep_per_edge=True, merge_tol=1e-6)
+    assert near.per_edge[near.is_seam].min() > 5.0
+
+
+def test_delta_e_matches_colour_science():
+    colour = pytest.importorskip("colour")
+    rng = np.random.default_rng(0)
+    a = rng.random((2000, 3))
+    b = np.clip(a + rng.normal(0, 0.1, a.shape), 0, 1)
+    a[:3] = 0.0  # black (hue undefined)
+    with colour.utilities.suppress_warnings(colour_usage_warnings=True):
+        ref = colour.delta_E(colour.XYZ_to_Lab(colour.sRGB_to_XYZ(a)), colour.XYZ_to_Lab(colour.sRGB_to_XYZ(b)),
+                             method="CIE 2000")
+    np.testing.assert_allclose(delta_e_2000(a, b), ref, atol=1e-9)
+
+
+def test_vertex_colour_jump(tmp_path: Path):
+    mesh, _ = two_chart_plane(n=2)
+    tm = load_textured_mesh(mesh)
+    colors = np.where(tm.vertices[:, :1] <= 1.0 - 1e-9, RED, GREEN).astype(np.uint8)
+    # vertices on x = 1 exist twice (one per chart): give the left chart's copies RED
+    left_chart = np.arange(len(tm.vertices)) < len(tm.vertices) // 2
+    colors[left_chart] = RED
+    vc = trimesh.Trimesh(tm.vertices, tm.faces, vertex_colors=np.c_[colors, np.full(len(colors), 255)], process=False)
+    rep = seam_metric(vc, keep_per_edge=True, merge_tol=1e-6)
+    assert rep.n_seam_edges == 2
+    np.testing.assert_allclose(rep.per_edge[rep.is_seam], expected_seam_de(), rtol=1e-6)

@@ -354,3 +354,133 @@ def test_fountain_selection_and_bake(fountain_scene):
         want[lab == v] = bilinear(images[v], p[:, 0], p[:, 1])
     err = np.abs(got - want)
     assert err.mean() < 1.0, err.mean()
+
+
+# ------------------------------------------------------------------------------ seam leveling
+
+
+def _two_chart_offset_scene(rng, offset: float = 20.0, split: bool = False):
+    """A plane seen by two identical cameras; view 1 is view 0's photo + ``offset`` levels.
+
+    The left half of the plane is textured from view 0, the right half from view 1: two
+    charts of the same photo with a known colour step at the seam x = 0.
+    """
+    import cv2
+
+    mesh = grid_mesh(10, split=split)
+    cam = camera([0.0, 0.0, -2.4], w=160, h=120)
+    vis = project(mesh, [cam, cam])
+    # detailed "photo": noise at two scales (finest over ~8 px, so that the photo itself changes
+    # little across the texel around the seam where the metric samples), in 40..200 (+offset: no clipping)
+    fine = cv2.resize(rng.uniform(0, 1, size=(15, 20, 3)).astype(np.float32), (160, 120), interpolation=cv2.INTER_CUBIC)
+    coarse = cv2.resize(rng.uniform(0, 1, size=(4, 5, 3)).astype(np.float32), (160, 120), interpolation=cv2.INTER_CUBIC)
+    photo = np.clip(40 + 160 * (0.4 * fine + 0.6 * coarse), 0, 255).astype(np.uint8)
+    shifted = np.clip(photo.astype(np.int16) + int(offset), 0, 255).astype(np.uint8)
+    cen = mesh.vertices[mesh.faces].mean(axis=1)
+    labels = np.where(cen[:, 0] < 0, 0, 1).astype(np.int64)
+    return mesh, vis, [photo, shifted], labels
+
+
+def _laplacian_var_in_faces(tm) -> float:
+    """Variance of the Laplacian of the atlas over the texels inside faces (eroded by 2)."""
+    import cv2
+
+    from o3d_seqcc.texturing import _rasterize_uv
+
+    S = tm.atlas_size
+    idx, _, _ = _rasterize_uv(tm.uv * S - 0.5, tm.faces, np.ones((S, S), bool))
+    mask = np.zeros(S * S, np.uint8)
+    mask[idx] = 1
+    mask = cv2.erode(mask.reshape(S, S), np.ones((5, 5), np.uint8)).astype(bool)
+    grey = cv2.cvtColor(tm.texture, cv2.COLOR_RGB2GRAY).astype(np.float64)
+    return float(np.var(cv2.Laplacian(grey, cv2.CV_64F, ksize=1)[mask]))
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
+    from o3d_seqcc.cli.texture import to_seam_mesh
+    from o3d_seqcc.seams import seam_metric
+
+    mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0, split=split)
+    plain = bake_texture(mesh, images, vis, labels, atlas_size=512)
+    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True)
+    assert plain.stats["leveling"] is None and lev.stats["leveling"]["seam_pairs"] > 0
+    # samples 0.1 texel inside each face: the photo's own gradient across the seam hardly counts
+    s0 = seam_metric(to_seam_mesh(plain), offset=0.1)
+    s1 = seam_metric(to_seam_mesh(lev), offset=0.1)
+    assert s0.n_seam_edges == 10 and s0.seam_mean > 5.0  # the known step is visible
+    assert s1.mean < 0.2 * s0.mean, (s0.mean, s1.mean)
+    # detail inside the charts kept: only a smooth offset field was added
+    l0, l1 = _laplacian_var_in_faces(plain), _laplacian_var_in_faces(lev)
+    assert abs(l1 / l0 - 1.0) < 0.05, (l0, l1)
+    # the offset is split between the two charts and is nearly constant (+-10 levels)
+    S = lev.atlas_size
+    diff = lev.texture.astype(np.float64) - plain.texture.astype(np.float64)
+    c_uv = lev.uv[lev.faces].mean(axis=1) * S - 0.5
+    d = bilinear(diff, c_uv[:, 0], c_uv[:, 1]).mean(axis=1)
+    assert np.all(d[labels == 0] > 5) and np.all(d[labels == 1] < -5)
+    np.testing.assert_allclose(d[labels == 0].mean() - d[labels == 1].mean(), 20.0, atol=2.5)
+
+
+def test_leveling_without_seams_is_identity(rng):
+    mesh, vis, images, _ = _two_chart_offset_scene(rng, 20.0)
+    labels = np.zeros(len(mesh.faces), np.int64)  # one chart: nothing to level
+    plain = bake_texture(mesh, images, vis, labels, atlas_size=512)
+    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True)
+    assert lev.stats["leveling"]["seam_pairs"] == 0
+    np.testing.assert_array_equal(lev.texture, plain.texture)
+
+
+def test_seam_leveling_offsets_known_answer():
+    """Two charts sharing 3 vertices with colours 100 and 140: the offsets meet in the middle."""
+    from o3d_seqcc.texturing import seam_leveling_offsets
+
+    # chart A: vertices 0,1,2,3 ; chart B: copies 4,5,6 of 1,2,3 plus vertex 7
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 7], [5, 6, 7]])
+    group = np.array([0, 1, 2, 3, 1, 2, 3, 4])
+    colors = np.array([[100.0] * 3] * 4 + [[140.0] * 3] * 4)
+    g, st = seam_leveling_offsets(colors, faces, group, smoothness=0.1, regularizer=1e-6)
+    assert st["seam_pairs"] == 3
+    np.testing.assert_allclose(g[:4], 20.0, atol=0.05)
+    np.testing.assert_allclose(g[4:], -20.0, atol=0.05)
+    assert st["seam_step_after"] < 0.1 < st["seam_step_before"]
+    # faces masked out: their vertices get no offset and no seam pair
+    g2, st2 = seam_leveling_offsets(colors, faces, group, face_mask=np.array([True, True, False, False]))
+    assert st2["seam_pairs"] == 0 and np.all(g2 == 0)
+    with pytest.raises(InputError):
+        seam_leveling_offsets(colors[:3], faces, group)
+
+
+def test_smooth_fallback_interpolates_neighbour_colours():
+    """Faces seen by no view, inside a region textured with a linear colour ramp: the Gouraud
+    fallback reproduces the ramp (no step at their edges), the flat one does not."""
+    from o3d_seqcc.cli.texture import to_seam_mesh
+    from o3d_seqcc.seams import seam_metric
+
+    mesh = grid_mesh(8)
+    cam = CAMS[0]  # fronto-parallel: the projection of the plane is affine
+    vis = project(mesh, [cam])
+    K, R, t, w, h = cam
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    img = np.clip(np.rint(np.stack([40 + 150 * xs / w, np.full_like(xs, 100.0), 60 + 100 * ys / h], -1)), 0, 255)
+    img = img.astype(np.uint8)
+    unseen = np.array([54, 55, 56, 118])  # a few faces inside the grid, some adjacent to each other
+    vis.usable[:, unseen] = False
+    lab = select_views(vis, method="largest-area")
+    assert set(np.flatnonzero(lab < 0)) == set(unseen)
+    S_err, S_seam = {}, {}
+    for fb in ("smooth", "flat"):
+        tm = bake_texture(mesh, [img], vis, lab, atlas_size=256, fallback=fb)
+        assert tm.stats["unseen_faces"] == len(unseen) and tm.stats["fallback"] == fb
+        S = tm.atlas_size
+        c_uv = tm.uv[tm.faces[unseen]].mean(axis=1) * S - 0.5
+        got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
+        cen = mesh.vertices[mesh.faces[unseen]].mean(axis=1)
+        xc = cen @ R.T + t
+        p = xc[:, :2] / xc[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
+        S_err[fb] = np.abs(got - bilinear(img, p[:, 0], p[:, 1])).max()
+        S_seam[fb] = seam_metric(to_seam_mesh(tm)).seam_mean
+    assert S_err["smooth"] < 1.5, S_err
+    assert S_seam["smooth"] < 0.5 and S_seam["flat"] > 2 * S_seam["smooth"], S_seam
+    with pytest.raises(ValueError, match="fallback"):
+        bake_texture(mesh, [img], vis, lab, atlas_size=256, fallback="nope")

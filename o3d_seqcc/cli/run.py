@@ -5,7 +5,8 @@ per-face image selection. Writes the textured mesh (``OUT/mesh.glb``, ``OUT/mesh
 ``OUT/selection.npy``, optionally the corrected images (``--save-images``: ``OUT/images/<view>.png``)
 and ``OUT/report.json`` with the correction summary (reference, paths, unreachable views),
 the selection statistics (image transitions, unseen faces), the seam metric and the timings of
-every stage. ``--compare-original`` also bakes the uncorrected images (in memory) and reports
+every stage (also printed). Global seam leveling is on unless ``--no-leveling``; ``OUT/selection.png``
+shows the per-face selection. ``--compare-original`` also bakes the uncorrected images (in memory) and reports
 their seam metric next to the corrected one.
 """
 
@@ -62,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
 
         labels = np.load(out / "selection.npy")
         tm0 = bake_texture(vis.mesh, originals, vis, labels, atlas_size=tm.atlas_size, padding=args.padding,
-                           texel_scale=tm.stats["texel_scale"], overflow="scale")
+                           texel_scale=tm.stats["texel_scale"], overflow="scale", leveling=not args.no_leveling,
+                           leveling_smoothness=args.leveling_smoothness, fallback=args.fallback)
         compare = {"seams_original_images": seam_summary(tm0)}
         timings["compare_original"] = time.perf_counter() - t
     if args.save_images:
@@ -96,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     if report.get("seams"):
         msg += f"; seams: mean {report['seams']['mean']:.2f}, >5: {report['seams']['frac_above_5']:.3f}"
     print(msg)
+    print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
     return 0
 
 

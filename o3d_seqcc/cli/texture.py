@@ -1,9 +1,12 @@
 """``o3d-seqcc texture SCENE --out OUT``: per-face view selection, texture atlas, OBJ/GLB export.
 
 Writes ``OUT/mesh.glb`` and/or ``OUT/mesh.obj`` (+ ``mesh.mtl``, ``mesh.png``), optionally
-``OUT/mesh_colors.ply``, ``OUT/selection.npy`` ((F,) int64 view per face, -1 = unseen) and
+``OUT/mesh_colors.ply``, ``OUT/selection.npy`` ((F,) int64 view per face, -1 = unseen),
+``OUT/selection.png`` (the selection coloured by image from one view, paper Figure 9a) and
 ``OUT/report.json`` (selection statistics: image transitions, unseen faces; atlas statistics;
-seam metric; timings). ``OUT`` must not exist unless ``--overwrite`` is given.
+seam metric; timings). Global seam leveling (:func:`o3d_seqcc.texturing.bake_texture`,
+``leveling=True``) is on unless ``--no-leveling``. ``OUT`` must not exist unless ``--overwrite``
+is given.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 
 from .._io import atomic_write_bytes, read_image, write_json
 from ..errors import InputError
+from ..texturing import LEVELING_SMOOTHNESS, MRF_SMOOTHNESS
 from .info import add_scene_arguments, load_scene_from_args
 
 logger = logging.getLogger(__name__)
@@ -80,10 +84,22 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, with_images: bool = Tru
     p.add_argument("--padding", type=int, default=4, help="gutter texels around every chart (default 4)")
     p.add_argument("--overflow", choices=("grow", "scale", "error"), default="grow",
                    help="when the charts do not fit the atlas: grow it (default), shrink the texels, or fail")
-    p.add_argument("--smoothness", type=float, default=1.0, help="mrf: Potts weight per interior edge (default 1)")
+    p.add_argument("--smoothness", type=float, default=MRF_SMOOTHNESS,
+                   help=f"mrf: Potts weight per interior edge (default {MRF_SMOOTHNESS:g})")
     p.add_argument("--format", default="glb,obj", help="comma-separated export formats among glb, obj, ply (default glb,obj)")
     p.add_argument("--seed", type=int, default=0, help="seed of random selection / mrf order (default 0)")
     p.add_argument("--unlit", action="store_true", help="GLB material with KHR_materials_unlit")
+    p.add_argument("--no-leveling", action="store_true",
+                   help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "
+                   "steps at chart seams; on by default)")
+    p.add_argument("--leveling-smoothness", type=float, default=LEVELING_SMOOTHNESS,
+                   help=f"seam leveling: weight of the smoothness of the offsets inside charts (default {LEVELING_SMOOTHNESS})")
+    p.add_argument("--fallback", choices=("smooth", "flat"), default="smooth",
+                   help="colour of faces seen by no view: smooth (default: vertex colours of the seen faces around, "
+                   "interpolated) or flat (one colour per face)")
+    p.add_argument("--selection-view", default=None,
+                   help="view (name or index) from which OUT/selection.png is rendered (default: the view that sees "
+                   "the most faces); 'none' to skip the picture")
     p.add_argument("--no-seams", action="store_true", help="skip the seam metric in report.json")
     p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
     if with_images:
@@ -108,6 +124,24 @@ def seam_summary(tm) -> dict[str, Any] | None:
         logger.warning("o3d_seqcc.seams not available: no seam metric")
         return None
     return seam_metric(to_seam_mesh(tm)).to_dict()
+
+
+def write_selection_picture(scene, visibility, labels: np.ndarray, path: Path, view: str | int | None = None) -> tuple[Path, str]:
+    """Render the per-face selection coloured by image (paper Figure 9a) from one view to ``path``.
+
+    ``view``: a view name or index; default the view in which the most faces are usable.
+    Returns the path and the view's name.
+    """
+    from .._io import write_image
+    from ..render import render_selection
+
+    if view is None:
+        k = int(np.argmax(np.asarray(visibility.usable).sum(axis=1)))
+    else:
+        k = scene.index(int(view) if isinstance(view, str) and view.isdigit() and view not in scene.names else view)
+    img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views))
+    write_image(path, img)
+    return path, scene.names[k]
 
 
 def texture_and_export(
@@ -135,8 +169,17 @@ def texture_and_export(
     tm = bake_texture(
         mesh, images, visibility, labels, atlas_size=args.atlas_size, padding=args.padding,
         texel_scale=args.texel_scale, overflow=args.overflow, adjacency=adjacency,
+        leveling=not getattr(args, "no_leveling", False),
+        leveling_smoothness=getattr(args, "leveling_smoothness", LEVELING_SMOOTHNESS),
+        fallback=getattr(args, "fallback", "smooth"),
     )
     timings["bake"] = time.perf_counter() - t
+    sel_png = None
+    sv = getattr(args, "selection_view", None)
+    if sv is None or str(sv).lower() != "none":
+        t = time.perf_counter()
+        sel_png = write_selection_picture(scene, visibility, labels, out / "selection.png", sv)
+        timings["selection_picture"] = time.perf_counter() - t
     t = time.perf_counter()
     written = export_textured_mesh(tm, out, formats=parse_formats(args.format), unlit=args.unlit)
     files = {k: str(v) for k, v in written.items()}
@@ -149,8 +192,11 @@ def texture_and_export(
         t = time.perf_counter()
         seams = seam_summary(tm)
         timings["seams"] = time.perf_counter() - t
+    if sel_png is not None:
+        files["selection_png"] = str(sel_png[0])
     report = {
-        "selection": {"method": args.selection, "seed": args.seed, **sel},
+        "selection": {"method": args.selection, "seed": args.seed, **sel,
+                      **({"picture_view": sel_png[1]} if sel_png is not None else {})},
         "atlas": {k: v for k, v in tm.stats.items() if not k.startswith("time_")},
         "seams": seams,
         "files": files,
@@ -189,6 +235,7 @@ def run(args: argparse.Namespace) -> int:
     if report["seams"]:
         msg += f"; seams: mean {report['seams']['mean']:.2f}, p99 {report['seams']['p99']:.2f}, >5: {report['seams']['frac_above_5']:.3f}"
     print(msg)
+    print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
     return 0
 
 
@@ -206,4 +253,4 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 __all__ = ["add_texture_arguments", "parse_formats", "prepare_out_dir", "register", "run", "seam_summary",
-           "texture_and_export", "to_seam_mesh"]
+           "texture_and_export", "to_seam_mesh", "write_selection_picture"]
