@@ -272,3 +272,21 @@ def test_contrast_guard_rescales_a_compressing_fit(rng):
     assert contrast_ratio(flat, x, y) < 0.9
     assert contrast_ratio(guarded, x, y) == pytest.approx(1.0, abs=0.03)
     assert np.all(np.diff(guarded) >= 0) and guarded.min() >= 0 and guarded.max() <= 1
+
+
+def test_black_point_keeps_shadows_neutral_without_dark_observations(rng):
+    """No observation below 0.25: the dark end runs to (0, 0) instead of the fitted line's
+    extrapolation, which for a steep curve would crush the shadows to 0 well before black."""
+    x = rng.uniform(0.25, 0.95, 4000)
+    y = np.clip(1.3 * x - 0.12, 0, 1)  # steep near the data's dark end: the line hits 0 at x ~ 0.09
+    lut = fit_cmf(x, y)
+    grid = np.linspace(0, 1, lut.size)
+    assert lut[0] == pytest.approx(0.0, abs=1e-9)
+    dark = (grid > 0.05) & (grid < 0.2)
+    assert (lut[dark] > 0.02).all()  # not crushed
+    assert np.all(np.diff(lut) >= -1e-12)
+    # inside the data the fit is untouched by the anchor
+    inside = (grid > 0.35) & (grid < 0.9)
+    np.testing.assert_allclose(lut[inside], np.clip(1.3 * grid[inside] - 0.12, 0, 1), atol=0.02)
+    free = fit_cmf(x, y, black_point=False)
+    assert (free[dark] < lut[dark]).any()
