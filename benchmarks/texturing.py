@@ -6,7 +6,8 @@ reference="auto")``):
 
 - ours: per-face selection (largest-area, random, mrf) + atlas bake + GLB export
   (``o3d_seqcc.texturing`` / ``o3d_seqcc.export``), each without and with global seam leveling
-  (``+lev``: ``bake_texture(leveling=True)``, the command-line default);
+  (``+lev``: ``bake_texture(leveling=True)``) and with global + local seam leveling (``+lev+local``:
+  ``bake_texture(leveling=True, local_leveling=True)``, the command-line default);
 - MeshLab's ``compute_texcoord_parametrization_and_texture_from_registered_rasters``
   (colorcorrection on) through pymeshlab, in a headless subprocess under xvfb-run;
 - Open3D's ``compute_uvatlas`` + ``project_images_to_albedo``.
@@ -65,6 +66,10 @@ def _grid(rows: list[list[np.ndarray]]) -> np.ndarray:
     return np.concatenate([np.concatenate(r, axis=1) for r in rows], axis=0)
 
 
+#: --leveling mode -> method-name suffix
+SUFFIX = {"off": "", "on": "+lev", "local": "+lev+local"}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=str(DATA), help="fountain_small folder")
@@ -76,7 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--selections", default=",".join(SELECTIONS))
     ap.add_argument("--supersample", type=int, default=3,
                     help="rays per pixel per axis of the renders (box-filtered; default 3)")
-    ap.add_argument("--leveling", default="off,on", help="ours without / with global seam leveling (default off,on)")
+    ap.add_argument("--leveling", default="off,on,local",
+                    help="ours without (off) / with global (on) / with global + local (local) seam leveling "
+                    "(default off,on,local)")
     ap.add_argument("--leveling-smoothness", type=float, default=None, help="default: the library's")
     ap.add_argument("--seam-offset", type=float, default=0.5, help="seam metric: texels inward from the edge (default 0.5)")
     ap.add_argument("--no-meshlab", action="store_true")
@@ -104,7 +111,11 @@ def main(argv: list[str] | None = None) -> int:
     views = [int(x) for x in args.views.split(",") if x.strip()]
     sv = args.view
     selections = [s.strip() for s in args.selections.split(",") if s.strip()]
-    levelings = [x.strip() == "on" for x in args.leveling.split(",") if x.strip()]
+    levelings = [x.strip() for x in args.leveling.split(",") if x.strip()]
+    bad = [x for x in levelings if x not in SUFFIX]
+    if bad:
+        print(f"--leveling: unknown {bad}; valid: {', '.join(SUFFIX)}", file=sys.stderr)
+        return 2
 
     originals = [v.load_image() for v in scene.views]
     image_sets: dict[str, list[np.ndarray]] = {"original": originals}
@@ -155,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         row = {"method": method, "images": images_name, "seconds": seconds, **rep.to_dict(),
                "sharpness_ratio": ratio, "sharpness_ratio_1spp": ratio1, "mesh": str(mesh_path), **extra}
         rows.append(row)
-        print(f"  {method:<22} {images_name:<9} {seconds:7.2f} s  seam mean {rep.mean:5.3f}  p99 {rep.p99:6.2f}  "
+        print(f"  {method:<28} {images_name:<9} {seconds:7.2f} s  seam mean {rep.mean:5.3f}  p99 {rep.p99:6.2f}  "
               f">5 {rep.frac_above_5:6.4f}  sharpness {ratio:5.2f}x ({ratio1:.2f}x at 1 ray/px)", flush=True)
         return row
 
@@ -169,10 +180,10 @@ def main(argv: list[str] | None = None) -> int:
                 t_sel = time.perf_counter() - t
                 lev_opts = {} if args.leveling_smoothness is None else {"leveling_smoothness": args.leveling_smoothness}
                 tm = bake_texture(mesh, imgs, vis, labels, atlas_size=args.atlas_size, adjacency=adjacency,
-                                  leveling=lev, **lev_opts)
+                                  leveling=lev != "off", local_leveling=lev == "local", **lev_opts)
                 t_bake = time.perf_counter() - t - t_sel
-                name = f"ours:{sel}" + ("+lev" if lev else "")
-                d = out / f"ours_{sel}{'_lev' if lev else ''}_{images_name}"
+                name = f"ours:{sel}" + SUFFIX[lev]
+                d = out / f"ours_{sel}{SUFFIX[lev].replace('+', '_')}_{images_name}"
                 files = export_textured_mesh(tm, d, formats=("glb",))
                 t_total = time.perf_counter() - t + t_vis
                 stats = selection_stats(labels, adjacency, len(scene.views))
@@ -180,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
                 measure(name, images_name, files["glb"], t_total,
                         {"transitions": stats["transitions"], "unseen_faces": stats["unseen_faces"],
                          "t_selection": t_sel, "t_bake": t_bake, "t_visibility": t_vis,
-                         "atlas_size": tm.atlas_size, "leveling": tm.stats.get("leveling")})
+                         "atlas_size": tm.atlas_size, "leveling": tm.stats.get("leveling"),
+                         "local_leveling": tm.stats.get("local_leveling")})
 
     reason = None if not args.no_meshlab else "--no-meshlab"
     reason = reason or meshlab_available()
@@ -205,13 +217,13 @@ def main(argv: list[str] | None = None) -> int:
 
     # ------------------------------------------------------------------ table and ratios
     print()
-    hdr = (f"{'method':<22} {'images':<9} {'time s':>7} {'seam mean':>9} {'p99':>6} {'>5':>7} {'UV-seam edges':>13} "
+    hdr = (f"{'method':<28} {'images':<9} {'time s':>7} {'seam mean':>9} {'p99':>6} {'>5':>7} {'UV-seam edges':>13} "
            f"{'seam-edge mean':>14} {'sharp':>6} {'sharp1':>6} {'transitions':>11}")
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         tr = r.get("transitions")
-        print(f"{r['method']:<22} {r['images']:<9} {r['seconds']:7.2f} {r['mean']:9.3f} {r['p99']:6.2f} "
+        print(f"{r['method']:<28} {r['images']:<9} {r['seconds']:7.2f} {r['mean']:9.3f} {r['p99']:6.2f} "
               f"{r['frac_above_5']:7.4f} {r['n_seam_edges']:13d} {r['seam_mean']:14.2f} {r['sharpness_ratio']:5.2f}x "
               f"{r['sharpness_ratio_1spp']:5.2f}x {'' if tr is None else tr:>11}")
     print("(seam metric: CIEDE2000 across interior edges, UV-seam edges sampled "
@@ -226,32 +238,32 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nratios on {main_set} images (ours / peer; < 1 = ours lower):")
     for sel in selections:
         for lev in levelings:
-            name = f"ours:{sel}" + ("+lev" if lev else "")
+            name = f"ours:{sel}" + SUFFIX[lev]
             o = find(name, main_set)
             for peer in ("meshlab", "open3d"):
                 p = find(peer, main_set)
                 if o and p:
-                    print(f"  {name:<22} / {peer:<8} seam mean {o['mean'] / p['mean']:5.2f}  "
+                    print(f"  {name:<28} / {peer:<8} seam mean {o['mean'] / p['mean']:5.2f}  "
                           f">5 {o['frac_above_5'] / max(p['frac_above_5'], 1e-12):5.2f}  "
                           f"time {o['seconds'] / p['seconds']:5.2f}")
-    for sel in selections:
-        a, b = find(f"ours:{sel}", main_set), find(f"ours:{sel}+lev", main_set)
+    for sel, (sa, sb) in ((s, ab) for s in selections for ab in (("", "+lev"), ("+lev", "+lev+local"))):
+        a, b = find(f"ours:{sel}{sa}", main_set), find(f"ours:{sel}{sb}", main_set)
         if a and b:
-            print(f"  ours:{sel:<13} leveling: seam mean {a['mean']:.3f} -> {b['mean']:.3f} ({b['mean'] / a['mean']:.2f}x), "
+            print(f"  ours:{sel:<13} {'leveling' if not sa else 'local leveling'}: seam mean {a['mean']:.3f} -> {b['mean']:.3f} ({b['mean'] / a['mean']:.2f}x), "
                   f">5 {a['frac_above_5']:.4f} -> {b['frac_above_5']:.4f}, sharpness {a['sharpness_ratio']:.2f}x -> "
                   f"{b['sharpness_ratio']:.2f}x")
-    la = find("ours:largest-area", main_set) or find("ours:largest-area+lev", main_set)
-    mrf = find("ours:mrf", main_set) or find("ours:mrf+lev", main_set)
+    la = next((r for r in (find("ours:largest-area" + SUFFIX[x], main_set) for x in levelings) if r), None)
+    mrf = next((r for r in (find("ours:mrf" + SUFFIX[x], main_set) for x in levelings) if r), None)
     if la and mrf:
         print(f"  image transitions: mrf {mrf['transitions']} vs largest-area {la['transitions']} "
               f"({mrf['transitions'] / max(la['transitions'], 1):.2f}x)")
     if "corrected" in image_sets:
         for sel in selections:
             for lev in levelings:
-                name = f"ours:{sel}" + ("+lev" if lev else "")
+                name = f"ours:{sel}" + SUFFIX[lev]
                 a, b = find(name, "original"), find(name, "corrected")
                 if a and b:
-                    print(f"  {name:<22} corrected / original seam mean {b['mean'] / a['mean']:5.2f} "
+                    print(f"  {name:<28} corrected / original seam mean {b['mean'] / a['mean']:5.2f} "
                           f"({a['mean']:.3f} -> {b['mean']:.3f})")
     for n in notes:
         print("note:", n)
@@ -262,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         tiles = [_label(render_selection(mesh, labels, scene.views[k], n_views=len(scene.views), hits=hits[k]),
                         f"{sel} selection, view {k}") for k in views]
         write_image(pics / f"selection_{sel}.png", _grid([tiles]))
-    best = "+lev" if True in levelings else ""
+    best = SUFFIX["local"] if "local" in levelings else SUFFIX["on"] if "on" in levelings else ""
     for sel in selections:
         rows_img = []
         for images_name in image_sets:
@@ -275,9 +287,9 @@ def main(argv: list[str] | None = None) -> int:
         rows_img = []
         for images_name in image_sets:
             for lev in levelings:
-                r = renders.get((f"ours:{sel}" + ("+lev" if lev else ""), images_name))
+                r = renders.get((f"ours:{sel}" + SUFFIX[lev], images_name))
                 if r:
-                    rows_img.append([_label(r[k], f"ours {sel}, {images_name}, leveling {'on' if lev else 'off'}, view {k}")
+                    rows_img.append([_label(r[k], f"ours {sel}, {images_name}, leveling {lev}, view {k}")
                                      for k in views])
         if rows_img:
             write_image(pics / f"ours_{sel}_leveling.png", _grid(rows_img))
@@ -286,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
 
     for k in views:
         tiles = []
-        for method in ("ours:mrf", "ours:mrf+lev", "ours:largest-area", "ours:largest-area+lev"):
+        for method in ("ours:mrf", "ours:mrf+lev", "ours:mrf+lev+local", "ours:largest-area", "ours:largest-area+lev",
+                       "ours:largest-area+lev+local"):
             r = renders.get((method, main_set))
             if r:
                 h, w = r[k].shape[:2]
@@ -304,12 +317,14 @@ def main(argv: list[str] | None = None) -> int:
     write_image(pics / "peers.png", _grid(peer_rows))
     # close-up crops of view `sv` at full resolution: ours vs peers vs photo
     crops = []
-    for method in ("ours:mrf", f"ours:mrf{best}", "meshlab", "open3d", f"ours:largest-area{best}"):
+    for method in dict.fromkeys(("ours:mrf", "ours:mrf+lev", f"ours:mrf{best}", "meshlab", "open3d",
+                                 f"ours:largest-area{best}")):
         r = renders.get((method, main_set))
         if r:
             crops.append(_label(r[sv][40:300, 100:460], f"{method}"))
     crops.append(_label(image_sets[main_set][sv][40:300, 100:460], "photo"))
-    write_image(pics / f"closeup_view{sv}.png", _grid([crops[:3], crops[3:] + [np.full_like(crops[0], 255)] * (3 - len(crops[3:]))]))
+    crops += [np.full_like(crops[0], 255)] * (-len(crops) % 4)
+    write_image(pics / f"closeup_view{sv}.png", _grid([crops[i:i + 4] for i in range(0, len(crops), 4)]))
 
     from o3d_seqcc._io import write_json
 

@@ -40,6 +40,13 @@ Three stages, pure numpy on the arrays of a :class:`~o3d_seqcc.visibility.Visibi
    (charts rasterised in atlas space by ray casting the UV mesh). Only a low-frequency field is
    added, so the texture keeps its detail.
 
+4. Local seam leveling (``bake_texture(local_leveling=True)``, after the same paper's local
+   Poisson editing, simplified; on by default in the command-line tools): what the global
+   leveling leaves (colour differences that vary along a seam) is removed in a thin strip
+   (``local_band`` texels) along every chart border: both sides of every seam edge are sampled,
+   each side's border is moved to their mean, and the difference fades out smoothly into the
+   chart (masked normalised convolution on the whole atlas, see :func:`bake_texture`).
+
 Conventions: atlas UVs are in [0, 1] with the origin at the *top-left* texel corner, u to the
 right, v down (image rows): the centre of texel (column X, row Y) of an S x S atlas is at
 ``((X + 0.5) / S, (Y + 0.5) / S)``. :mod:`o3d_seqcc.export` flips v for OBJ (v = 1 - y / S) and
@@ -872,6 +879,136 @@ def _apply_corner_offsets(
     return out, {"texels_in_faces": int(len(tidx)), "time_raster_s": t1 - t0, "time_apply_s": time.perf_counter() - t0}
 
 
+def _seam_edge_corners(wf: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Corner indices (0..2) of the shared edge of each adjacent face pair.
+
+    ``wf`` (F, 3): welded vertex id of every face corner; ``pairs`` (E, 2): faces sharing an
+    edge. Returns ``cp`` and ``cq``, both (E, 2) int64: the corners of face ``pairs[:, 0]`` /
+    ``pairs[:, 1]`` at the two shared vertices, in the same vertex order.
+    """
+    wp = wf[pairs[:, 0]]
+    wq = wf[pairs[:, 1]]
+    match = wp[:, :, None] == wq[:, None, :]  # (E, 3, 3)
+    ip = match.any(axis=2)
+    cp = np.argsort(~ip, axis=1, kind="stable")[:, :2].astype(np.int64)
+    rows = np.arange(len(pairs))[:, None]
+    cq = np.argmax(match[rows, cp], axis=2).astype(np.int64)
+    return cp, cq
+
+
+def _local_seam_leveling(
+    tex: np.ndarray, region: np.ndarray, txy: np.ndarray, new_faces: np.ndarray, face_chart: np.ndarray,
+    labels: np.ndarray, adjacency: np.ndarray, wf: np.ndarray, *, band: int, smooth_iters: int = 1,
+    step: float = 0.5, inset: float = 0.5,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Local seam leveling (after Waechter et al. 2014, simplified); see :func:`bake_texture`.
+
+    Along every seam edge (adjacent faces in two different charts, at least one of them seen)
+    the atlas is sampled in both charts at points ``step`` texels apart. A seen chart's target
+    is the mean of the two colours (``d = (other - own) / 2``), or the other side's colour when
+    that is a fallback (unseen) face, which is not changed (``d = other - own``). ``d`` is
+    splatted (bilinear weights) onto the texels around the edge in the chart's rectangle,
+    extended into the chart by ``ceil(band / 2)`` steps of masked 5 x 5 normalised convolution (a
+    front that never crosses into another chart's rectangle: a two-texel ring inside every
+    rectangle is a barrier), smoothed by ``smooth_iters`` masked 3 x 3 averages, faded out with
+    the distance to the nearest border texel (smoothstep from 1 within one texel of the
+    border to 0 at ``band + 1`` texels) and added to the texture. Whole-atlas OpenCV filters,
+    no per-texel Python.
+    """
+    import cv2
+
+    from .seams import bilinear
+
+    t0 = time.perf_counter()
+    stats: dict[str, Any] = {"band": int(band), "seam_edges": 0, "mean_abs_diff": 0.0, "texels_changed": 0,
+                             "mean_abs_offset": 0.0}
+    seen = labels >= 0
+    fp, fq = adjacency[:, 0], adjacency[:, 1]
+    seam = (seen[fp] | seen[fq]) & (face_chart[fp] != face_chart[fq])
+    pairs = adjacency[seam]
+    rows_used = np.flatnonzero((region >= 0).any(axis=1))
+    if len(pairs) == 0 or len(rows_used) == 0 or band < 1:
+        stats["time_s"] = time.perf_counter() - t0
+        return tex, stats
+    R = int(rows_used[-1]) + 1
+    S = tex.shape[1]
+    cp, cq = _seam_edge_corners(wf, pairs)
+    ea = txy[new_faces[pairs[:, 0:1], cp]]  # (E, 2 endpoints, 2 xy) in the texels of face p's chart
+    eb = txy[new_faces[pairs[:, 1:2], cq]]
+    length = np.maximum(np.linalg.norm(ea[:, 1] - ea[:, 0], axis=1), np.linalg.norm(eb[:, 1] - eb[:, 0], axis=1))
+    n = np.clip(np.ceil(length / float(step)).astype(np.int64), 1, 4096)
+    eid = np.repeat(np.arange(len(pairs)), n)
+    start = np.r_[0, np.cumsum(n)[:-1]]
+    t = ((np.arange(int(n.sum())) - start[eid]) + 0.5) / n[eid]
+    pa = ea[eid, 0] + (ea[eid, 1] - ea[eid, 0]) * t[:, None]
+    pb = eb[eid, 0] + (eb[eid, 1] - eb[eid, 0]) * t[:, None]
+    if inset > 0:  # move the samples ``inset`` texels into their own face (where seams are seen and measured)
+        for e2, cc, col, pts_ in ((ea, cp, 0, pa), (eb, cq, 1, pb)):
+            third = txy[new_faces[pairs[:, col], 3 - cc.sum(axis=1)]]  # the face's corner off the edge
+            dvec = e2[:, 1] - e2[:, 0]
+            nvec = np.stack([-dvec[:, 1], dvec[:, 0]], axis=1)
+            nvec /= np.maximum(np.linalg.norm(nvec, axis=1), 1e-12)[:, None]
+            sgn = np.sign(((third - e2[:, 0]) * nvec).sum(axis=1))
+            pts_ += (float(inset) * sgn[:, None] * nvec)[eid]
+    diff = (bilinear(tex, pb[:, 0], pb[:, 1]) - bilinear(tex, pa[:, 0], pa[:, 1])) * 255.0  # other - own, for p
+    both = (seen[pairs[:, 0]] & seen[pairs[:, 1]])[eid]
+    share = np.where(both, 0.5, 1.0)[:, None]
+    stats["seam_edges"] = int(len(pairs))
+    stats["mean_abs_diff"] = float(np.abs(diff).mean())
+    # splat d onto the 4 bilinear neighbours of every sample, on both sides (fallback sides fall outside the domain)
+    own_seen = np.concatenate([seen[pairs[:, 0]][eid], seen[pairs[:, 1]][eid]])
+    pts = np.concatenate([pa, pb])[own_seen]
+    dv = np.concatenate([share * diff, -share * diff])[own_seen]
+    x0 = np.clip(np.floor(pts[:, 0]).astype(np.int64), 0, S - 2)
+    y0 = np.clip(np.floor(pts[:, 1]).astype(np.int64), 0, R - 2)
+    fx = np.clip(pts[:, 0] - x0, 0.0, 1.0)
+    fy = np.clip(pts[:, 1] - y0, 0.0, 1.0)
+    base = y0 * S + x0
+    idx = np.concatenate([base, base + 1, base + S, base + S + 1])
+    w = np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
+    wsum = np.bincount(idx, weights=w, minlength=R * S).reshape(R, S)
+    # domain: texels of seen-chart rectangles minus a two-texel ring inside every rectangle
+    reg = region[:R]
+    edge = np.zeros((R, S), dtype=np.uint8)
+    edge[1:] |= reg[1:] != reg[:-1]
+    edge[:-1] |= reg[:-1] != reg[1:]
+    edge[:, 1:] |= reg[:, 1:] != reg[:, :-1]
+    edge[:, :-1] |= reg[:, :-1] != reg[:, 1:]
+    edge = cv2.dilate(edge, np.ones((3, 3), np.uint8))
+    dom = ((reg >= 0) & (edge == 0)).astype(np.float32)
+    seed = ((wsum > 1e-6) & (dom > 0)).astype(np.float32)
+    inv_w = np.divide(seed, wsum, out=np.zeros((R, S)), where=wsum > 1e-6)
+    P = [np.ascontiguousarray((np.bincount(idx, weights=w * np.tile(dv[:, c], 4), minlength=R * S).reshape(R, S)
+                               * inv_w).astype(np.float32)) for c in range(3)]  # value x known
+    K = seed
+    bc = cv2.BORDER_CONSTANT
+    for _ in range((int(band) + 1) // 2):  # extension front, two texels per step
+        c = cv2.boxFilter(K, -1, (5, 5), normalize=False, borderType=bc)
+        upd = cv2.multiply(cv2.subtract(dom, K), cv2.threshold(c, 1e-3, 1.0, cv2.THRESH_BINARY)[1])
+        f = cv2.divide(upd, cv2.max(c, 1e-3))  # upd is 0 where c is
+        P = [cv2.add(p, cv2.multiply(cv2.boxFilter(p, -1, (5, 5), normalize=False, borderType=bc), f)) for p in P]
+        K = cv2.add(K, upd)
+    free = cv2.subtract(K, seed)  # extended, non-seed texels
+    keep = cv2.subtract(np.float32(1.0) + np.zeros_like(free), free)
+    for _ in range(int(smooth_iters)):  # masked smoothing of the extended values (seeds fixed)
+        c = cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc)
+        f = cv2.divide(free, cv2.max(c, 1e-3))  # c >= 1 where free
+        P = [cv2.add(cv2.multiply(p, keep), cv2.multiply(cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=bc), f))
+             for p in P]
+    dist = cv2.distanceTransform((seed == 0).astype(np.uint8), cv2.DIST_L2, 3)
+    tt = np.clip(1.0 - (dist - 1.0) / float(band), 0.0, 1.0)
+    fall = (tt * tt * (3.0 - 2.0 * tt) * K).astype(np.float32)  # P holds value x known, K in {0, 1}
+    off = cv2.merge([cv2.multiply(p, fall) for p in P])
+    touched = fall > 0
+    out = tex.copy()
+    sub = out[:R]
+    sub[touched] = np.clip(np.rint(sub[touched].astype(np.float32) + off[touched]), 0, 255).astype(np.uint8)
+    stats["texels_changed"] = int(np.count_nonzero(touched))
+    stats["mean_abs_offset"] = float(np.abs(off[touched]).mean()) if touched.any() else 0.0
+    stats["time_s"] = time.perf_counter() - t0
+    return out, stats
+
+
 def _fallback_vertex_colors(
     images: list[np.ndarray], uv_all: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
     corner_offsets: np.ndarray | None = None, iters: int = 256,
@@ -969,6 +1106,8 @@ def bake_texture(
     adjacency: np.ndarray | None = None,
     leveling: bool = False,
     leveling_smoothness: float = LEVELING_SMOOTHNESS,
+    local_leveling: bool = False,
+    local_band: int = 8,
     fallback: str = "smooth",
 ) -> TexturedMesh:
     """Bake a texture atlas from the selected view of every face.
@@ -1012,6 +1151,22 @@ def bake_texture(
         tools turn it on by default.
     leveling_smoothness : float, default :data:`LEVELING_SMOOTHNESS` (0.03)
         ``smoothness`` of :func:`seam_leveling_offsets`.
+    local_leveling : bool, default False
+        Local seam leveling (after Waechter et al. 2014's Poisson editing of a strip along every
+        chart border, simplified), applied after the global leveling when both are on: along
+        every seam edge both charts are sampled half a texel inside their own face, every
+        ``0.5`` texel along the edge; a seen chart's border target is the mean of the two sides
+        (or the other side's colour when that is a fallback face, which is kept), and the border
+        difference is spread into the chart by a masked normalised-convolution front that never
+        leaves the chart's rectangle, fading out (smoothstep) over ``local_band`` texels, then
+        added. Only a thin low-amplitude strip changes, so the texture keeps its detail. On
+        fountain (mrf selection, corrected images, after global leveling) the seam metric mean
+        drops from 0.21 to 0.04 and the sharpness ratio of the render stays ~1.1x; ~0.2 s on a
+        2048^2 atlas. Needs ``padding >= 1`` (a two-texel ring inside every chart rectangle keeps
+        charts apart; with ``padding=0`` it would cover the chart borders, so nothing is done and
+        a warning is logged). The command-line tools turn it on by default.
+    local_band : int, default 8
+        Width in texels of the strip changed by ``local_leveling`` (>= 1).
     fallback : {"smooth", "flat"}, default "smooth"
         Colour of the faces seen by no view. ``"smooth"``: per-vertex colours interpolated over
         the face (Gouraud), a vertex taking the mean colour of the seen faces around it (their
@@ -1025,7 +1180,10 @@ def bake_texture(
     Returns
     -------
     TexturedMesh
-        ``stats["leveling"]`` holds the leveling statistics when ``leveling`` is on.
+        ``stats["leveling"]`` holds the leveling statistics when ``leveling`` is on,
+        ``stats["local_leveling"]`` those of the local leveling (``seam_edges``, ``band``,
+        ``mean_abs_diff`` the mean colour step sampled across seams before it, in RGB levels,
+        ``texels_changed``, ``mean_abs_offset``, ``time_s``) when ``local_leveling`` is on.
 
     Raises
     ------
@@ -1047,6 +1205,8 @@ def bake_texture(
         raise InputError(f"atlas_size must be an integer >= 8, got {atlas_size}")
     if padding < 0 or texel_scale <= 0:
         raise InputError(f"padding must be >= 0 and texel_scale > 0, got {padding}, {texel_scale}")
+    if local_leveling and (int(local_band) < 1 or int(local_band) != local_band):
+        raise InputError(f"local_band must be an integer >= 1, got {local_band}")
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     uv_all = np.asarray(visibility.uv)
@@ -1221,7 +1381,7 @@ def bake_texture(
     covered = np.zeros(size * size, dtype=bool)
     covered[dst_idx] = True
     region = None
-    if leveling:  # chart id of every texel of a seen chart's rectangle (fallback blocks are not leveled)
+    if leveling or local_leveling:  # chart id of every texel of a seen chart's rectangle (fallback blocks are not leveled)
         region = np.full(size * size, -1, dtype=np.int32)
         region[dst_idx] = np.repeat(np.arange(n_charts, dtype=np.int32), area_c)
         region[region >= n_charts_seen] = -1
@@ -1268,6 +1428,16 @@ def bake_texture(
         logger.info("bake_texture: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f, %.2f s",
                     lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
                     lev_stats["seam_step_after"], lev_stats["time_solve_s"] + lev_stats["time_apply_s"])
+    local_stats = None
+    if local_leveling and int(padding) < 1:
+        logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(padding))
+    elif local_leveling:
+        tex, local_stats = _local_seam_leveling(
+            tex, region, txy, new_faces, face_chart, labels, adjacency, weld_vertices(verts)[faces], band=int(local_band)
+        )
+        logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
+                    local_stats["seam_edges"], local_stats["mean_abs_diff"], local_stats["texels_changed"],
+                    local_stats["time_s"])
     if fill_background and not covered.all():
         tex = _push_pull_fill(tex, covered)
     t_end = time.perf_counter()
@@ -1284,6 +1454,7 @@ def bake_texture(
         "utilization": float(covered.mean()),
         "packer": "shelf",
         "leveling": lev_stats,
+        "local_leveling": local_stats,
         "time_pack_s": t_pack - t0,
         "time_bake_s": t_bake - t_pack,
         "time_total_s": t_end - t0,

@@ -5,7 +5,8 @@ per-face image selection. Writes the textured mesh (``OUT/mesh.glb``, ``OUT/mesh
 ``OUT/selection.npy``, optionally the corrected images (``--save-images``: ``OUT/images/<view>.png``)
 and ``OUT/report.json`` with the correction summary (reference, paths, unreachable views),
 the selection statistics (image transitions, unseen faces), the seam metric and the timings of
-every stage (also printed). Global seam leveling is on unless ``--no-leveling``; ``OUT/selection.png``
+every stage (also printed). Global seam leveling is on unless ``--no-leveling``, local seam leveling
+unless ``--no-local-leveling``; ``OUT/selection.png``
 shows the per-face selection. ``--compare-original`` also bakes the uncorrected images (in memory) and reports
 their seam metric next to the corrected one.
 """
@@ -64,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
         labels = np.load(out / "selection.npy")
         tm0 = bake_texture(vis.mesh, originals, vis, labels, atlas_size=tm.atlas_size, padding=args.padding,
                            texel_scale=tm.stats["texel_scale"], overflow="scale", leveling=not args.no_leveling,
-                           leveling_smoothness=args.leveling_smoothness, fallback=args.fallback)
+                           leveling_smoothness=args.leveling_smoothness, fallback=args.fallback,
+                           local_leveling=not args.no_local_leveling, local_band=args.local_band)
         compare = {"seams_original_images": seam_summary(tm0)}
         timings["compare_original"] = time.perf_counter() - t
     if args.save_images:

@@ -5,7 +5,8 @@ Writes ``OUT/mesh.glb`` and/or ``OUT/mesh.obj`` (+ ``mesh.mtl``, ``mesh.png``), 
 ``OUT/selection.png`` (the selection coloured by image from one view, paper Figure 9a) and
 ``OUT/report.json`` (selection statistics: image transitions, unseen faces; atlas statistics;
 seam metric; timings). Global seam leveling (:func:`o3d_seqcc.texturing.bake_texture`,
-``leveling=True``) is on unless ``--no-leveling``. ``OUT`` must not exist unless ``--overwrite``
+``leveling=True``) is on unless ``--no-leveling``, local seam leveling (``local_leveling=True``) unless
+``--no-local-leveling``. ``OUT`` must not exist unless ``--overwrite``
 is given.
 """
 
@@ -94,6 +95,11 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, with_images: bool = Tru
                    "steps at chart seams; on by default)")
     p.add_argument("--leveling-smoothness", type=float, default=LEVELING_SMOOTHNESS,
                    help=f"seam leveling: weight of the smoothness of the offsets inside charts (default {LEVELING_SMOOTHNESS})")
+    p.add_argument("--no-local-leveling", action="store_true",
+                   help="skip local seam leveling (after the global one: the colour steps left along chart borders "
+                   "are blended away in a thin strip of --local-band texels; on by default)")
+    p.add_argument("--local-band", type=int, default=8,
+                   help="local seam leveling: width of the blended strip along chart borders, in texels (default 8)")
     p.add_argument("--fallback", choices=("smooth", "flat"), default="smooth",
                    help="colour of faces seen by no view: smooth (default: vertex colours of the seen faces around, "
                    "interpolated) or flat (one colour per face)")
@@ -171,6 +177,8 @@ def texture_and_export(
         texel_scale=args.texel_scale, overflow=args.overflow, adjacency=adjacency,
         leveling=not getattr(args, "no_leveling", False),
         leveling_smoothness=getattr(args, "leveling_smoothness", LEVELING_SMOOTHNESS),
+        local_leveling=not getattr(args, "no_local_leveling", False),
+        local_band=getattr(args, "local_band", 8),
         fallback=getattr(args, "fallback", "smooth"),
     )
     timings["bake"] = time.perf_counter() - t
