@@ -570,27 +570,32 @@ def _method_none(ctx: CorrectionContext) -> list:
     return [IdentityTransform() for _ in ctx.images]
 
 
-def _path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any]) -> list[list | None]:
+def _path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, n_jobs: int | None = None) -> list[list | None]:
     """Per view, the per-edge steps ``make_step(t, s)`` along its path (each directed edge made
-    once, even when several paths share it); None for the reference and unreachable views."""
-    cache: dict[tuple[int, int], Any] = {}
-    out: list[list | None] = []
-    for v in range(len(ctx.images)):
-        path = ctx.paths.get(v)
-        if path is None or len(path) < 2:
-            out.append(None)
-            continue
-        steps = []
-        for t, s in zip(path[:-1], path[1:]):
-            if (t, s) not in cache:
-                cache[(t, s)] = make_step(t, s)
-            steps.append(cache[(t, s)])
-        out.append(steps)
+    once, even when several paths share it); None for the reference and unreachable views.
+
+    The edges are fitted in joblib threads (``n_jobs``, joblib semantics: None = the active
+    ``joblib.parallel_config`` or 1, -1 = all cores); scikit-learn's SVR fit releases the GIL.
+    """
+    from joblib import Parallel, delayed
+
+    paths = [ctx.paths.get(v) for v in range(len(ctx.images))]
+    edges = list(dict.fromkeys((t, s) for p in paths if p is not None for t, s in zip(p[:-1], p[1:])))
+    made = Parallel(n_jobs=n_jobs, prefer="threads")(delayed(make_step)(t, s) for t, s in edges)
+    cache = dict(zip(edges, made))
     logger.debug("fitted %d directed edge(s) for %d path(s)", len(cache), len(ctx.paths))
-    return out
+    return [
+        None if p is None or len(p) < 2 else [cache[(t, s)] for t, s in zip(p[:-1], p[1:])] for p in paths
+    ]
 
 
-def _lut_per_path(ctx: CorrectionContext, edge_lut: Callable[[int, int], np.ndarray], *, extrapolate: bool = False) -> list:
+def _lut_per_path(
+    ctx: CorrectionContext,
+    edge_lut: Callable[[int, int], np.ndarray],
+    *,
+    extrapolate: bool = False,
+    n_jobs: int | None = None,
+) -> list:
     """Compose per-edge (3, L) tables along every path into one table per view."""
     return [
         IdentityTransform()
@@ -598,7 +603,7 @@ def _lut_per_path(ctx: CorrectionContext, edge_lut: Callable[[int, int], np.ndar
         else LutTransform(
             np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])
         )
-        for luts in _path_steps(ctx, edge_lut)
+        for luts in _path_steps(ctx, edge_lut, n_jobs=n_jobs)
     ]
 
 
@@ -639,8 +644,12 @@ def _method_seqcc(
     cmf_options: dict | None = None,
     bits: int | None = None,
     jih_blur: float = 0.0,
+    n_jobs: int | None = None,
 ) -> list:
     """Sequential pairwise correction with JIH + CMF per path edge (paper 3.5-3.7).
+
+    ``n_jobs`` (joblib semantics, threads): edges fitted in parallel; None = the active
+    ``joblib.parallel_config`` or 1.
 
     Options: ``cmf`` (a :data:`o3d_seqcc.cmf.CMF_METHODS` name), ``cmf_options`` (passed to
     :func:`o3d_seqcc.cmf.fit_cmf`), ``bits`` (JIH bit depth; default 8 for 8-bit input, 10
@@ -667,7 +676,7 @@ def _method_seqcc(
             rows.append(fit_cmf(x, y, weights=w, method=cmf, n_out=ctx.lut_size, **opts))
         return np.stack(rows)
 
-    return _lut_per_path(ctx, edge_lut, extrapolate=not opts.get("clamp", True))
+    return _lut_per_path(ctx, edge_lut, extrapolate=not opts.get("clamp", True), n_jobs=n_jobs)
 
 
 @register_method("vandermonde")

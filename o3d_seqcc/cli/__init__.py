@@ -28,6 +28,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    parser.add_argument(
+        "-j", "--jobs", type=int, default=-1,
+        help="parallel workers (joblib threads) for per-view and per-edge work (default -1: all cores)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
@@ -41,8 +45,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     level = logging.WARNING if args.quiet else (logging.INFO if args.verbose <= 1 else logging.DEBUG)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    from joblib import parallel_config
+
     try:
-        return int(args.func(args) or 0)
+        with parallel_config(n_jobs=args.jobs):
+            return int(args.func(args) or 0)
     except InputError as e:
         print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
         return 2
