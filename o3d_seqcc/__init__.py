@@ -33,6 +33,7 @@ _LAZY: dict[str, str] = {
     "SyntheticScene": "synthetic",
     "make_synthetic_scene": "synthetic",
     "load_synthetic": "synthetic",
+    "perturb_poses": "synthetic",
     # visibility and mappings (paper 3.1-3.2)
     "Visibility": "visibility",
     "compute_visibility": "visibility",

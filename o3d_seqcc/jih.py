@@ -172,7 +172,7 @@ def column_samples(
         Non-negative weights (default 1).
     columns, rows : int, default 256
         Grid resolution along x and y.
-    clip_k : float, default 3.0
+    clip_k : float, default inf
         Outlier rejection threshold in MADs (``inf`` keeps everything: plain column means).
     min_spread : float, default 2/255
         Floor of the MAD, so clean, tight columns keep all their observations.
