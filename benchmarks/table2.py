@@ -3,7 +3,8 @@
 Usage::
 
     .venv/bin/python benchmarks/table2.py [--fountain PATH] [--no-fountain] [--no-synthetic]
-        [--blur 1.5] [--holdout 0.5] [--methods none,seqcc,...] [--json FILE]
+        [--blur 1.5] [--holdout 0.5] [--methods none,seqcc,...] [--pose-error 0,0.5] [--json FILE]
+        [--figure FILE.png [--figure-views 5,16,27,29]]
 
 For every method (Table 1 #1-#7: none, reinhard, root-polynomial, vandermonde,
 gain-compensation, histogram-matching, seqcc) it prints PSNR and CIEDE2000 over the view
@@ -106,6 +107,26 @@ def contrast_ratios(corrected, mappings, reference: int, *, t_npm: int, min_n: i
     return np.array(out)
 
 
+def write_montage(path, images, corrected: dict, views) -> None:
+    """PNG grid, one row per method (plus the input images first unless "none" is one), one column
+    per view of ``views``; half size, labelled."""
+    import cv2
+
+    from o3d_seqcc._io import write_image
+
+    def cell(img, text):
+        im = np.asarray(img)
+        im = (im / 257).astype(np.uint8) if im.dtype == np.uint16 else np.asarray(im, dtype=np.uint8)
+        im = cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2), interpolation=cv2.INTER_AREA).copy()
+        cv2.putText(im, text, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2, cv2.LINE_AA)
+        cv2.putText(im, text, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
+        return im
+
+    rows = list(corrected.items()) if "none" in corrected else [("input", images), *corrected.items()]
+    grid = [np.concatenate([cell(ims[v], f"{name} / view {v}") for v in views], axis=1) for name, ims in rows]
+    write_image(path, np.concatenate(grid, axis=0))
+
+
 def run_scene(
     label: str,
     scene,
@@ -119,8 +140,14 @@ def run_scene(
     gt=None,
     method_options=None,
     t_npm: int = 400,
+    figure: str | None = None,
+    figure_views=(),
 ) -> dict:
-    """Evaluate all methods on one scene; print the table; return the numbers."""
+    """Evaluate all methods on one scene; print the table; return the numbers.
+
+    ``figure``: also write a PNG montage there, one row per method, one column per view of
+    ``figure_views`` (the reference first), each image halved.
+    """
     method_options = method_options or {}
     results = {}
     ref = reference
@@ -152,7 +179,7 @@ def run_scene(
           f"{mappings.total} {mappings.mode} mappings, t_npm {t_npm} (vertex units), blur {blur:g} px (scoring only) ===")
     gt_extra = f" | {'dE00 to GT':>10} {'max view':>8}" if gt is not None else ""
     cr_extra = f" | {'contrast':>8} {'min':>5}"
-    for proto in ("in-sample", f"held-out {holdout:g}"):
+    for proto in ("in-sample", f"held-out {holdout:g}") if holdout > 0 else ("in-sample",):
         print(f"\n-- {proto} --")
         print(_header((cr_extra + gt_extra) if proto == "in-sample" else ""))
         base = results["none"]["result"] if "none" in results else None
@@ -168,6 +195,9 @@ def run_scene(
             if gt is not None and proto == "in-sample":
                 extra += f" | {e['gt_de'].mean():10.2f} {e['gt_de'].max():8.2f}"
             print(_fmt_row(m, ev, secs, base_ev, extra))
+    if figure:
+        write_montage(figure, images, {m: e["result"].corrected for m, e in results.items()}, [ref, *figure_views])
+        print(f"\nwrote {figure} (rows: {', '.join(results)}; columns: views {[ref, *figure_views]})")
     out = {}
     for m, e in results.items():
         d = e["result"].to_dict()
@@ -196,7 +226,7 @@ def fountain_block(args, methods, method_options) -> dict | None:
     return run_scene(
         "fountain", scene, images, mappings, methods,
         reference=args.reference, holdout=args.holdout, blur=args.blur, method_options=method_options,
-        t_npm=args.t_npm,
+        t_npm=args.t_npm, figure=args.figure, figure_views=args.figure_views,
     )
 
 
@@ -262,6 +292,11 @@ def main(argv=None) -> int:
              "(default 0,0.5; 0.5 deg is ~2.2 px in the 320-px-wide views, fountain's is 2-17 px in 640-px ones)",
     )
     ap.add_argument("--json", help="write all numbers to this JSON file")
+    ap.add_argument("--figure", help="fountain: write a PNG montage of the corrected views per method here")
+    ap.add_argument(
+        "--figure-views", type=lambda v: [int(x) for x in v.split(",") if x.strip()], default=[5, 16, 27, 29],
+        help="fountain view indices in the montage after the reference (default 5,16,27,29)",
+    )
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

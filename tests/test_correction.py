@@ -326,3 +326,16 @@ def test_colour_inliers_drops_wrong_correspondences(rng):
     assert keep[~wrong].mean() > 0.98
     assert (~keep[wrong]).mean() > 0.85
     assert colour_inliers(ct[:5], cs[:5], lut).all()  # too few to judge: all kept
+
+
+def test_quantile_luts_recover_a_known_tone_curve(rng):
+    from o3d_seqcc.correction import quantile_luts
+
+    ct = rng.uniform(0.0, 1.0, (20000, 3))
+    gammas = np.array([0.7, 1.0, 1.6])
+    lut = quantile_luts(ct, ct**gammas, n_out=256)
+    grid = np.linspace(0, 1, 256)
+    inner = (grid > 0.05) & (grid < 0.95)
+    for c in range(3):
+        np.testing.assert_allclose(lut[c, inner], grid[inner] ** gammas[c], atol=0.02)
+        assert np.all(np.diff(lut[c]) >= 0)
