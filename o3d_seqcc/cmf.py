@@ -84,8 +84,8 @@ the paper's joint regression): fountain, mean contrast ratio of corrected target
 the mappings 1.00 (min 0.90) against 0.65 (min 0.35), pairwise mean CIEDE2000 at the
 misregistered mappings 6.86 against 5.39 (none: 7.70) because that score rewards shrinkage.
 Which one is right shows on the synthetic room, where the truth is known: with exact poses both
-come to ground truth (CIEDE2000 1.20 and 1.33, from 10.49); with the mappings computed from
-poses off by 0.5 deg (~2 px, like real data) quantile pairing stays at 1.70 while the joint
+come to ground truth (CIEDE2000 1.17 and 1.33, from 10.49); with the mappings computed from
+poses off by 0.5 deg (~2 px, like real data) quantile pairing stays at 1.69 while the joint
 regression falls back to 9.17 -- with a pairwise PSNR 3.8 dB *higher* than quantile pairing's.
 
 ``symmetric=True`` averages the fit of y on x with the inverse of the fit of x on y (a classic

@@ -643,6 +643,9 @@ def _fit_context(ctx: CorrectionContext, blur: float) -> CorrectionContext:
 def quantile_luts(ct: np.ndarray, cs: np.ndarray, *, n_out: int = 256, levels: int = 256) -> np.ndarray:
     """Per-channel quantile-quantile curves: the target's quantiles mapped to the source's.
 
+    The curve through :func:`o3d_seqcc.cmf.quantile_samples` (no regression, no guards): a
+    numpy-only estimate of each channel's monotone photometric change.
+
     Parameters
     ----------
     ct, cs : (n, 3) float arrays in [0, 1]
@@ -650,26 +653,29 @@ def quantile_luts(ct: np.ndarray, cs: np.ndarray, *, n_out: int = 256, levels: i
     n_out : int, default 256
         Lookup-table length.
     levels : int, default 256
-        Quantile levels, evenly spaced in [0.002, 0.998].
+        Number of quantile levels.
 
     Returns
     -------
     numpy.ndarray
         (3, n_out) float64, monotone non-decreasing, flat beyond the outer quantiles.
     """
-    q = np.linspace(0.002, 0.998, int(levels))
-    xq = np.quantile(np.asarray(ct, dtype=np.float64), q, axis=0)
-    yq = np.quantile(np.asarray(cs, dtype=np.float64), q, axis=0)
+    from .cmf import quantile_samples
+
+    ct = np.asarray(ct, dtype=np.float64)
+    cs = np.asarray(cs, dtype=np.float64)
     grid = np.linspace(0.0, 1.0, int(n_out))
+    w = np.ones(len(ct))
     out = np.empty((3, grid.size))
     for c in range(3):
-        x = np.maximum.accumulate(xq[:, c]) + np.arange(q.size) * 1e-9  # strictly increasing
-        out[c] = np.interp(grid, x, yq[:, c])
+        xq, yq, _ = quantile_samples(ct[:, c], cs[:, c], w, n=int(levels))
+        xq = np.maximum.accumulate(xq) + np.arange(xq.size) * 1e-9  # strictly increasing for interp
+        out[c] = np.interp(grid, xq, yq)
     return out
 
 
 def colour_inliers(ct: np.ndarray, cs: np.ndarray, lut: np.ndarray, *, k: float = 3.0) -> np.ndarray:
-    """Mask of mappings whose colours agree with a first fit, jointly over the channels.
+    """Mask of mappings whose colours agree with per-channel curves, jointly over the channels.
 
     The residual of every mapping's source colour against the target colour mapped by ``lut``
     is measured per channel in robust standard deviations (1.4826 MAD, at least 1/255) and
@@ -683,7 +689,8 @@ def colour_inliers(ct: np.ndarray, cs: np.ndarray, lut: np.ndarray, *, k: float 
     ct, cs : (n, 3) float arrays in [0, 1]
         Target and source colours at the mappings.
     lut : (3, L) float array
-        Per-channel CMFs from a first fit.
+        Per-channel curves predicting the source colour from the target's (e.g.
+        :func:`quantile_luts`).
     k : float, default 3.0
 
     Returns
@@ -729,19 +736,22 @@ def _method_seqcc(
     flattens the CMF (fountain: CIEDE2000 6.87 without, 6.82 with 2 px), while blurring before a
     non-linear tone curve does not commute with it (synthetic room, CIEDE2000 to ground truth
     1.49 -> 2.56 with 2 px)). The correction itself is applied to the unblurred images.
-    ``outlier_k`` (default 3.0; None disables): after a first fit, mappings whose colours
-    disagree with it by more than ``outlier_k`` robust sigmas jointly over the three channels
-    (:func:`colour_inliers`) are dropped and the edge is fitted again. Wrong correspondences
+    ``outlier_k`` (default 3.0; None disables): mappings whose colours disagree with the edge's
+    quantile-quantile curve (:func:`quantile_luts`) by more than ``outlier_k`` robust sigmas
+    jointly over the three channels (:func:`colour_inliers`) are dropped before the JIH and the
+    CMF fit. Wrong correspondences
     (occlusions the filters missed, gross misregistration) pair differently coloured surfaces;
     in a sparse tail of the value range a handful of them bend one channel's CMF and tint the
     shadows (fountain views 27-28 turned magenta). Measured (``benchmarks/table2.py``):
-    synthetic room, CIEDE2000 to ground truth 1.06 -> 1.20 with clean correspondences and
-    1.86 -> 1.70 with 0.5 deg pose error; fountain pairwise CIEDE2000 6.89 -> 6.86.
+    synthetic room, CIEDE2000 to ground truth 1.06 -> 1.17 with clean correspondences and
+    1.86 -> 1.69 with 0.5 deg pose error; fountain pairwise CIEDE2000 6.89 -> 6.86.
     """
     opts = dict(cmf_options or {})
     b = int(bits) if bits is not None else (8 if ctx.lut_size <= 256 else 10)
     if float(jih_blur) < 0:
         raise ValueError(f"jih_blur must be >= 0 (pixels), got {jih_blur}")
+    if outlier_k is not None and not float(outlier_k) > 0:
+        raise ValueError(f"outlier_k must be > 0 (robust sigmas) or None, got {outlier_k}")
     fctx = _fit_context(ctx, float(jih_blur))
 
     def fit(ct: np.ndarray, cs: np.ndarray) -> np.ndarray:

@@ -194,6 +194,8 @@ def test_bad_input_messages(problem):
         correct(scene, images=images, mappings=mappings, method="magic")
     with pytest.raises(TypeError, match="bogus"):
         correct(scene, images=images, mappings=mappings, bogus=3)
+    with pytest.raises(ValueError, match="outlier_k"), pytest.warns(UserWarning, match="no colour-correction path"):
+        correct(scene, images=images, mappings=mappings, outlier_k=0)
     with pytest.raises(InputError, match="grey"):
         correct(scene, images=[im[..., 0] for im in images], mappings=mappings)
     with pytest.raises(InputError, match="RGB"):
