@@ -643,8 +643,10 @@ def _fit_context(ctx: CorrectionContext, blur: float) -> CorrectionContext:
 def quantile_luts(ct: np.ndarray, cs: np.ndarray, *, n_out: int = 256, levels: int = 256) -> np.ndarray:
     """Per-channel quantile-quantile curves: the target's quantiles mapped to the source's.
 
-    The curve through :func:`o3d_seqcc.cmf.quantile_samples` (no regression, no guards): a
-    numpy-only estimate of each channel's monotone photometric change.
+    The unweighted counterpart of :func:`o3d_seqcc.cmf.quantile_samples` (same levels, evenly
+    spaced in ``[QUANTILE_TRIM, 1 - QUANTILE_TRIM]``, the same plotting positions ``(i + 0.5) /
+    n``), on sorted columns instead of weighted sorts (~20x faster), with no regression and no
+    guards: a numpy-only estimate of each channel's monotone photometric change.
 
     Parameters
     ----------
@@ -660,17 +662,18 @@ def quantile_luts(ct: np.ndarray, cs: np.ndarray, *, n_out: int = 256, levels: i
     numpy.ndarray
         (3, n_out) float64, monotone non-decreasing, flat beyond the outer quantiles.
     """
-    from .cmf import quantile_samples
+    from .cmf import QUANTILE_TRIM
 
-    ct = np.asarray(ct, dtype=np.float64)
-    cs = np.asarray(cs, dtype=np.float64)
+    xs = np.sort(np.asarray(ct, dtype=np.float64), axis=0)
+    ys = np.sort(np.asarray(cs, dtype=np.float64), axis=0)
+    pos = (np.arange(len(xs)) + 0.5) / max(len(xs), 1)
+    q = np.linspace(QUANTILE_TRIM, 1.0 - QUANTILE_TRIM, int(levels))
     grid = np.linspace(0.0, 1.0, int(n_out))
-    w = np.ones(len(ct))
     out = np.empty((3, grid.size))
     for c in range(3):
-        xq, yq, _ = quantile_samples(ct[:, c], cs[:, c], w, n=int(levels))
-        xq = np.maximum.accumulate(xq) + np.arange(xq.size) * 1e-9  # strictly increasing for interp
-        out[c] = np.interp(grid, xq, yq)
+        xq = np.interp(q, pos, xs[:, c])
+        xq = np.maximum.accumulate(xq) + np.arange(q.size) * 1e-9  # strictly increasing for interp
+        out[c] = np.interp(grid, xq, np.interp(q, pos, ys[:, c]))
     return out
 
 

@@ -331,6 +331,7 @@ def test_colour_inliers_drops_wrong_correspondences(rng):
 
 
 def test_quantile_luts_recover_a_known_tone_curve(rng):
+    from o3d_seqcc.cmf import quantile_samples
     from o3d_seqcc.correction import quantile_luts
 
     ct = rng.uniform(0.0, 1.0, (20000, 3))
@@ -341,3 +342,6 @@ def test_quantile_luts_recover_a_known_tone_curve(rng):
     for c in range(3):
         np.testing.assert_allclose(lut[c, inner], grid[inner] ** gammas[c], atol=0.02)
         assert np.all(np.diff(lut[c]) >= 0)
+        # the same curve as the weighted quantile pairing of cmf (unit weights)
+        xq, yq, _ = quantile_samples(ct[:, c], ct[:, c] ** gammas[c], np.ones(len(ct)))
+        np.testing.assert_allclose(lut[c], np.interp(grid, xq, yq), atol=1e-6)
