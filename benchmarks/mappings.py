@@ -55,7 +55,7 @@ def _ray_hits(rs, view, uv: np.ndarray) -> np.ndarray:
 
 
 def _reproject(view, P: np.ndarray) -> np.ndarray:
-    from o3d_seqcc.visibility import project_points
+    from o3d_seqcc.camera import project_points
 
     uv, _ = project_points(P, view.intrinsic, view.extrinsic)
     return uv

@@ -51,12 +51,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from o3d_seqcc._io import write_json  # noqa: E402
+from o3d_seqcc.io.files import write_json  # noqa: E402
 from o3d_seqcc.mappings import compute_mappings  # noqa: E402
-from o3d_seqcc.metrics import evaluate_method, image_delta_e  # noqa: E402
-from o3d_seqcc.correction import to_float  # noqa: E402
+from o3d_seqcc.evaluation import evaluate_method  # noqa: E402
 from o3d_seqcc.graph import build_graph, correction_paths, scale_t_npm  # noqa: E402
-from o3d_seqcc.mappings import sample_colors  # noqa: E402
+from o3d_seqcc.imageops import img_as_float as to_float  # noqa: E402
+from o3d_seqcc.imageops import sample_colors  # noqa: E402
+from o3d_seqcc.metrics import image_delta_e  # noqa: E402
 
 METHODS = ("none", "reinhard", "root-polynomial", "vandermonde", "gain-compensation", "histogram-matching", "seqcc")
 DEFAULT_FOUNTAIN = REPO.parent / "shared" / "datasets" / "fountain_small"
@@ -114,7 +115,7 @@ def write_montage(path, images, corrected: dict, views) -> None:
     per view of ``views``; half size, labelled."""
     import cv2
 
-    from o3d_seqcc._io import write_image
+    from o3d_seqcc.io.files import write_image
 
     def cell(img, text):
         im = np.asarray(img)

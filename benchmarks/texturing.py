@@ -92,13 +92,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
-    from meshlab_filters.peers import meshlab_available, run_meshlab, run_open3d
-    from o3d_seqcc._io import write_image
+    from peers import meshlab_available, run_meshlab, run_open3d
+    from o3d_seqcc.io.files import write_image
     from o3d_seqcc.export import export_textured_mesh
     from o3d_seqcc.render import raycast, render_selection, render_textured, sharpness
-    from o3d_seqcc.scene import load_scene
-    from o3d_seqcc.seams import load_textured_mesh, seam_metric
-    from o3d_seqcc.texturing import bake_texture, face_adjacency, select_views, selection_stats
+    from o3d_seqcc import load_scene
+    from o3d_seqcc.meshops import face_adjacency
+    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.texturing import bake_texture, load_textured_mesh, select_views, selection_stats
     from o3d_seqcc.visibility import compute_visibility
 
     data = Path(args.data)
@@ -326,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
     crops += [np.full_like(crops[0], 255)] * (-len(crops) % 4)
     write_image(pics / f"closeup_view{sv}.png", _grid([crops[i:i + 4] for i in range(0, len(crops), 4)]))
 
-    from o3d_seqcc._io import write_json
+    from o3d_seqcc.io.files import write_json
 
     write_json(out / "results.json", {"rows": rows, "notes": notes, "t_visibility": t_vis, "t_correct": t_correct})
     print(f"\nwrote {out / 'results.json'} and pictures in {pics}")

@@ -2,7 +2,7 @@
 
 Implements L. Dal'Col et al., "A Sequential Color Correction Approach for Texture Mapping of
 3D Meshes", Sensors 2023, 23(2), 607, on top of Open3D, scikit-learn and networkx, and textures
-the mesh sharply (one photo per face, xatlas-packed atlas, OBJ/GLB export).
+the mesh sharply (one photo per face, texture atlas, OBJ/GLB export).
 
 The pipeline, one module per stage::
 
@@ -12,6 +12,11 @@ The pipeline, one module per stage::
     res = o3d_seqcc.correct(scene, reference="auto", mappings=maps)    # graph, jih, cmf, correction (3.3-3.7)
     ev = o3d_seqcc.evaluate(res.images, maps)                          # metrics (4.2)
     sel = o3d_seqcc.select_views(vis, method="mrf")                    # texturing (3.8)
+
+or the whole job with the command line's defaults::
+
+    res = o3d_seqcc.pipeline.run("scene.json")                         # correct + texture
+    res.save("out/")                                                   # what `o3d-seqcc run` writes
 
 Heavy dependencies are imported on first use of a name (PEP 562), so ``import o3d_seqcc`` is
 cheap.
@@ -23,7 +28,8 @@ import importlib
 from typing import Any
 
 from .errors import InputError
-from .scene import FORMAT, PRIMESENSE_INTRINSIC, Mesh, Scene, View, load_mesh, load_scene, save_scene
+from .io.load import load_scene, save_scene
+from .scene import FORMAT, PRIMESENSE_INTRINSIC, Mesh, Scene, View, load_mesh
 
 __version__ = "0.1.0"
 
@@ -37,12 +43,13 @@ _LAZY: dict[str, str] = {
     # visibility and mappings (paper 3.1-3.2)
     "Visibility": "visibility",
     "compute_visibility": "visibility",
-    "project_points": "visibility",
+    "project_points": "camera",
     "Mappings": "mappings",
     "PairMapping": "mappings",
     "compute_mappings": "mappings",
-    "load_mappings": "mappings",
-    "sample_colors": "mappings",
+    "load_mappings": "io.mappings_npz",
+    "save_mappings": "io.mappings_npz",
+    "sample_colors": "imageops",
     # graph, JIH, CMF, correction (3.3-3.7)
     "build_graph": "graph",
     "correction_paths": "graph",
@@ -61,12 +68,14 @@ _LAZY: dict[str, str] = {
     "IdentityTransform": "correction",
     # evaluation (4.2)
     "evaluate": "metrics",
-    "evaluate_method": "metrics",
     "Evaluation": "metrics",
-    "MethodEvaluation": "metrics",
+    "evaluate_method": "evaluation",
+    "MethodEvaluation": "evaluation",
     # texturing, export, seams, renders (3.8)
     "SELECTION_METHODS": "texturing",
+    "TextureSettings": "texturing",
     "TexturedMesh": "texturing",
+    "load_textured_mesh": "texturing",
     "select_views": "texturing",
     "bake_texture": "texturing",
     "export_obj": "export",
@@ -78,7 +87,18 @@ _LAZY: dict[str, str] = {
     "render_textured": "render",
     "render_selection": "render",
     "sharpness": "render",
+    "plot_pair": "render",
+    # the whole job
+    "RunResult": "pipeline",
+    "run_demo": "demo",
 }
+
+#: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
+_SUBMODULES = frozenset({
+    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
+    "jih", "mappings", "meshops", "metrics", "occlusion", "photometric", "pipeline", "render", "scene", "seams",
+    "synthetic", "texturing", "visibility",
+})
 
 __all__ = [
     "FORMAT",
@@ -96,6 +116,10 @@ __all__ = [
 
 
 def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+        globals()[name] = value
+        return value
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'o3d_seqcc' has no attribute {name!r}")
@@ -105,4 +129,4 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+    return sorted(set(globals()) | set(__all__) | _SUBMODULES)

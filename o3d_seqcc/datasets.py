@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .scene import Scene, load_rgbd_folder
+from .io import rgbd_folder
+from .scene import Scene
 
 __all__ = ["fountain"]
 
@@ -69,7 +70,9 @@ def fountain(
         if not found:
             raise InputError(f"{root}/scene holds none of {FOUNTAIN_MESHES}; pass mesh=")
         mesh = found[0]
-    scene = load_rgbd_folder(root, mesh=mesh, intrinsic=intrinsic)
+    if rgbd_folder.detect(root) is None:
+        raise InputError(f"{root}: not an Open3D RGB-D folder (needs image/ and scene/key.log)")
+    scene = rgbd_folder.load(root, mesh=mesh, intrinsic=intrinsic)
     scene.validate()
     logger.info("fountain: %d views, mesh %s", len(scene.views), scene.mesh)
     return scene

@@ -1,10 +1,10 @@
 """Export of a :class:`~o3d_seqcc.texturing.TexturedMesh`: OBJ + MTL + PNG, glTF 2.0 binary (GLB), PLY.
 
-UV conventions. ``TexturedMesh.uv`` has its origin at the top-left corner of the atlas with v
-pointing down (texel (X, Y) centre at ((X + 0.5) / S, (Y + 0.5) / S)).
+UV conventions. ``TexturedMesh.uv`` has its origin at the bottom-left corner of the atlas with
+v up (the OBJ convention, see :mod:`o3d_seqcc.texturing.textured_mesh`).
 
-- OBJ/MTL: origin bottom-left, v up, so ``vt = (u, 1 - v)``.
-- glTF 2.0: origin top-left (the first pixel of the image), so ``TEXCOORD_0 = (u, v)`` unchanged.
+- OBJ/MTL: the same convention, so ``vt = (u, v)``.
+- glTF 2.0: origin top-left (the first pixel of the image), so ``TEXCOORD_0 = (u, 1 - v)``.
 
 Every file is written atomically (temporary file in the destination folder, then rename), and
 for OBJ the texture and material are written before the ``.obj`` that refers to them.
@@ -28,8 +28,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from ._io import atomic_write_bytes
 from .errors import InputError
+from .imageops import sample_bilinear
+from .io.files import atomic_write_bytes
+from .meshops import vertex_normals
 
 __all__ = ["FORMATS", "encode_png", "export_glb", "export_obj", "export_ply", "export_textured_mesh"]
 
@@ -65,17 +67,8 @@ def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
 
 
 def _normals(textured: Any) -> np.ndarray:
-    n = getattr(textured, "normals", None)
-    v, f = textured.vertices, textured.faces
-    if n is None or np.shape(n) != v.shape:
-        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        n = np.zeros_like(v, dtype=np.float64)
-        np.add.at(n, f.reshape(-1), np.repeat(fn, 3, axis=0))
-    n = np.asarray(n, dtype=np.float64)
-    ln = np.linalg.norm(n, axis=1)
-    bad = ~(ln > 1e-12)
-    n = np.where(bad[:, None], [0.0, 0.0, 1.0], n / np.where(bad, 1.0, ln)[:, None])
-    return n
+    """(M, 3) unit normals: the mesh's where usable, else area-weighted face normals."""
+    return vertex_normals(textured.vertices, textured.faces, getattr(textured, "normals", None))
 
 
 def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
@@ -91,7 +84,7 @@ def export_obj(textured: Any, path: str | os.PathLike, *, png_compression: int =
     Parameters
     ----------
     textured : TexturedMesh
-        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2) top-left origin, ``texture``
+        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2) bottom-left origin, ``texture``
         (S, S, 3) uint8, optionally ``normals`` (M, 3).
     path : path-like
         Destination ``.obj``.
@@ -119,8 +112,7 @@ def export_obj(textured: Any, path: str | os.PathLike, *, png_compression: int =
         f"d 1.0\nillum 1\nmap_Kd {png_name}\n"
     )
     atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
-    uv = np.asarray(textured.uv, dtype=np.float64)
-    vt = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
+    vt = np.asarray(textured.uv, dtype=np.float64)
     f1 = np.asarray(textured.faces, dtype=np.int64) + 1
     fidx = np.repeat(f1, 3, axis=1)  # a/a/a b/b/b c/c/c
     parts = [
@@ -148,7 +140,7 @@ def glb_bytes(textured: Any, *, unlit: bool = False, png_compression: int = 1, p
     nrm = np.ascontiguousarray(_normals(textured), dtype=np.float32)
     # float32 rounding can leave |n| a hair off 1; renormalise in float32
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    uv = np.ascontiguousarray(textured.uv, dtype=np.float32)
+    uv = np.ascontiguousarray(np.stack([textured.uv[:, 0], 1.0 - textured.uv[:, 1]], axis=1), dtype=np.float32)
     idx = np.ascontiguousarray(textured.faces, dtype=np.uint32).reshape(-1)
     if png is None:
         png = encode_png(textured.texture, compression=png_compression)
@@ -249,14 +241,7 @@ def export_ply(textured: Any, path: str | os.PathLike) -> Path:
     """
     _check(textured)
     path = Path(path)
-    tex = textured.texture.astype(np.float64)
-    s_h, s_w = tex.shape[:2]
-    x = np.clip(textured.uv[:, 0] * s_w - 0.5, 0, s_w - 1)
-    y = np.clip(textured.uv[:, 1] * s_h - 0.5, 0, s_h - 1)
-    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
-    x1, y1 = np.minimum(x0 + 1, s_w - 1), np.minimum(y0 + 1, s_h - 1)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    col = (tex[y0, x0] * (1 - fx) * (1 - fy) + tex[y0, x1] * fx * (1 - fy) + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
+    col = sample_bilinear(textured.texture, *textured.texel_xy().T)
     n = _normals(textured)
     vdt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
                     ("red", "u1"), ("green", "u1"), ("blue", "u1")])

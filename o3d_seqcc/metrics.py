@@ -1,53 +1,45 @@
 """Image-based colour-similarity metrics over pairwise mappings (paper section 4, Table 2).
 
 For every view pair ``(a, b)`` the two images are sampled at the pair's filtered mappings
-(:func:`o3d_seqcc.mappings.sample_colors`) and compared:
+(:func:`o3d_seqcc.imageops.sample_colors`) and compared:
 
 - **PSNR** ``20 log10(L / RMS)`` over all mapped channel values, computed on colours scaled
   to [0, 1] (``L = 1``; identical to ``L = 255`` on 8-bit values and ``L = 65535`` on 16-bit
   values, so 8- and 16-bit images agree). Higher is more similar. Identical colours give
   ``inf``; summaries cap every pair at :data:`PSNR_CAP_DB` (100 dB) so a single perfect pair
   cannot make a mean infinite (the per-pair record keeps ``inf``).
-- **CIEDE2000** (colour-science ``delta_E(..., method="CIE 2000")``) between the CIE Lab
+- **CIEDE2000** (:func:`o3d_seqcc.imageops.delta_e_2000`, scikit-image) between the CIE Lab
   values of the two colours (sRGB with its transfer function -> XYZ -> Lab, D65), averaged
   over the pair's mappings. Lower is more similar.
 
 The summaries are the paper's Table 2: simple mean over pairs, mean weighted by the number
 of mappings ``n`` of each pair, and the (population, ``ddof=0``) standard deviation over pairs.
 
-:func:`evaluate_method` adds a held-out protocol: a colour-correction method is fitted on one
-part of the mappings (split by mesh face, :meth:`o3d_seqcc.mappings.Mappings.split`) and scored
-on the other, besides the paper's in-sample protocol (fit on all mappings, score on all).
+This module only scores; :mod:`o3d_seqcc.evaluation` fits a correction method and scores it
+(the paper's in-sample protocol and a held-out one).
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
 from .errors import InputError
+from .imageops import INTERPOLATIONS, delta_e_2000, dtype_scale, img_as_float, sample_colors
 
 __all__ = [
     "PSNR_CAP_DB",
     "Evaluation",
-    "MethodEvaluation",
     "MetricSummary",
     "PairScore",
     "blur_images",
-    "ciede2000",
-    "delta_e_2000_rgb",
     "evaluate",
-    "evaluate_method",
-    "placeholder_scene",
     "image_delta_e",
     "psnr",
-    "rgb_to_lab",
-    "to_unit_float",
 ]
 
 logger = logging.getLogger(__name__)
@@ -55,95 +47,11 @@ logger = logging.getLogger(__name__)
 #: Cap (dB) applied to per-pair PSNR values in summaries (identical colours give inf).
 PSNR_CAP_DB = 100.0
 
-_INTERPOLATIONS = ("bilinear", "nearest")
 #: mappings converted to Lab per batch in :func:`evaluate` (bounds the memory to ~0.5 GB)
 _BATCH = 1_000_000
 
 
 # ----------------------------------------------------------------------------- primitives
-def _unit_scale(dtype: np.dtype) -> float:
-    """Divisor that maps values of ``dtype`` to [0, 1]."""
-    dtype = np.dtype(dtype)
-    if dtype == np.uint8:
-        return 255.0
-    if dtype == np.uint16:
-        return 65535.0
-    if np.issubdtype(dtype, np.floating):
-        return 1.0
-    raise InputError(f"images must be uint8, uint16 or float in [0, 1]; got dtype {dtype}")
-
-
-def to_unit_float(image: np.ndarray) -> np.ndarray:
-    """Convert an image to float64 in [0, 1].
-
-    Parameters
-    ----------
-    image : (..., 3) uint8, uint16 or float array
-        uint8 is divided by 255, uint16 by 65535; floats are taken as already in [0, 1].
-
-    Returns
-    -------
-    numpy.ndarray
-        float64 array of the same shape (a new array; the input is not modified).
-    """
-    image = np.asarray(image)
-    return image.astype(np.float64) / _unit_scale(image.dtype)
-
-
-def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
-    """sRGB in [0, 1] (gamma-encoded) to CIE Lab (D65, 2 degree observer).
-
-    Parameters
-    ----------
-    rgb : (..., 3) float array
-        Non-linear sRGB values in [0, 1] (clipped to it).
-
-    Returns
-    -------
-    numpy.ndarray
-        (..., 3) float64 Lab, L in [0, 100].
-    """
-    import colour
-
-    rgb = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
-    with colour.utilities.suppress_warnings(colour_usage_warnings=True, python_warnings=True):
-        return np.asarray(colour.XYZ_to_Lab(colour.sRGB_to_XYZ(rgb)), dtype=np.float64)
-
-
-def ciede2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
-    """CIEDE2000 colour difference (kL = kC = kH = 1) between Lab colours.
-
-    Parameters
-    ----------
-    lab1, lab2 : (..., 3) float arrays
-        CIE Lab values (L in [0, 100]).
-
-    Returns
-    -------
-    numpy.ndarray
-        (...) float64 Delta E 2000 (colour-science ``delta_E(method="CIE 2000")``).
-    """
-    import colour
-
-    return np.asarray(colour.delta_E(np.asarray(lab1, float), np.asarray(lab2, float), method="CIE 2000"), dtype=np.float64)
-
-
-def delta_e_2000_rgb(rgb_a: np.ndarray, rgb_b: np.ndarray) -> np.ndarray:
-    """CIEDE2000 between sRGB colours in [0, 1].
-
-    Parameters
-    ----------
-    rgb_a, rgb_b : (..., 3) float arrays
-        sRGB colours in [0, 1].
-
-    Returns
-    -------
-    numpy.ndarray
-        (...) float64 Delta E 2000.
-    """
-    return ciede2000(rgb_to_lab(rgb_a), rgb_to_lab(rgb_b))
-
-
 def psnr(colors_a: np.ndarray, colors_b: np.ndarray, *, peak: float = 1.0) -> float:
     """Peak signal-to-noise ratio ``20 log10(peak / RMS)`` over all values.
 
@@ -225,7 +133,7 @@ def image_delta_e(image: np.ndarray, truth: np.ndarray, *, mask: np.ndarray | No
         a, b = image[mask], truth[mask]
     if len(a) == 0:
         return float("nan")
-    return float(np.mean(delta_e_2000_rgb(to_unit_float(a), to_unit_float(b))))
+    return float(np.mean(delta_e_2000(img_as_float(a), img_as_float(b))))
 
 
 # ----------------------------------------------------------------------------- results
@@ -364,7 +272,7 @@ def _check_images(images: Sequence[np.ndarray], n_views: int) -> list[np.ndarray
     for i, im in enumerate(images):
         if im.ndim != 3 or im.shape[2] != 3:
             raise InputError(f"evaluate: image {i} has shape {im.shape}; expected (H, W, 3) RGB")
-        _unit_scale(im.dtype)
+        dtype_scale(im.dtype)
     return images
 
 
@@ -408,12 +316,10 @@ def evaluate(
     ValueError
         Unknown ``interpolation``.
     """
-    from .mappings import sample_colors
-
-    if interpolation not in _INTERPOLATIONS:
-        raise ValueError(f"unknown interpolation {interpolation!r}; valid: {', '.join(_INTERPOLATIONS)}")
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"unknown interpolation {interpolation!r}; valid: {', '.join(INTERPOLATIONS)}")
     images = _check_images(images, int(mappings.n_views))
-    scales = [_unit_scale(im.dtype) for im in images]
+    scales = [dtype_scale(im.dtype) for im in images]
     if pairs is None:
         keys = sorted(mappings.pairs)
     else:
@@ -440,7 +346,7 @@ def evaluate(
         ca, cb = np.concatenate(batch_a), np.concatenate(batch_b)
         starts = np.concatenate([[0], np.cumsum(batch_n)[:-1]])
         sse_parts.append(np.add.reduceat(((ca - cb) ** 2).sum(axis=1), starts))
-        de_parts.append(np.add.reduceat(delta_e_2000_rgb(ca, cb), starts))
+        de_parts.append(np.add.reduceat(delta_e_2000(ca, cb), starts))
         batch_a.clear()
         batch_b.clear()
         batch_n.clear()
@@ -482,173 +388,4 @@ def evaluate(
         psnr_cap=float(psnr_cap),
         view_names=names,
         skipped=tuple(skipped),
-    )
-
-
-# ----------------------------------------------------------------------------- held-out protocol
-@dataclass(frozen=True)
-class MethodEvaluation:
-    """A colour-correction method scored in-sample and on held-out mappings.
-
-    Attributes
-    ----------
-    method : str
-        Registry name of the method.
-    reference : int
-        Reference view index used (``"auto"`` is resolved by the in-sample run and reused).
-    in_sample : Evaluation
-        The paper's protocol: method fitted on all mappings, scored on all mappings.
-    held_out : Evaluation or None
-        Fitted on the ``fit`` part of ``mappings.split(holdout)``, scored on the ``test`` part
-        (mesh faces never seen by the fit); None when ``holdout == 0``.
-    fit_seconds : float
-        Wall time of the in-sample ``correct`` call.
-    holdout_fit_seconds : float or None
-        Wall time of the held-out ``correct`` call.
-    holdout : float
-        Fraction of faces held out.
-    seed : int
-        Seed of the split.
-    corrected : tuple of numpy.ndarray
-        The in-sample corrected images (same dtype as the input), e.g. to score against ground truth.
-    """
-
-    method: str
-    reference: int
-    in_sample: Evaluation
-    held_out: Evaluation | None
-    fit_seconds: float
-    holdout_fit_seconds: float | None
-    holdout: float
-    seed: int
-    corrected: tuple[np.ndarray, ...] = field(default=(), repr=False)
-
-    def to_dict(self, *, per_pair: bool = False) -> dict[str, Any]:
-        return {
-            "method": self.method,
-            "reference": self.reference,
-            "holdout": self.holdout,
-            "seed": self.seed,
-            "fit_seconds": self.fit_seconds,
-            "holdout_fit_seconds": self.holdout_fit_seconds,
-            "in_sample": self.in_sample.to_dict(per_pair=per_pair),
-            "held_out": None if self.held_out is None else self.held_out.to_dict(per_pair=per_pair),
-        }
-
-
-def placeholder_scene(images: Sequence[np.ndarray], names: Sequence[str] = ()):
-    """A :class:`~o3d_seqcc.scene.Scene` describing in-memory images (names and sizes only).
-
-    Its image and mesh paths are placeholders that are never read: use it only with functions
-    that take ``images=`` and ``mappings=`` explicitly (e.g. ``correct``).
-
-    Parameters
-    ----------
-    images : sequence of (H, W, 3) arrays
-    names : sequence of str, optional
-        View names (default ``"0"``, ``"1"``, ...).
-    """
-    from .scene import Scene, View
-
-    names = list(names) or [str(i) for i in range(len(images))]
-    if len(names) != len(images):
-        raise InputError(f"{len(names)} view names for {len(images)} images")
-    views = []
-    for nm, im in zip(names, images):
-        h, w = np.asarray(im).shape[:2]
-        K = np.array([[float(w), 0, (w - 1) / 2], [0, float(w), (h - 1) / 2], [0, 0, 1]])
-        views.append(View(name=str(nm), image=f"<memory>/{nm}.png", intrinsic=K, extrinsic=np.eye(4), width=w, height=h))
-    return Scene(mesh="<memory>/mesh.ply", views=tuple(views))
-
-
-def evaluate_method(
-    scene_or_images,
-    mappings,
-    *,
-    method: str,
-    reference: str | int = "auto",
-    holdout: float = 0.5,
-    seed: int = 0,
-    t_npm: int = 400,
-    blur: float = 0.0,
-    interpolation: str = "bilinear",
-    min_n: int = 1,
-    scene=None,
-    **options: Any,
-) -> MethodEvaluation:
-    """Fit a colour-correction method and score it in-sample and on held-out mappings.
-
-    Parameters
-    ----------
-    scene_or_images : Scene or sequence of (H, W, 3) arrays
-        A :class:`~o3d_seqcc.scene.Scene` (its images are loaded once) or the images
-        themselves (then ``scene=`` may give the scene ``correct`` receives; by default a
-        :func:`placeholder_scene` named after ``mappings.view_names``).
-    mappings : Mappings
-        All pairwise mappings of the scene.
-    method : str
-        Name in :data:`o3d_seqcc.correction.METHODS` (e.g. "none", "seqcc", "gain-compensation").
-    reference : str or int, default "auto"
-        Passed to ``correct``; the reference actually used by the in-sample run is reused for
-        the held-out run (so both use the same view).
-    holdout : float, default 0.5
-        Fraction of mesh faces whose mappings are held out for scoring; 0 skips the held-out run.
-    seed : int, default 0
-        Seed of the face split.
-    t_npm : int, default 400
-        Minimum mappings per graph edge (passed to ``correct``). With ``holdout`` the fit half
-        has fewer mappings per pair; ``t_npm`` is scaled by ``1 - holdout`` for the held-out
-        fit so the graph keeps the same edges.
-    blur : float, default 0.0
-        Gaussian sigma (px) applied to the corrected images before scoring only.
-    interpolation, min_n
-        Passed to :func:`evaluate` (``min_n`` scaled by ``holdout`` for the held-out part).
-    **options
-        Extra keyword options of the method, passed to ``correct``.
-
-    Returns
-    -------
-    MethodEvaluation
-    """
-    from .correction import correct
-
-    if not 0.0 <= float(holdout) < 1.0:
-        raise InputError(f"holdout must be in [0, 1), got {holdout}")
-    if isinstance(scene_or_images, (list, tuple, np.ndarray)):
-        images = [np.asarray(im) for im in scene_or_images]
-        if scene is None:
-            scene = placeholder_scene(images, getattr(mappings, "view_names", ()) or ())
-    else:
-        scene = scene_or_images
-        images = [v.load_image() for v in scene.views]
-
-    t0 = time.perf_counter()
-    res = correct(scene, reference=reference, method=method, t_npm=t_npm, mappings=mappings, images=images, **options)
-    fit_seconds = time.perf_counter() - t0
-    ref = int(res.reference)
-    in_sample = evaluate(blur_images(res.images, blur), mappings, interpolation=interpolation, min_n=min_n)
-
-    held_out = None
-    ho_seconds = None
-    if holdout > 0:
-        fit, test = mappings.split(float(holdout), seed=seed)
-        t_fit = max(1, int(round(t_npm * (1.0 - float(holdout)))))
-        t0 = time.perf_counter()
-        res_h = correct(scene, reference=ref, method=method, t_npm=t_fit, mappings=fit, images=images, **options)
-        ho_seconds = time.perf_counter() - t0
-        min_test = max(1, int(round(min_n * float(holdout))))
-        held_out = evaluate(blur_images(res_h.images, blur), test, interpolation=interpolation, min_n=min_test)
-    logger.info(
-        "%s: in-sample PSNR %.2f dB, CIEDE2000 %.2f (%.2f s)", method, in_sample.psnr.mean, in_sample.ciede2000.mean, fit_seconds
-    )
-    return MethodEvaluation(
-        method=method,
-        reference=ref,
-        in_sample=in_sample,
-        held_out=held_out,
-        fit_seconds=fit_seconds,
-        holdout_fit_seconds=ho_seconds,
-        holdout=float(holdout),
-        seed=int(seed),
-        corrected=tuple(res.images),
     )

@@ -1,7 +1,7 @@
-"""Pictures of textured meshes: ray-cast renders from a scene view, selection colouring, sharpness.
+"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, mapping plots.
 
-Paper Figures 9 (per-face image selection coloured by image) and 12-13 (textured mesh from
-chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
+Paper Figures 2-3 (pairwise mappings, :func:`plot_pair`), 9 (per-face image selection coloured
+by image) and 12-13 (textured mesh from chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
 first hit of each pixel's ray gives a face and barycentric coordinates, from which the face's
 texture coordinates are interpolated and the texture looked up bilinearly. No lighting, no
 mip-mapping: a render from a view's own camera is directly comparable with that view's photo.
@@ -9,25 +9,32 @@ mip-mapping: a render from a view's own camera is directly comparable with that 
 
 from __future__ import annotations
 
+import io
 import logging
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Sequence
 
 import cv2
 import numpy as np
 
 from .errors import InputError
+from .imageops import dtype_scale
+from .io.files import atomic_write_bytes, write_image
 from .scene import View
-from .seams import load_textured_mesh, sample_texture
+from .texturing.textured_mesh import load_textured_mesh, sample_texture
 
 __all__ = [
     "RayHits",
+    "plot_pair",
     "raycast",
     "render_selection",
     "render_textured",
     "selection_palette",
     "sharpness",
     "supersampled_view",
+    "write_selection_picture",
 ]
 
 logger = logging.getLogger(__name__)
@@ -82,7 +89,7 @@ def raycast(mesh: Any, view: View) -> RayHits:
 
     Parameters
     ----------
-    mesh : Mesh, ColoredMesh, trimesh.Trimesh, (vertices, faces) or path
+    mesh : Mesh, TexturedMesh, trimesh.Trimesh, (vertices, faces) or path
         Anything with ``vertices`` (N, 3) and ``faces`` (F, 3).
     view : View
         Camera (intrinsic, world-to-camera extrinsic in OpenCV axes, width x height).
@@ -145,7 +152,7 @@ def render_textured(
 
     Parameters
     ----------
-    mesh : path-like, trimesh.Trimesh or ColoredMesh
+    mesh : path-like, trimesh.Trimesh or TexturedMesh
         Textured OBJ / GLB (or a mesh with vertex colours).
     view : View
         Camera to render from (its own width x height).
@@ -240,7 +247,7 @@ def render_selection(
 
     Parameters
     ----------
-    mesh : Mesh, ColoredMesh, trimesh.Trimesh, (vertices, faces) or path
+    mesh : Mesh, TexturedMesh, trimesh.Trimesh, (vertices, faces) or path
     faces_view : (F,) int array
         Selected view index per face, -1 for faces seen by no view.
     view : View
@@ -299,8 +306,7 @@ def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int =
         Variance of ``cv2.Laplacian`` (3x3) of the grey image over the mask, in [0,1]^2 units.
     """
     img = np.asarray(image)
-    scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype, 1.0)
-    img = img.astype(np.float32) / np.float32(scale)
+    img = img.astype(np.float32) / np.float32(dtype_scale(img.dtype))
     grey = (cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img).astype(np.float64)
     lap = cv2.Laplacian(grey, cv2.CV_64F, ksize=1)
     m = np.ones(grey.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -311,3 +317,150 @@ def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int =
     if not m.any():
         raise InputError("sharpness: the (eroded) mask is empty")
     return float(np.var(lap[m]))
+
+
+def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(title, uv_a, uv_b) of the vertex mappings of a pair after each filter stage (Figure 3)."""
+    vis = mappings.visibility
+    titles = {
+        "valid": "no filter",
+        "+occlusion": "+ z-buffering",
+        "+depth": "+ depth consistency",
+        "+oblique": "+ camera viewpoint (final)",
+    }
+    out = []
+    faces = vis.mesh.faces
+    for key, m in vis.stage_masks().items():
+        k = np.flatnonzero(m[a] & m[b])
+        tri = faces[k]
+        out.append((titles[key], vis.uv[a][tri].reshape(-1, 2), vis.uv[b][tri].reshape(-1, 2)))
+    return out
+
+
+def _position_colors(uv: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(n, 3) RGB in [0, 1]: hue from x, value from y (saturated, visible on photos)."""
+    from matplotlib.colors import hsv_to_rgb
+
+    h = np.clip(uv[:, 0] / max(width - 1, 1), 0, 1) * 0.85
+    v = 1.0 - 0.45 * np.clip(uv[:, 1] / max(height - 1, 1), 0, 1)
+    return hsv_to_rgb(np.stack([h, np.ones_like(h), v], axis=1))
+
+
+def plot_pair(
+    scene,
+    mappings,
+    a: int | str,
+    b: int | str,
+    path: str | os.PathLike,
+    *,
+    stages: bool = True,
+    max_points: int = 20000,
+    marker_size: float | None = None,
+    image_alpha: float = 0.5,
+    seed: int = 0,
+    images: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Path:
+    """Figure of a pair's mappings like the paper's Figures 2-3, written atomically as PNG.
+
+    Both images side by side with the mappings drawn as points; corresponding points have the
+    same colour (a 2-D colour map of the position in view ``a``: the hue changes from left to
+    right, the brightness from top to bottom). With ``stages`` and a visibility attached, four rows show the vertex mappings with
+    no filter, + z-buffering, + depth consistency and + camera viewpoint (Figure 3 a-h);
+    otherwise one row shows the mappings themselves.
+
+    Parameters
+    ----------
+    scene : Scene
+    mappings : Mappings
+    a, b : int or str
+        View indices or names.
+    path : path-like
+        Output PNG.
+    stages : bool, default True
+    max_points : int, default 20000
+        Random subset drawn per row (seeded) when a row has more mappings.
+    marker_size : float, optional
+        Marker area in points^2; default ``4 * max(1, 640 / width)`` (bigger for small images).
+    image_alpha : float, default 0.5
+        Opacity of the photos (dimmed so that the points stand out).
+    seed : int, default 0
+    images : pair of arrays, optional
+        Images to draw instead of the views' files (e.g. corrected images).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    ia, ib = scene.index(a), scene.index(b)
+    if ia == ib:
+        raise ValueError("plot_pair needs two different views")
+    va, vb = scene.views[ia], scene.views[ib]
+    if images is None:
+        images = (va.load_image(), vb.load_image())
+    imgs = []
+    for im in images:
+        im = np.asarray(im)
+        if im.dtype == np.uint16:
+            im = (im / 65535.0).astype(np.float32)
+        elif im.dtype != np.uint8:
+            im = np.clip(im, 0, 1)
+        imgs.append(im)
+    if stages and mappings.visibility is not None:
+        rows = _stage_pairs(mappings, ia, ib) if ia < ib else [
+            (t, ub, ua) for t, ua, ub in _stage_pairs(mappings, ib, ia)
+        ]
+    else:
+        pm = mappings.pair(ia, ib)
+        rows = [(f"{mappings.mode} mappings", pm.uv_a, pm.uv_b)]
+    rng = np.random.default_rng(seed)
+    if marker_size is None:
+        marker_size = 4.0 * max(1.0, 640.0 / max(va.width, vb.width))
+    aspect = max(va.height / va.width, vb.height / vb.width)
+    fig = Figure(figsize=(12, 12 * aspect * len(rows) / 2 + 0.6 * len(rows)), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(rows), 2, squeeze=False)
+    for r, (title, ua, ub) in enumerate(rows):
+        n = len(ua)
+        sel = rng.choice(n, max_points, replace=False) if n > max_points else np.arange(n)
+        col = _position_colors(ua[sel], va.width, va.height)
+        for c, (ax, img, uv, view) in enumerate(zip(axes[r], imgs, (ua, ub), (va, vb))):
+            ax.imshow(img, interpolation="nearest", alpha=image_alpha)
+            ax.scatter(uv[sel, 0], uv[sel, 1], s=marker_size, c=col, marker=".", linewidths=0)
+            ax.set_xlim(-0.5, view.width - 0.5)
+            ax.set_ylim(view.height - 0.5, -0.5)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            letter = "abcdefghijklmnop"[2 * r + c]
+            ax.set_title(f"({letter}) {view.name}: {title}, {n} mappings", fontsize=9)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def write_selection_picture(scene, visibility, labels: np.ndarray, path, view: str | int | None = None) -> tuple[Path, str]:
+    """Render the per-face selection coloured by image (paper Figure 9a) from one view to a PNG.
+
+    Parameters
+    ----------
+    scene : Scene
+    visibility : Visibility
+    labels : (F,) int
+        View per face (-1 = unseen).
+    path : path-like
+        Output PNG (written atomically).
+    view : str or int, optional
+        View name or index; default the view in which the most faces are usable.
+
+    Returns
+    -------
+    (pathlib.Path, str)
+        The path and the view's name.
+    """
+    k = int(np.argmax(np.asarray(visibility.usable).sum(axis=1))) if view is None else scene.index(view)
+    img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views))
+    write_image(path, img)
+    return Path(path), scene.names[k]

@@ -1,19 +1,8 @@
 """Scene model: registered views (images + cameras) and a triangle mesh.
 
-The native manifest is ``scene.json`` in format ``o3d_seqcc.scene/1``::
-
-    {"format": "o3d_seqcc.scene/1",
-     "mesh": "mesh.ply",
-     "views": [{"name": "v00", "image": "images/v00.png", "width": 640, "height": 480,
-                "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]],
-                "extrinsic": [[r,r,r,t],[r,r,r,t],[r,r,r,t],[0,0,0,1]],
-                "depth": "depth/v00.png", "depth_scale": 1000.0,
-                "point_cloud": "scans/s0.ply"}]}
-
-Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
-1000) and ``point_cloud`` are optional. Besides the manifest, :func:`load_scene` reads an
-Open3D RGB-D folder (``image/``, ``depth/``, ``scene/key.log``) and COLMAP text models
-(``cameras.txt`` + ``images.txt``); both need the mesh passed explicitly.
+Plain frozen dataclasses with read-only arrays; files are read lazily (``View.load_image``,
+``Scene.load_mesh``). Reading and writing scene *formats* (``scene.json``, MeshLab projects,
+COLMAP, Meshroom, Open3D RGB-D folders) lives in :mod:`o3d_seqcc.io`.
 
 Cameras follow Open3D's ``PinholeCameraParameters``: ``extrinsic`` maps world to camera
 coordinates in OpenCV axes (x right, y down, z forward).
@@ -21,17 +10,17 @@ coordinates in OpenCV axes (x right, y down, z forward).
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from ._io import read_depth, read_image, write_json
+from .io.files import read_depth, read_image
+from .meshops import face_normals
 from .errors import InputError
 
 __all__ = [
@@ -41,8 +30,8 @@ __all__ = [
     "Scene",
     "View",
     "load_mesh",
-    "load_scene",
-    "save_scene",
+    "resolve_view",
+    "summarise",
 ]
 
 logger = logging.getLogger(__name__)
@@ -87,6 +76,38 @@ def _check_extrinsic(T: np.ndarray, where: str) -> None:
             f"{where}: extrinsic is not rigid (|R^T R - I| = {err:.2e}, det R = {det:.4f}); it must be a "
             "rotation + translation, world-to-camera, without scale or reflection"
         )
+
+
+def resolve_view(names: Sequence[str], view: str | int) -> int:
+    """Index of a view given by name, by index, or by an index written as a string.
+
+    A name always wins over a digit string (a view named ``"3"`` is that view, not index 3).
+
+    Parameters
+    ----------
+    names : sequence of str
+        View names in order.
+    view : str or int
+
+    Raises
+    ------
+    InputError
+        Unknown name or index out of range; the message lists the valid names.
+    """
+    names = list(names)
+    if isinstance(view, str):
+        if view in names:
+            return names.index(view)
+        if view.strip().isdigit():
+            view = int(view)
+        else:
+            shown = ", ".join(names[:20]) + (" ..." if len(names) > 20 else "")
+            raise InputError(f"unknown view {view!r:.80}; valid names: {shown} (or an index 0..{len(names) - 1})")
+    if isinstance(view, (int, np.integer)) and not isinstance(view, bool):
+        if not 0 <= int(view) < len(names):
+            raise InputError(f"view index {view} out of range 0..{len(names) - 1}")
+        return int(view)
+    raise InputError(f"a view is given by name or index, got {view!r:.80} ({type(view).__name__})")
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,10 +249,7 @@ class Mesh:
     @property
     def face_normals(self) -> np.ndarray:
         """(F, 3) unit face normals (zero for degenerate faces), right-hand rule on the winding."""
-        v = self.vertices[self.faces]
-        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        norm = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
+        return face_normals(self.vertices, self.faces)[0]
 
     def to_open3d(self):
         """This mesh as ``open3d.geometry.TriangleMesh`` (legacy)."""
@@ -334,15 +352,14 @@ class Scene:
         return [v.name for v in self.views]
 
     def index(self, view: str | int) -> int:
-        """Index of a view given by name or index; raises listing the valid names."""
-        if isinstance(view, (int, np.integer)) and not isinstance(view, bool):
-            if not 0 <= int(view) < len(self.views):
-                raise InputError(f"view index {view} out of range 0..{len(self.views) - 1}")
-            return int(view)
-        for i, v in enumerate(self.views):
-            if v.name == view:
-                return i
-        raise InputError(f"unknown view {view!r}; valid names: {', '.join(self.names)}")
+        """Index of a view given by name, index or index as a string (see :func:`resolve_view`)."""
+        return resolve_view(self.names, view)
+
+    def __repr__(self) -> str:
+        sizes = sorted({f"{v.width}x{v.height}" for v in self.views})
+        depth = sum(v.depth is not None for v in self.views)
+        return (f"Scene({len(self.views)} views {'/'.join(sizes)}, {depth} with depth, mesh={str(self.mesh)!r}, "
+                f"views={self.names[0]!r}..{self.names[-1]!r})")
 
     def load_mesh(self) -> Mesh:
         """The mesh as arrays (see :func:`load_mesh`)."""
@@ -398,362 +415,19 @@ def _check_image_header(v: View) -> None:
         )
 
 
-# --------------------------------------------------------------------------------------------
-# scene.json
-# --------------------------------------------------------------------------------------------
-
-
-def _join(root: Path, rel: str) -> Path:
-    return Path(os.path.normpath(root / rel))
-
-
-def _load_json(path: Path) -> Scene:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}: not valid JSON ({e})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a JSON object with 'format', 'mesh' and 'views'")
-    fmt = data.get("format")
-    if fmt != FORMAT:
-        raise InputError(
-            f"{path}: unknown scene format {fmt!r}; this version of o3d_seqcc reads {FORMAT!r} "
-            "(upgrade o3d_seqcc or re-export the scene)"
-        )
-    root = path.parent
-    for key in ("mesh", "views"):
-        if key not in data:
-            raise InputError(f"{path}: missing required key {key!r}")
-    if not isinstance(data["views"], list):
-        raise InputError(f"{path}: 'views' must be a list")
-    views = []
-    for i, d in enumerate(data["views"]):
-        where = f"{path}: views[{i}]"
-        if not isinstance(d, dict):
-            raise InputError(f"{where} must be an object")
-        missing = [k for k in ("name", "image", "width", "height", "intrinsic", "extrinsic") if k not in d]
-        if missing:
-            raise InputError(f"{where} ({d.get('name', '?')}) is missing {', '.join(missing)}")
-        unknown = set(d) - {"name", "image", "width", "height", "intrinsic", "extrinsic", "depth", "depth_scale", "point_cloud"}
-        if unknown:
-            raise InputError(f"{where} has unknown keys {sorted(unknown)}")
-        try:
-            views.append(
-                View(
-                    name=d["name"],
-                    image=_join(root, d["image"]),
-                    intrinsic=np.asarray(d["intrinsic"], dtype=np.float64),
-                    extrinsic=np.asarray(d["extrinsic"], dtype=np.float64),
-                    width=d["width"],
-                    height=d["height"],
-                    depth=None if d.get("depth") is None else _join(root, d["depth"]),
-                    depth_scale=d.get("depth_scale", 1000.0),
-                    point_cloud=None if d.get("point_cloud") is None else _join(root, d["point_cloud"]),
-                )
-            )
-        except InputError as e:
-            raise InputError(f"{path}: {e}") from None
-        except (TypeError, ValueError) as e:
-            raise InputError(f"{where}: malformed entry ({e})") from None
-    try:
-        return Scene(mesh=_join(root, data["mesh"]), views=tuple(views))
-    except InputError as e:
-        raise InputError(f"{path}: {e}") from None
-
-
-def _rel(p: Path, root: Path) -> str:
-    return Path(os.path.relpath(Path(p).resolve(), root.resolve())).as_posix()
-
-
-def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
-    """Write ``scene`` as a ``scene.json`` manifest (format ``o3d_seqcc.scene/1``), atomically.
-
-    Paths are stored relative to the manifest's folder. ``load_scene(save_scene(s, p)) == s``
-    exactly (floats are written with full precision).
-
-    Parameters
-    ----------
-    scene : Scene
-    path : path-like
-        Manifest path (conventionally ``.../scene.json``).
-
-    Returns
-    -------
-    pathlib.Path
-        The manifest path.
-    """
-    path = Path(path)
-    root = path.parent
-    root.mkdir(parents=True, exist_ok=True)
-    views = []
-    for v in scene.views:
-        d = {
-            "name": v.name,
-            "image": _rel(v.image, root),
-            "width": v.width,
-            "height": v.height,
-            "intrinsic": v.intrinsic.tolist(),
-            "extrinsic": v.extrinsic.tolist(),
-        }
-        if v.depth is not None:
-            d["depth"] = _rel(v.depth, root)
-            d["depth_scale"] = v.depth_scale
-        if v.point_cloud is not None:
-            d["point_cloud"] = _rel(v.point_cloud, root)
-        views.append(d)
-    return write_json(path, {"format": FORMAT, "mesh": _rel(scene.mesh, root), "views": views})
-
-
-# --------------------------------------------------------------------------------------------
-# Open3D RGB-D folder (SampleFountainRGBDImages layout)
-# --------------------------------------------------------------------------------------------
-
-_IMAGE_EXT = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp"}
-
-
-def read_log_trajectory(path: str | os.PathLike) -> list[np.ndarray]:
-    """Read a ``.log`` trajectory (blocks of a header line + 4 rows): camera-to-world 4x4 poses."""
-    path = Path(path)
-    rows = [ln.split() for ln in path.read_text(encoding="utf-8").splitlines() if ln.strip()]
-    if len(rows) % 5:
-        raise InputError(f"{path}: a .log trajectory has blocks of 5 lines (header + 4x4 matrix); got {len(rows)} lines")
-    poses = []
-    for b in range(0, len(rows), 5):
-        try:
-            poses.append(np.array([[float(x) for x in r] for r in rows[b + 1 : b + 5]], dtype=np.float64))
-        except ValueError:
-            raise InputError(f"{path}: block {b // 5} does not hold a 4x4 numeric matrix") from None
-        if poses[-1].shape != (4, 4):
-            raise InputError(f"{path}: block {b // 5} does not hold a 4x4 matrix")
-    return poses
-
-
-def _list_images(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_EXT and not p.name.startswith("."))
-
-
-def load_rgbd_folder(
-    root: str | os.PathLike,
-    *,
-    mesh: str | os.PathLike,
-    intrinsic: np.ndarray | None = None,
-    depth_scale: float = 1000.0,
-) -> Scene:
-    """Load an Open3D RGB-D folder: ``image/``, ``depth/`` (optional), ``scene/key.log``.
-
-    Images, depth maps and poses are paired in sorted order. ``key.log`` holds camera-to-world
-    poses; the extrinsic is their inverse.
-
-    Parameters
-    ----------
-    root : path-like
-        The folder.
-    mesh : path-like
-        Mesh file, absolute or relative to ``root``.
-    intrinsic : (3, 3) array, optional
-        Defaults to :data:`PRIMESENSE_INTRINSIC`.
-    depth_scale : float, default 1000.0
-    """
-    root = Path(root)
-    img_dir, depth_dir, log = root / "image", root / "depth", root / "scene" / "key.log"
-    if not img_dir.is_dir() or not log.is_file():
-        raise InputError(f"{root}: not an Open3D RGB-D folder (needs image/ and scene/key.log)")
-    images = _list_images(img_dir)
-    depths = _list_images(depth_dir) if depth_dir.is_dir() else []
-    poses = read_log_trajectory(log)
-    if len(images) != len(poses):
-        raise InputError(f"{root}: {len(images)} images in image/ but {len(poses)} poses in scene/key.log")
-    if depths and len(depths) != len(images):
-        raise InputError(f"{root}: {len(images)} images but {len(depths)} depth maps; they are paired in sorted order")
-    K = PRIMESENSE_INTRINSIC if intrinsic is None else np.asarray(intrinsic, dtype=np.float64)
-    mesh_path = Path(mesh)
-    if not mesh_path.is_absolute() and not mesh_path.exists():
-        mesh_path = root / mesh_path
-    from PIL import Image
-
-    with Image.open(images[0]) as im:
-        w, h = im.size
-    views = []
-    for i, (img, pose) in enumerate(zip(images, poses)):
-        if not np.all(np.isfinite(pose)):
-            raise InputError(f"{log}: pose {i} contains NaN/inf")
-        ext = np.linalg.inv(pose)
-        ext[3] = [0.0, 0.0, 0.0, 1.0]
-        views.append(
-            View(
-                name=img.stem,
-                image=img,
-                intrinsic=K,
-                extrinsic=ext,
-                width=w,
-                height=h,
-                depth=depths[i] if depths else None,
-                depth_scale=depth_scale,
-            )
-        )
-    return Scene(mesh=mesh_path, views=tuple(views))
-
-
-# --------------------------------------------------------------------------------------------
-# COLMAP text model
-# --------------------------------------------------------------------------------------------
-
-
-def _qvec2rotmat(q: Iterable[float]) -> np.ndarray:
-    w, x, y, z = np.asarray(list(q), dtype=np.float64) / np.linalg.norm(list(q))
-    return np.array(
-        [
-            [1 - 2 * y * y - 2 * z * z, 2 * x * y - 2 * w * z, 2 * x * z + 2 * w * y],
-            [2 * x * y + 2 * w * z, 1 - 2 * x * x - 2 * z * z, 2 * y * z - 2 * w * x],
-            [2 * x * z - 2 * w * y, 2 * y * z + 2 * w * x, 1 - 2 * x * x - 2 * y * y],
-        ]
-    )
-
-
-def load_colmap(
-    model_dir: str | os.PathLike,
-    *,
-    mesh: str | os.PathLike,
-    image_dir: str | os.PathLike | None = None,
-) -> Scene:
-    """Load a COLMAP text model (``cameras.txt``, ``images.txt``) with undistorted cameras.
-
-    Supported camera models: PINHOLE, SIMPLE_PINHOLE, and SIMPLE_RADIAL / RADIAL / OPENCV only
-    when their distortion parameters are all zero (run ``colmap image_undistorter`` first).
-    COLMAP's pixel convention (centre of the top-left pixel at 0.5) is converted to ours
-    (pixel centres at integers): cx, cy are shifted by -0.5.
-
-    Parameters
-    ----------
-    model_dir : path-like
-        Folder with ``cameras.txt`` and ``images.txt``.
-    mesh : path-like
-        Mesh file, absolute or relative to ``model_dir``.
-    image_dir : path-like, optional
-        Folder of the images; default: ``images/`` next to the model or in its parent folders.
-    """
-    model_dir = Path(model_dir)
-    cams_txt, imgs_txt = model_dir / "cameras.txt", model_dir / "images.txt"
-    for p in (cams_txt, imgs_txt):
-        if not p.is_file():
-            raise InputError(f"COLMAP model {model_dir}: {p.name} not found (export the model as TXT)")
-    cams: dict[int, tuple[int, int, np.ndarray]] = {}
-    for ln in cams_txt.read_text(encoding="utf-8").splitlines():
-        if not ln.strip() or ln.startswith("#"):
-            continue
-        tok = ln.split()
-        cid, model, w, h = int(tok[0]), tok[1], int(tok[2]), int(tok[3])
-        prm = [float(x) for x in tok[4:]]
-        if model == "PINHOLE":
-            fx, fy, cx, cy = prm[:4]
-        elif model == "SIMPLE_PINHOLE":
-            fx, cx, cy = prm[:3]
-            fy = fx
-        elif model in ("SIMPLE_RADIAL", "RADIAL") and all(p == 0 for p in prm[3:]):
-            fx, cx, cy = prm[:3]
-            fy = fx
-        elif model in ("OPENCV", "FULL_OPENCV") and all(p == 0 for p in prm[4:]):
-            fx, fy, cx, cy = prm[:4]
-        else:
-            raise InputError(
-                f"{cams_txt}: camera {cid} uses model {model} with distortion; undistort the images first "
-                "(`colmap image_undistorter`) to get PINHOLE cameras"
-            )
-        cams[cid] = (w, h, np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1.0]]))
-    if image_dir is None:
-        cands = [model_dir / "images", model_dir.parent / "images", model_dir.parent.parent / "images"]
-        image_dir = next((c for c in cands if c.is_dir()), model_dir)
-    image_dir = Path(image_dir)
-    lines = [ln for ln in imgs_txt.read_text(encoding="utf-8").splitlines() if not ln.startswith("#")]
-    views = []
-    for k in range(0, len(lines), 2):
-        if not lines[k].strip():
-            continue
-        tok = lines[k].split()
-        if len(tok) < 10:
-            raise InputError(f"{imgs_txt}: malformed image line {lines[k]!r}")
-        q, t, cid, name = [float(x) for x in tok[1:5]], [float(x) for x in tok[5:8]], int(tok[8]), " ".join(tok[9:])
-        if cid not in cams:
-            raise InputError(f"{imgs_txt}: image {name} refers to camera {cid}, not in cameras.txt")
-        w, h, K = cams[cid]
-        ext = np.eye(4)
-        ext[:3, :3] = _qvec2rotmat(q)
-        ext[:3, 3] = t
-        views.append(View(name=Path(name).stem, image=image_dir / name, intrinsic=K, extrinsic=ext, width=w, height=h))
-    mesh_path = Path(mesh)
-    if not mesh_path.is_absolute() and not mesh_path.exists():
-        mesh_path = model_dir / mesh_path
-    return Scene(mesh=mesh_path, views=tuple(views))
-
-
-# --------------------------------------------------------------------------------------------
-# dispatcher
-# --------------------------------------------------------------------------------------------
-
-
-def load_scene(
-    path: str | os.PathLike,
-    *,
-    mesh: str | os.PathLike | None = None,
-    intrinsic: np.ndarray | None = None,
-    image_dir: str | os.PathLike | None = None,
-    validate: bool = True,
-) -> Scene:
-    """Load a scene, detecting its format.
-
-    Parameters
-    ----------
-    path : path-like
-        A ``scene.json`` manifest (or a folder containing one), an Open3D RGB-D folder
-        (``image/``, ``depth/``, ``scene/key.log``), or a COLMAP text model folder
-        (``cameras.txt``, ``images.txt``).
-    mesh : path-like, optional
-        Mesh file; required for RGB-D folders and COLMAP models, overrides the manifest's.
-    intrinsic : (3, 3) array, optional
-        RGB-D folders only; default PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5).
-    image_dir : path-like, optional
-        COLMAP only: folder of the images.
-    validate : bool, default True
-        Check files, image headers (size, grey, alpha) and the mesh now rather than later.
-
-    Returns
-    -------
-    Scene
-        Images are not read (lazy); use ``View.load_image``.
-
-    Raises
-    ------
-    InputError
-        Unknown layout, missing files, malformed cameras, duplicate names, ...
-    """
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"scene not found: {p}")
-    if p.is_dir() and (p / "scene.json").is_file():
-        p = p / "scene.json"
-    if p.is_file():
-        if p.suffix.lower() != ".json":
-            raise InputError(f"{p}: expected a scene.json manifest, an Open3D RGB-D folder or a COLMAP model folder")
-        scene = _load_json(p)
-        if mesh is not None:
-            scene = Scene(Path(mesh), scene.views)
-    elif (p / "scene" / "key.log").is_file() and (p / "image").is_dir():
-        if mesh is None:
-            cands = sorted((p / "scene").glob("*.ply"))
-            raise InputError(
-                f"{p} is an Open3D RGB-D folder: pass the mesh explicitly (mesh=... / --mesh), "
-                f"e.g. one of {[c.name for c in cands]}"
-            )
-        scene = load_rgbd_folder(p, mesh=mesh, intrinsic=intrinsic)
-    elif (p / "cameras.txt").is_file() and (p / "images.txt").is_file():
-        if mesh is None:
-            raise InputError(f"{p} is a COLMAP model: pass the mesh explicitly (mesh=... / --mesh)")
-        scene = load_colmap(p, mesh=mesh, image_dir=image_dir)
-    else:
-        raise InputError(
-            f"{p}: unknown scene layout; expected scene.json, an Open3D RGB-D folder (image/, depth/, "
-            "scene/key.log) or a COLMAP text model (cameras.txt, images.txt)"
-        )
-    if validate:
-        scene.validate()
-    return scene
+def summarise(scene: Scene) -> dict:
+    """A JSON-friendly summary of a scene: views, sizes, depth, mesh size and bounds, camera spread."""
+    m = scene.load_mesh()
+    centres = np.array([v.center for v in scene.views])
+    return {
+        "views": len(scene.views),
+        "names": scene.names[:3] + (["..."] if len(scene.views) > 3 else []),
+        "image_size": sorted({f"{v.width}x{v.height}" for v in scene.views}),
+        "with_depth": sum(v.depth is not None for v in scene.views),
+        "with_point_cloud": sum(v.point_cloud is not None for v in scene.views),
+        "mesh": str(scene.mesh),
+        "mesh_vertices": int(len(m.vertices)),
+        "mesh_faces": int(len(m.faces)),
+        "mesh_bounds": [m.vertices.min(0).round(3).tolist(), m.vertices.max(0).round(3).tolist()],
+        "camera_centre_bounds": [centres.min(0).round(3).tolist(), centres.max(0).round(3).tolist()],
+    }

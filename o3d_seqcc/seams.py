@@ -17,17 +17,17 @@ per-vertex colours (colours interpolated at the sample points).
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import InputError
+from .imageops import delta_e_2000
+from .meshops import edge_topology, weld_vertices
+from .texturing.textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
 
-__all__ = ["SeamReport", "ColoredMesh", "TexturedMesh", "bilinear", "delta_e_2000", "delta_e_2000_lab", "load_textured_mesh",
-           "sample_texture", "seam_metric", "srgb_to_lab"]
+__all__ = ["SeamReport", "seam_metric"]
 
 logger = logging.getLogger(__name__)
 
@@ -90,282 +90,6 @@ class SeamReport:
         return d
 
 
-@dataclass(frozen=True, eq=False)
-class ColoredMesh:
-    """A triangle mesh with per-corner texture coordinates and one texture image.
-
-    Attributes
-    ----------
-    vertices : (N, 3) float64
-    faces : (F, 3) int64
-    uv : (N, 2) float64 or None
-        Texture coordinates per vertex, OBJ convention (origin bottom-left, v up), in [0, 1].
-    texture : (H, W, 3) uint8 / uint16 or None
-        RGB texture image.
-    vertex_colors : (N, 3) float64 in [0, 1] or None
-        Per-vertex colours (used when there is no texture).
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    uv: np.ndarray | None = None
-    texture: np.ndarray | None = None
-    vertex_colors: np.ndarray | None = None
-
-    @property
-    def has_texture(self) -> bool:
-        return self.uv is not None and self.texture is not None
-
-
-#: Former name of :class:`ColoredMesh`, kept for callers (``o3d_seqcc.cli.texture``).
-TexturedMesh = ColoredMesh
-
-
-def _image_to_rgb_array(img: Any, where: str) -> np.ndarray:
-    arr = np.asarray(img.convert("RGB") if hasattr(img, "convert") else img)
-    if arr.ndim == 2:
-        arr = np.repeat(arr[..., None], 3, axis=2)
-    if arr.ndim != 3 or arr.shape[2] < 3:
-        raise InputError(f"{where}: texture image has shape {arr.shape}; expected an RGB image")
-    arr = arr[..., :3]
-    if arr.dtype not in (np.uint8, np.uint16):
-        raise InputError(f"{where}: texture dtype {arr.dtype} unsupported (expected 8- or 16-bit)")
-    return np.ascontiguousarray(arr)
-
-
-def load_textured_mesh(mesh_or_path: Any) -> ColoredMesh:
-    """Read a textured (or vertex-coloured) mesh with trimesh.
-
-    Parameters
-    ----------
-    mesh_or_path : path-like, trimesh.Trimesh, trimesh.Scene or ColoredMesh
-        OBJ (+MTL+image), GLB/glTF, PLY, ... A scene is merged into one mesh
-        (``force="mesh"``).
-
-    Returns
-    -------
-    ColoredMesh
-
-    Raises
-    ------
-    InputError
-        Missing file, no faces, neither a texture (with UVs) nor vertex colours.
-    """
-    if isinstance(mesh_or_path, ColoredMesh):
-        return mesh_or_path
-    import trimesh
-
-    if isinstance(mesh_or_path, (str, os.PathLike)):
-        p = Path(mesh_or_path)
-        if not p.is_file():
-            raise InputError(f"mesh not found: {p}")
-        where = str(p)
-        try:
-            mesh = trimesh.load(str(p), force="mesh", process=False)
-        except Exception as e:  # trimesh raises many types on malformed files
-            raise InputError(f"cannot read mesh {p}: {e}") from None
-    else:
-        mesh, where = mesh_or_path, type(mesh_or_path).__name__
-        if isinstance(mesh, trimesh.Scene):
-            mesh = mesh.to_mesh() if hasattr(mesh, "to_mesh") else mesh.dump(concatenate=True)
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"{where}: no triangles found; give a triangle mesh with faces")
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    f = np.asarray(mesh.faces, dtype=np.int64)
-    visual = mesh.visual
-    uv = tex = vc = None
-    if getattr(visual, "kind", None) == "texture" and getattr(visual, "uv", None) is not None:
-        uv = np.asarray(visual.uv, dtype=np.float64)
-        mat = visual.material
-        img = getattr(mat, "baseColorTexture", None)
-        if img is None:
-            img = getattr(mat, "image", None)
-        if img is not None and len(uv) == len(v):
-            tex = _image_to_rgb_array(img, where)
-            factor = getattr(mat, "baseColorFactor", None)
-            if factor is not None and not np.allclose(np.asarray(factor)[:3], 255 if np.max(factor) > 1 else 1):
-                logger.warning("%s: baseColorFactor %s ignored by the seam metric", where, list(factor))
-        else:
-            uv = None
-    if tex is None:
-        try:
-            colors = np.asarray(visual.vertex_colors) if getattr(visual, "kind", None) == "vertex" else None
-        except Exception:
-            colors = None
-        if colors is not None and len(colors) == len(v):
-            vc = colors[:, :3].astype(np.float64) / 255.0
-    if tex is None and vc is None:
-        raise InputError(
-            f"{where}: the mesh has neither a texture with UV coordinates nor vertex colours; "
-            "the seam metric needs a textured OBJ/GLB (or a PLY with vertex colours)"
-        )
-    return ColoredMesh(vertices=v, faces=f, uv=uv, texture=tex, vertex_colors=vc)
-
-
-def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear lookup of texture colours at UV coordinates.
-
-    Parameters
-    ----------
-    texture : (H, W, 3) uint8 / uint16 / float array
-        RGB texture.
-    uv : (n, 2) float array
-        OBJ / trimesh convention: u right, v up, (0, 0) the bottom-left corner of the image,
-        texel centres at ((i + 0.5) / W, 1 - (j + 0.5) / H). Outside [0, 1] clamps to the edge.
-
-    Returns
-    -------
-    (n, 3) float64
-        Colours in [0, 1] (integer textures are divided by their maximum value).
-    """
-    texture = np.asarray(texture)
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    h, w = texture.shape[:2]
-    x = uv[:, 0] * w - 0.5
-    y = (1.0 - uv[:, 1]) * h - 0.5
-    return bilinear(texture, x, y)
-
-
-def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear lookup at pixel coordinates (pixel centres at integers), clamped to the border.
-
-    Parameters
-    ----------
-    image : (H, W, C) uint8 / uint16 / float array
-    x, y : (...) float arrays
-        Column and row coordinates.
-
-    Returns
-    -------
-    (..., C) float64
-        Values in [0, 1] for integer images (divided by 255 / 65535), as-is for float images.
-    """
-    image = np.asarray(image)
-    scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(image.dtype, 1.0)
-    h, w = image.shape[:2]
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, w - 1.0)
-    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, h - 1.0)
-    x0 = np.minimum(np.floor(x).astype(np.int64), max(w - 2, 0))
-    y0 = np.minimum(np.floor(y).astype(np.int64), max(h - 2, 0))
-    x1 = np.minimum(x0 + 1, w - 1)
-    y1 = np.minimum(y0 + 1, h - 1)
-    fx = (x - x0)[..., None]
-    fy = (y - y0)[..., None]
-    img = image if image.ndim == 3 else image[..., None]
-    out = (
-        img[y0, x0] * ((1 - fx) * (1 - fy))
-        + img[y0, x1] * (fx * (1 - fy))
-        + img[y1, x0] * ((1 - fx) * fy)
-        + img[y1, x1] * (fx * fy)
-    )
-    return out / scale
-
-
-# sRGB linear RGB -> XYZ (the standard's rounded matrix, as colour-science), and the D65 white (CIE 1931 2 deg, xy 0.3127, 0.3290)
-_SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])  # IEC 61966-2-1
-_D65_XYZ = np.array([0.3127 / 0.3290, 1.0, (1.0 - 0.3127 - 0.3290) / 0.3290])
-
-
-def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
-    """CIE Lab (D65) of sRGB colours in [0, 1] ((..., 3), clipped), numpy only.
-
-    Same conversion as colour-science's ``XYZ_to_Lab(sRGB_to_XYZ(rgb))`` (to ~1e-6).
-    """
-    c = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
-    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    xyz = lin @ _SRGB_TO_XYZ.T / _D65_XYZ
-    eps, kappa = 216.0 / 24389.0, 24389.0 / 27.0
-    f = np.where(xyz > eps, np.cbrt(xyz), (kappa * xyz + 16.0) / 116.0)
-    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1)
-
-
-def delta_e_2000_lab(lab_a: np.ndarray, lab_b: np.ndarray) -> np.ndarray:
-    """CIEDE2000 (kL = kC = kH = 1) between CIE Lab colours ((..., 3) each), vectorised numpy
-    (Sharma, Wu and Dalal 2005), equal to colour-science's ``delta_E(method="CIE 2000")``."""
-    L1, a1, b1 = np.moveaxis(np.asarray(lab_a, dtype=np.float64), -1, 0)
-    L2, a2, b2 = np.moveaxis(np.asarray(lab_b, dtype=np.float64), -1, 0)
-    C1, C2 = np.hypot(a1, b1), np.hypot(a2, b2)
-    Cm7 = ((C1 + C2) / 2.0) ** 7
-    G = 0.5 * (1.0 - np.sqrt(Cm7 / (Cm7 + 25.0**7)))
-    a1p, a2p = (1.0 + G) * a1, (1.0 + G) * a2
-    C1p, C2p = np.hypot(a1p, b1), np.hypot(a2p, b2)
-    h1p = np.degrees(np.arctan2(b1, a1p)) % 360.0
-    h2p = np.degrees(np.arctan2(b2, a2p)) % 360.0
-    h1p = np.where((b1 == 0) & (a1p == 0), 0.0, h1p)
-    h2p = np.where((b2 == 0) & (a2p == 0), 0.0, h2p)
-    dLp = L2 - L1
-    dCp = C2p - C1p
-    dh = h2p - h1p
-    dh = np.where(dh > 180.0, dh - 360.0, np.where(dh < -180.0, dh + 360.0, dh))
-    zero = (C1p * C2p) == 0
-    dh = np.where(zero, 0.0, dh)
-    dHp = 2.0 * np.sqrt(C1p * C2p) * np.sin(np.radians(dh) / 2.0)
-    Lpm = (L1 + L2) / 2.0
-    Cpm = (C1p + C2p) / 2.0
-    hs = h1p + h2p
-    hpm = np.where(np.abs(h1p - h2p) <= 180.0, hs / 2.0, np.where(hs < 360.0, (hs + 360.0) / 2.0, (hs - 360.0) / 2.0))
-    hpm = np.where(zero, hs, hpm)
-    T = (1.0 - 0.17 * np.cos(np.radians(hpm - 30.0)) + 0.24 * np.cos(np.radians(2.0 * hpm))
-         + 0.32 * np.cos(np.radians(3.0 * hpm + 6.0)) - 0.20 * np.cos(np.radians(4.0 * hpm - 63.0)))
-    dtheta = 30.0 * np.exp(-(((hpm - 275.0) / 25.0) ** 2))
-    Cpm7 = Cpm**7
-    Rc = 2.0 * np.sqrt(Cpm7 / (Cpm7 + 25.0**7))
-    Sl = 1.0 + 0.015 * (Lpm - 50.0) ** 2 / np.sqrt(20.0 + (Lpm - 50.0) ** 2)
-    Sc = 1.0 + 0.045 * Cpm
-    Sh = 1.0 + 0.015 * Cpm * T
-    Rt = -np.sin(np.radians(2.0 * dtheta)) * Rc
-    return np.sqrt((dLp / Sl) ** 2 + (dCp / Sc) ** 2 + (dHp / Sh) ** 2 + Rt * (dCp / Sc) * (dHp / Sh))
-
-
-def delta_e_2000(rgb_a: np.ndarray, rgb_b: np.ndarray) -> np.ndarray:
-    """CIEDE2000 between sRGB colours in [0, 1] ((..., 3) each), via CIE Lab D65.
-
-    Pure numpy (:func:`srgb_to_lab`, :func:`delta_e_2000_lab`), numerically the same as
-    colour-science's ``delta_E(XYZ_to_Lab(sRGB_to_XYZ(.)), ..., method="CIE 2000")`` without
-    its import cost (~0.4 s).
-    """
-    return delta_e_2000_lab(srgb_to_lab(rgb_a), srgb_to_lab(rgb_b))
-
-
-def _merge_positions(vertices: np.ndarray, tol: float) -> np.ndarray:
-    """Id per vertex such that vertices within ``tol`` (on a grid) share an id."""
-    q = np.round(vertices / tol).astype(np.int64)
-    _, inv = np.unique(q, axis=0, return_inverse=True)
-    return inv.reshape(-1)
-
-
-def _interior_edges(faces_merged: np.ndarray):
-    """Face-edge incidences of edges shared by exactly two faces.
-
-    Returns (face_a, corner_a0, corner_a1, face_b, corner_b0, corner_b1, edges, n_boundary,
-    n_nonmanifold) where corner_x0 is the local corner (0..2) of face x at the edge's smaller
-    merged vertex id and corner_x1 at the larger one.
-    """
-    F = len(faces_merged)
-    c0 = np.tile(np.arange(3), F)
-    c1 = (c0 + 1) % 3
-    fid = np.repeat(np.arange(F), 3)
-    a = faces_merged[fid, c0]
-    b = faces_merged[fid, c1]
-    ok = a != b  # degenerate (collapsed) edges are not edges
-    fid, c0, c1, a, b = fid[ok], c0[ok], c1[ok], a[ok], b[ok]
-    swap = a > b
-    lo, hi = np.where(swap, b, a), np.where(swap, a, b)
-    clo, chi = np.where(swap, c1, c0), np.where(swap, c0, c1)
-    key = lo.astype(np.int64) * (int(faces_merged.max()) + 1) + hi
-    order = np.argsort(key, kind="stable")
-    key_s = key[order]
-    uniq, start, counts = np.unique(key_s, return_index=True, return_counts=True)
-    two = counts == 2
-    i0 = order[start[two]]
-    i1 = order[start[two] + 1]
-    # two incidences from the same face (degenerate/duplicate) are not a shared edge
-    good = fid[i0] != fid[i1]
-    i0, i1 = i0[good], i1[good]
-    edges = np.stack([lo[i0], hi[i0]], axis=1)
-    return (fid[i0], clo[i0], chi[i0], fid[i1], clo[i1], chi[i1], edges, int(np.sum(counts == 1)), int(np.sum(counts > 2)))
-
-
 def _face_samples(
     uvpts: np.ndarray, corners: np.ndarray, corner_lo: np.ndarray, corner_hi: np.ndarray, t: np.ndarray,
     offset: float, max_weight: float = 1.0 / 3.0,
@@ -409,7 +133,7 @@ def _face_samples(
     return out
 
 
-def _colors_at(tm: ColoredMesh, faces: np.ndarray, bary: np.ndarray) -> np.ndarray:
+def _colors_at(tm: TexturedMesh, faces: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """Colours (E*S, 3) in [0, 1] at barycentric points (E, S, 3) of faces (E,)."""
     corners = tm.faces[faces]  # (E, 3)
     if tm.has_texture:
@@ -418,7 +142,7 @@ def _colors_at(tm: ColoredMesh, faces: np.ndarray, bary: np.ndarray) -> np.ndarr
     return np.einsum("esk,ekd->esd", bary, tm.vertex_colors[corners]).reshape(-1, 3)
 
 
-def _is_continuous(tm: ColoredMesh, fa, ca0, ca1, fb, cb0, cb1, tol: float) -> np.ndarray:
+def _is_continuous(tm: TexturedMesh, fa, ca0, ca1, fb, cb0, cb1, tol: float) -> np.ndarray:
     """(E,) bool: both faces carry the same texture coordinates (or vertex colours) at both ends."""
     if tm.has_texture:
         h, w = tm.texture.shape[:2]
@@ -466,7 +190,7 @@ def seam_metric(
 
     Parameters
     ----------
-    mesh_or_path : path-like, trimesh.Trimesh or ColoredMesh
+    mesh_or_path : path-like, trimesh.Trimesh or TexturedMesh
         A textured OBJ/GLB (or a mesh with vertex colours).
     offset : float, default 0.5
         Distance of the samples from the edge, in texels of the texture image (> 0).
@@ -501,9 +225,10 @@ def seam_metric(
     tm = load_textured_mesh(mesh_or_path)
     diag = float(np.linalg.norm(np.ptp(tm.vertices, axis=0)))
     tol = float(merge_tol) if merge_tol is not None else max(diag * 1e-6, 1e-12)
-    merged = _merge_positions(tm.vertices, tol)
-    fm = merged[tm.faces]
-    fa, ca0, ca1, fb, cb0, cb1, edges, n_bnd, n_nm = _interior_edges(fm)
+    topo = edge_topology(weld_vertices(tm.vertices, tol=tol)[tm.faces])
+    fa, ca0, ca1, fb, cb0, cb1 = (topo.face_a, topo.corner_a0, topo.corner_a1, topo.face_b, topo.corner_b0,
+                                  topo.corner_b1)
+    edges, n_bnd, n_nm = topo.edges, topo.n_boundary, topo.n_nonmanifold
     if len(fa) == 0:
         raise InputError(
             "the mesh has no interior edge (no edge shared by two faces after merging vertices within "

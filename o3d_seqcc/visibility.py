@@ -43,16 +43,21 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from .camera import project_columns, project_points
+from .depthmaps import depth_edges, depth_from_point_cloud, load_point_cloud
 from .errors import InputError
+from .meshops import oriented_face_normals
+from .occlusion import occluded_faces
 from .scene import Mesh, load_mesh
 
 __all__ = [
     "FILTERS",
+    "UsableFaces",
     "Visibility",
     "compute_visibility",
     "depth_from_point_cloud",
     "project_points",
-]
+]  # depth_from_point_cloud (:mod:`.depthmaps`) and project_points (:mod:`.camera`) re-exported
 
 logger = logging.getLogger(__name__)
 
@@ -60,8 +65,22 @@ logger = logging.getLogger(__name__)
 FILTERS = ("occlusion", "depth", "oblique")
 
 
+class UsableFaces:
+    """Shape of a (V, F) ``usable`` face mask: what every per-view visibility record exposes."""
+
+    usable: np.ndarray
+
+    @property
+    def n_views(self) -> int:
+        return int(self.usable.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.usable.shape[1])
+
+
 @dataclass(frozen=True, eq=False)
-class Visibility:
+class Visibility(UsableFaces):
     """Per-view visibility of every mesh face.
 
     Attributes
@@ -108,14 +127,6 @@ class Visibility:
     view_names: tuple[str, ...] = ()
     options: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def n_views(self) -> int:
-        return int(self.valid.shape[0])
-
-    @property
-    def n_faces(self) -> int:
-        return int(self.valid.shape[1])
-
     def stage_masks(self) -> dict[str, np.ndarray]:
         """Cumulative (V, F) masks as in the paper's Figure 3.
 
@@ -124,148 +135,6 @@ class Visibility:
         m1 = self.valid & ~self.occluded
         m2 = m1 & ~self.depth_inconsistent
         return {"valid": self.valid, "+occlusion": m1, "+depth": m2, "+oblique": m2 & ~self.oblique}
-
-
-# --------------------------------------------------------------------------------------------
-# pure helpers
-# --------------------------------------------------------------------------------------------
-
-
-def project_points(
-    points: np.ndarray, intrinsic: np.ndarray, extrinsic: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pinhole projection of world points.
-
-    Parameters
-    ----------
-    points : (n, 3) float
-        World coordinates.
-    intrinsic : (3, 3) float
-    extrinsic : (4, 4) float
-        World-to-camera, OpenCV axes.
-
-    Returns
-    -------
-    uv : (n, 2) float64
-        Pixel coordinates (pixel centres at integers); NaN where ``z <= 0``.
-    z : (n,) float64
-        Camera-frame depth.
-    """
-    X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    u, v, z = _project_cols(np.ascontiguousarray(X.T), np.asarray(intrinsic, np.float64), np.asarray(extrinsic, np.float64))
-    uv = np.stack([u, v], axis=1)
-    return uv, z
-
-
-def _inside(uv: np.ndarray, z: np.ndarray, width: int, height: int) -> np.ndarray:
-    u, v = uv[..., 0], uv[..., 1]
-    with np.errstate(invalid="ignore"):
-        return (z > 0) & (u >= -0.5) & (u < width - 0.5) & (v >= -0.5) & (v < height - 0.5)
-
-
-def _pixel_index(uv: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest pixel (row, col) of in-image coordinates (pixel i covers [i-0.5, i+0.5))."""
-    c = np.clip(np.floor(uv[:, 0] + 0.5), 0, width - 1).astype(np.intp)
-    r = np.clip(np.floor(uv[:, 1] + 0.5), 0, height - 1).astype(np.intp)
-    return r, c
-
-
-def _bary_grid(level: int, *, interior_only: bool) -> np.ndarray:
-    """(m, 3) barycentric grid points (i/L, j/L, k/L); optionally without the 3 vertices."""
-    i, j = np.meshgrid(np.arange(level + 1), np.arange(level + 1), indexing="ij")
-    keep = (i + j) <= level
-    w = np.stack([level - i[keep] - j[keep], i[keep], j[keep]], axis=1).astype(np.float64) / level
-    if interior_only:
-        w = w[~(w == 1.0).any(axis=1)]
-    return w
-
-
-def depth_from_point_cloud(
-    points: np.ndarray,
-    intrinsic: np.ndarray,
-    extrinsic: np.ndarray,
-    width: int,
-    height: int,
-    *,
-    fill_radius: int = 6,
-    inpaint_radius: float = 3.0,
-) -> np.ndarray:
-    """Render a depth image from a point cloud: nearest point per pixel, small holes inpainted.
-
-    Parameters
-    ----------
-    points : (M, 3) float
-        World points.
-    intrinsic, extrinsic : arrays
-        The view's camera.
-    width, height : int
-    fill_radius : int, default 6
-        Empty pixels within this many pixels of a rendered one are filled with
-        ``cv2.inpaint(..., cv2.INPAINT_NS)`` (Navier-Stokes, as in the paper); larger empty
-        regions stay 0 (missing). 0 disables filling.
-    inpaint_radius : float, default 3.0
-        Neighbourhood radius passed to ``cv2.inpaint``.
-
-    Returns
-    -------
-    (H, W) float64
-        Camera z per pixel, 0 where missing.
-    """
-    import cv2
-
-    uv, z = project_points(points, intrinsic, extrinsic)
-    ok = _inside(uv, z, width, height)
-    r, c = _pixel_index(uv[ok], width, height)
-    pix = r * width + c
-    zz = z[ok]
-    D = np.zeros(height * width, dtype=np.float64)
-    if len(pix):
-        order = np.lexsort((zz, pix))
-        ps, zs = pix[order], zz[order]
-        first = np.ones(len(ps), dtype=bool)
-        first[1:] = ps[1:] != ps[:-1]
-        D[ps[first]] = zs[first]
-    D = D.reshape(height, width)
-    if fill_radius > 0 and (D > 0).any() and (D == 0).any():
-        have = (D > 0).astype(np.uint8)
-        k = 2 * int(fill_radius) + 1
-        near = cv2.dilate(have, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-        mask = (near & (D == 0)).astype(np.uint8)
-        if mask.any():
-            filled = cv2.inpaint(D.astype(np.float32), mask, float(inpaint_radius), cv2.INPAINT_NS)
-            D = np.where(mask > 0, np.maximum(filled.astype(np.float64), 0.0), D)
-    return D
-
-
-def _load_point_cloud(path) -> np.ndarray:
-    import open3d as o3d
-
-    if not os.path.isfile(path):
-        raise InputError(f"point cloud not found: {path}")
-    pc = o3d.io.read_point_cloud(str(path))
-    pts = np.asarray(pc.points, dtype=np.float64)
-    if len(pts) == 0:
-        raise InputError(f"point cloud {path} has no points (unreadable or empty file); give a PLY/PCD with points")
-    return pts
-
-
-def _face_normals(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, int]:
-    """Unit face normals oriented by the vertex normals, degenerate mask, number flipped."""
-    v = mesh.vertices[mesh.faces]
-    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    norm = np.linalg.norm(n, axis=1)
-    scale = float(np.ptp(mesh.vertices, axis=0).max()) if len(mesh.vertices) else 1.0
-    degenerate = norm <= (1e-12 * max(scale, 1e-300) ** 2)
-    fn = np.divide(n, norm[:, None], out=np.zeros_like(n), where=~degenerate[:, None])
-    vn = getattr(mesh, "vertex_normals", None)
-    flipped = 0
-    if vn is not None and np.shape(vn) == np.shape(mesh.vertices):
-        s = np.asarray(vn, dtype=np.float64)[mesh.faces].sum(1)
-        dots = np.einsum("ij,ij->i", fn, s)
-        flip = dots < 0
-        flipped = int(flip.sum())
-        fn[flip] *= -1.0
-    return fn, degenerate, flipped
 
 
 # --------------------------------------------------------------------------------------------
@@ -294,27 +163,13 @@ class _Geometry:
         return vert_mask[self.f0] & vert_mask[self.f1] & vert_mask[self.f2]
 
 
-def _project_cols(XT: np.ndarray, K: np.ndarray, E: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    R, t = E[:3, :3], E[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = R[0, 0] * XT[0] + R[0, 1] * XT[1] + R[0, 2] * XT[2] + t[0]
-        y = R[1, 0] * XT[0] + R[1, 1] * XT[1] + R[1, 2] * XT[2] + t[1]
-        z = R[2, 0] * XT[0] + R[2, 1] * XT[1] + R[2, 2] * XT[2] + t[2]
-        inv = np.where(z > 0, 1.0 / z, np.nan)
-        x *= inv
-        y *= inv
-        u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
-        v = K[1, 1] * y + K[1, 2]
-    return u, v, z
-
-
 def _per_view(view, i: int, g: _Geometry, opts, res: dict[str, np.ndarray]) -> dict:
     """Projection, validity, area, angles and the depth-consistency test of view ``i``.
 
     Writes row ``i`` of the (V, ...) arrays in ``res``; returns the per-vertex depth test.
     """
     W, H = view.width, view.height
-    u, v, z = _project_cols(g.XT, view.intrinsic, view.extrinsic)
+    u, v, z = project_columns(g.XT, view.intrinsic, view.extrinsic)
     with np.errstate(invalid="ignore"):
         inside = (z > 0) & (u >= -0.5) & (u < W - 0.5) & (v >= -0.5) & (v < H - 0.5)
     valid = g.all3(inside) & ~g.degenerate
@@ -356,7 +211,7 @@ def _per_view(view, i: int, g: _Geometry, opts, res: dict[str, np.ndarray]) -> d
         out["depth_source"] = "depth"
     elif view.point_cloud is not None:
         D = depth_from_point_cloud(
-            _load_point_cloud(view.point_cloud), view.intrinsic, view.extrinsic, W, H, fill_radius=opts["fill_radius"]
+            load_point_cloud(view.point_cloud), view.intrinsic, view.extrinsic, W, H, fill_radius=opts["fill_radius"]
         )
         out["depth_source"] = "point_cloud"
     if D is None:
@@ -374,114 +229,11 @@ def _per_view(view, i: int, g: _Geometry, opts, res: dict[str, np.ndarray]) -> d
     out["vertex_depth_known"] = known
     margin = int(opts["depth_edge_margin"])
     if margin > 0:
-        edge = _depth_edges(D, margin, opts["depth_atol"], opts["depth_tol"])
+        edge = depth_edges(D, margin, opts["depth_atol"], opts["depth_tol"])
         near = np.zeros(g.n_vertices, dtype=bool)
         near[vid] = edge[r, c]
         out["vertex_near_edge"] = near
     return out
-
-
-def _depth_edges(D: np.ndarray, margin: int, atol: float, rtol: float) -> np.ndarray:
-    """(H, W) bool: within ``margin`` px of a depth discontinuity.
-
-    A discontinuity is a jump between 4-neighbouring pixels (both with depth) larger than
-    ``max(atol, rtol * nearer depth)``; gradual changes (slanted surfaces) are not edges.
-    """
-    import cv2
-
-    edge = np.zeros(D.shape, dtype=np.uint8)
-    for a, b, sa, sb in (
-        (D[:, :-1], D[:, 1:], (slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-        (D[:-1, :], D[1:, :], (slice(None, -1), slice(None)), (slice(1, None), slice(None))),
-    ):
-        near = np.minimum(a, b)
-        jump = (a > 0) & (b > 0) & (np.abs(a - b) > np.maximum(atol, rtol * near))
-        edge[sa] |= jump
-        edge[sb] |= jump
-    k = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * margin + 1, 2 * margin + 1))
-    return cv2.dilate(edge, k) > 0
-
-
-def _occlusion(mesh: Mesh, geom, views, areas: np.ndarray, fn_ok: np.ndarray, opts) -> tuple[np.ndarray, int]:
-    """(V, F) occluded mask via any-hit ray queries; returns also the number of rays cast."""
-    import open3d as o3d
-    import open3d.core as o3c
-
-    X = mesh.vertices
-    faces = mesh.faces
-    V, F = len(views), len(faces)
-    rs = o3d.t.geometry.RaycastingScene()
-    rs.add_triangles(
-        o3c.Tensor(np.ascontiguousarray(X, dtype=np.float32)),
-        o3c.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)),
-    )
-    tol, atol = float(opts["occlusion_tol"]), float(opts["occlusion_atol"])
-
-    def rays_to(C: np.ndarray, P: np.ndarray) -> np.ndarray:
-        d = P - C[None, :]
-        dist = np.linalg.norm(d, axis=1, keepdims=True)
-        # scale so that t = 1 is the first distance that counts as "in front of the point"
-        reach = np.maximum(dist * (1.0 - tol) - atol, 0.0)
-        d = d * np.divide(reach, dist, out=np.zeros_like(dist), where=dist > 0)
-        return np.concatenate([np.broadcast_to(C, d.shape), d], axis=1).astype(np.float32)
-
-    def hidden(rays: list[np.ndarray]) -> np.ndarray:
-        if not rays:
-            return np.zeros(0, bool)
-        allr = np.concatenate(rays)
-        out = np.empty(len(allr), dtype=bool)
-        step = 1 << 22
-        for s in range(0, len(allr), step):
-            out[s : s + step] = rs.test_occlusions(o3c.Tensor(allr[s : s + step]), tnear=0.0, tfar=1.0).numpy()
-        return out
-
-    # 1) vertices of the faces to test, all views in one batch
-    rays, vids = [], []
-    for v, view in enumerate(views):
-        need = np.zeros(len(X), dtype=bool)
-        need[faces[fn_ok[v]].ravel()] = True
-        ids = np.flatnonzero(need)
-        vids.append(ids)
-        rays.append(rays_to(view.center, X[ids]))
-    hid = hidden(rays)
-    n_rays = len(hid)
-    occluded = np.zeros((V, F), dtype=bool)
-    off = 0
-    for v in range(V):
-        ids = vids[v]
-        vh = np.zeros(len(X), dtype=bool)
-        vh[ids] = hid[off : off + len(ids)]
-        off += len(ids)
-        occluded[v] = fn_ok[v] & geom.any3(vh)
-    # 2) interior points of faces with a large projection
-    spacing = float(opts["occlusion_spacing"])
-    if spacing > 0:
-        rays, owners = [], []
-        for v, view in enumerate(views):
-            area = areas[v]
-            big = np.flatnonzero(fn_ok[v] & ~occluded[v] & (area > 2.0 * spacing**2))
-            if not len(big):
-                owners.append((v, big, None))
-                continue
-            level = np.clip(np.ceil(np.sqrt(2.0 * area[big]) / spacing), 2, opts["occlusion_max_level"]).astype(int)
-            pts, own = [], []
-            for L in np.unique(level):  # at most occlusion_max_level groups
-                sel = big[level == L]
-                w = _bary_grid(int(L), interior_only=True)  # (m, 3)
-                tri = X[faces[sel]]  # (k, 3, 3)
-                pts.append(np.einsum("mj,kjc->kmc", w, tri).reshape(-1, 3))
-                own.append(np.repeat(sel, len(w)))
-            P = np.concatenate(pts)
-            owners.append((v, np.concatenate(own), None))
-            rays.append(rays_to(view.center, P))
-        hid = hidden(rays)
-        n_rays += len(hid)
-        off = 0
-        for v, own, _ in owners:
-            h = hid[off : off + len(own)]
-            off += len(own)
-            occluded[v, own[h]] = True
-    return occluded, n_rays
 
 
 def compute_visibility(
@@ -616,7 +368,7 @@ def compute_visibility(
         m.compute_vertex_normals()
         logger.info("mesh has no (valid) vertex normals: computed them from the winding")
         mesh = Mesh(vertices=X, faces=faces, vertex_normals=np.asarray(m.vertex_normals, dtype=np.float64))
-    fn, degenerate, flipped = _face_normals(mesh)
+    fn, degenerate, flipped = oriented_face_normals(mesh.vertices, mesh.faces, getattr(mesh, "vertex_normals", None))
     if degenerate.any():
         logger.info("%d degenerate (zero-area) faces excluded", int(degenerate.sum()))
     if flipped:
@@ -649,7 +401,7 @@ def compute_visibility(
     n_rays = 0
     if "occlusion" in filters and valid.any():
         front = valid & ~back
-        occluded, n_rays = _occlusion(mesh, geom, views, res["area"], front, opts)
+        occluded, n_rays = occluded_faces(mesh, geom, views, res["area"], front, opts)
     else:
         occluded = np.zeros((V, F), bool)
     timings["occlusion"] = time.perf_counter() - t2

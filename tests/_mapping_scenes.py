@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from o3d_seqcc.scene import Scene, View, save_scene
+from o3d_seqcc import Scene, View, save_scene
 
 W, H, F_PX = 80, 60, 70.0
 K = np.array([[F_PX, 0.0, (W - 1) / 2], [0.0, F_PX, (H - 1) / 2], [0.0, 0.0, 1.0]])

@@ -1,22 +1,21 @@
-"""Tests of o3d_seqcc.baselines: Brown & Lowe gain compensation and Moulon et al. histogram matching."""
+"""Tests of o3d_seqcc.correction.global_methods: Brown & Lowe gain compensation and Moulon et al. histogram matching."""
 
 from __future__ import annotations
 
 import warnings
 
+import cv2
 import numpy as np
 import pytest
 
-cv2 = pytest.importorskip("cv2")
-baselines = pytest.importorskip("o3d_seqcc.baselines", reason="o3d_seqcc.correction (registry) not available")
-
-from o3d_seqcc.baselines import (  # noqa: E402
+import o3d_seqcc.correction.global_methods as baselines
+from o3d_seqcc.correction.global_methods import (
     affine_lut,
     gain_compensation_gains,
     histogram_matching_params,
     overlap_quantiles,
 )
-from o3d_seqcc.mappings import Mappings, PairMapping  # noqa: E402
+from o3d_seqcc.mappings import Mappings, PairMapping
 
 GAINS = np.array([[1.0, 1.0, 1.0], [1.3, 1.1, 0.9], [0.8, 0.95, 1.15], [1.1, 0.7, 1.05]])
 OFFSETS = np.array([[0.0, 0.0, 0.0], [0.05, -0.03, 0.02], [-0.04, 0.06, 0.0], [0.02, 0.01, -0.05]])
@@ -162,16 +161,14 @@ def gained_views():
 
 
 def _correct(images, mappings, method, reference=0, **kw):
-    correction = pytest.importorskip("o3d_seqcc.correction")
-    from o3d_seqcc.metrics import placeholder_scene
+    import o3d_seqcc.correction as correction
 
-    scene = placeholder_scene(images)
-    return correction.correct(scene, reference=reference, method=method, mappings=mappings, images=images, t_npm=10, **kw)
+    return correction.correct(reference=reference, method=method, mappings=mappings, images=images, t_npm=10, **kw)
 
 
 @pytest.mark.parametrize("method", ["gain-compensation", "histogram-matching"])
 def test_methods_registered(method):
-    correction = pytest.importorskip("o3d_seqcc.correction")
+    import o3d_seqcc.correction as correction
     assert method in correction.METHODS
 
 

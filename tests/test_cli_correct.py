@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from o3d_seqcc._io import read_image, write_image
+from o3d_seqcc.io.files import read_image, write_image
 from o3d_seqcc.cli import main
-from o3d_seqcc.scene import load_scene, save_scene
+from o3d_seqcc import load_scene, save_scene
 
 
 @pytest.fixture(scope="module")
 def synth(tmp_path_factory):
-    synthetic = pytest.importorskip("o3d_seqcc.synthetic")
+    import o3d_seqcc.synthetic as synthetic
     out = tmp_path_factory.mktemp("synth")
     return synthetic.make_synthetic_scene(out, n_views=6, width=160, height=120, seed=3)
 

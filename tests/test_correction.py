@@ -14,9 +14,9 @@ from o3d_seqcc.correction import (
     IdentityTransform,
     LutTransform,
     correct,
-    from_float,
-    to_float,
 )
+from o3d_seqcc.imageops import img_as_dtype as from_float
+from o3d_seqcc.imageops import img_as_float as to_float
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.jih import jih_samples, joint_histogram
 from o3d_seqcc.mappings import Mappings, PairMapping
@@ -227,8 +227,8 @@ def test_lut_apply_levels_matches_float_path(rng, dtype):
 
 
 def test_seqcc_on_a_synthetic_room_gets_close_to_ground_truth(tmp_path):
-    synthetic = pytest.importorskip("o3d_seqcc.synthetic")
-    from o3d_seqcc._io import read_image
+    import o3d_seqcc.synthetic as synthetic
+    from o3d_seqcc.io.files import read_image
     from o3d_seqcc.metrics import image_delta_e
 
     ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=6, width=160, height=120, seed=3)
@@ -279,8 +279,8 @@ def test_seqcc_stays_close_to_ground_truth_with_pose_error(tmp_path):
     """Mappings from poses rotated by 1 deg (~2 px, like real registration error): seqcc still
     recovers the true colours, while a conditional-mean CMF (vandermonde) that scores well on the
     misregistered pairs themselves drifts back toward the uncorrected error."""
-    synthetic = pytest.importorskip("o3d_seqcc.synthetic")
-    from o3d_seqcc._io import read_image
+    import o3d_seqcc.synthetic as synthetic
+    from o3d_seqcc.io.files import read_image
     from o3d_seqcc.mappings import compute_mappings
     from o3d_seqcc.metrics import image_delta_e
 
@@ -300,7 +300,7 @@ def test_seqcc_stays_close_to_ground_truth_with_pose_error(tmp_path):
 
 
 def test_perturb_poses_rotates_about_the_camera_centre(tmp_path):
-    synthetic = pytest.importorskip("o3d_seqcc.synthetic")
+    import o3d_seqcc.synthetic as synthetic
     ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=3, width=64, height=48, seed=1)
     moved = synthetic.perturb_poses(ss.scene, 2.0, seed=5, keep=())
     for v0, v1 in zip(ss.scene.views, moved.views):
@@ -316,7 +316,7 @@ def test_perturb_poses_rotates_about_the_camera_centre(tmp_path):
 
 def test_colour_inliers_drops_wrong_correspondences(rng):
     from o3d_seqcc.cmf import fit_cmf
-    from o3d_seqcc.correction import colour_inliers
+    from o3d_seqcc.correction.seqcc import colour_inliers
 
     n = 4000
     ct = rng.uniform(0.05, 0.9, (n, 3))
@@ -332,7 +332,7 @@ def test_colour_inliers_drops_wrong_correspondences(rng):
 
 def test_quantile_luts_recover_a_known_tone_curve(rng):
     from o3d_seqcc.cmf import quantile_samples
-    from o3d_seqcc.correction import quantile_luts
+    from o3d_seqcc.correction.seqcc import quantile_luts
 
     ct = rng.uniform(0.0, 1.0, (20000, 3))
     gammas = np.array([0.7, 1.0, 1.6])

@@ -15,7 +15,7 @@ from o3d_seqcc.errors import InputError
 from o3d_seqcc.export import export_glb, export_obj, export_ply, export_textured_mesh, glb_bytes
 from o3d_seqcc.texturing import TexturedMesh
 
-trimesh = pytest.importorskip("trimesh")
+import trimesh
 
 
 @pytest.fixture
@@ -26,7 +26,7 @@ def textured(rng) -> TexturedMesh:
     S = 16
     tex = rng.integers(0, 256, size=(S, S, 3), dtype=np.uint8)
     texel = np.array([[1, 1], [6, 1], [6, 6], [9, 9], [14, 14], [9, 14]], dtype=np.float64)
-    uv = (texel + 0.5) / S
+    uv = np.stack([(texel[:, 0] + 0.5) / S, 1.0 - (texel[:, 1] + 0.5) / S], axis=1)  # OBJ convention, v up
     n = np.tile([0.0, 0.0, 1.0], (6, 1))
     return TexturedMesh(vertices=v, faces=f, uv=uv, normals=n, texture=tex, face_view=np.array([0, 1]),
                         vertex_index=np.array([0, 1, 2, 0, 2, 3]), face_chart=np.array([0, 1]), stats={})
@@ -62,7 +62,7 @@ def test_roundtrip_trimesh(tmp_path, textured, fmt):
     np.testing.assert_array_equal(tex, textured.texture)  # PNG is lossless
     # trimesh gives OBJ-convention UVs for both formats: the texel under every vertex must match
     for k in range(len(textured.vertices)):
-        x, y = (textured.uv[k] * 16 - 0.5).round().astype(int)
+        x, y = textured.texel_xy()[k].round().astype(int)
         np.testing.assert_array_equal(_texel_of_vertex(m, uv, k, tex), textured.texture[y, x])
     assert not list(tmp_path.glob(".*.tmp")), "temporary files left behind"
 
@@ -71,8 +71,7 @@ def test_obj_vt_convention(tmp_path, textured):
     export_obj(textured, tmp_path / "m.obj")
     vt = np.array([[float(x) for x in ln.split()[1:]] for ln in (tmp_path / "m.obj").read_text().splitlines()
                    if ln.startswith("vt ")])
-    np.testing.assert_allclose(vt[:, 0], textured.uv[:, 0], atol=1e-6)
-    np.testing.assert_allclose(vt[:, 1], 1.0 - textured.uv[:, 1], atol=1e-6)
+    np.testing.assert_allclose(vt, textured.uv, atol=1e-6)  # our UVs are in the OBJ convention already
 
 
 def _json_chunk(data: bytes) -> dict:
@@ -93,12 +92,12 @@ def test_glb_layout(textured):
     pbr = gltf["materials"][0]["pbrMetallicRoughness"]
     assert pbr["baseColorTexture"]["index"] == 0 and pbr["metallicFactor"] == 0
     assert gltf["images"][0]["mimeType"] == "image/png"
-    # glTF UV origin is top-left: TEXCOORD_0 == our uv unchanged
+    # glTF UV origin is top-left: TEXCOORD_0 == (u, 1 - v) of our (OBJ-convention) uv
     acc = gltf["accessors"][prim["attributes"]["TEXCOORD_0"]]
     bv = gltf["bufferViews"][acc["bufferView"]]
     start = 20 + jlen + 8 + bv["byteOffset"]
     uv = np.frombuffer(data[start:start + bv["byteLength"]], dtype="<f4").reshape(-1, 2)
-    np.testing.assert_allclose(uv, textured.uv, atol=1e-7)
+    np.testing.assert_allclose(uv, np.stack([textured.uv[:, 0], 1.0 - textured.uv[:, 1]], axis=1), atol=1e-7)
     unlit = _json_chunk(glb_bytes(textured, unlit=True))
     assert "KHR_materials_unlit" in unlit["extensionsUsed"]
     assert "KHR_materials_unlit" in unlit["materials"][0]["extensions"]
@@ -182,7 +181,7 @@ def test_ply_vertex_colours(tmp_path, textured):
     assert len(m.vertices) == 6 and len(m.faces) == 2
     cols = np.asarray(m.visual.vertex_colors)[:, :3]
     for k in range(6):
-        x, y = (textured.uv[k] * 16 - 0.5).round().astype(int)
+        x, y = textured.texel_xy()[k].round().astype(int)
         np.testing.assert_array_equal(cols[k], textured.texture[y, x])
 
 

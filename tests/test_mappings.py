@@ -12,10 +12,10 @@ from o3d_seqcc.mappings import (
     Mappings,
     PairMapping,
     compute_mappings,
-    load_mappings,
-    plot_pair,
-    sample_colors,
 )
+from o3d_seqcc.imageops import sample_colors
+from o3d_seqcc.io.mappings_npz import load_mappings, save_mappings
+from o3d_seqcc.render import plot_pair
 from o3d_seqcc.visibility import compute_visibility, project_points
 
 
@@ -253,7 +253,7 @@ def test_save_load_round_trip(plane_scene, tmp_path, fmt, mode):
     M = compute_mappings(plane_scene, mode=mode)
     fit, _ = M.split(0.3, seed=1)
     for src in (M, fit):
-        p = src.save(tmp_path / f"m_{fmt}.npz", format=fmt)
+        p = save_mappings(src, tmp_path / f"m_{fmt}.npz", format=fmt)
         L = load_mappings(p)
         assert L.view_names == src.view_names and L.mode == src.mode and L.counts == src.counts
         assert L.filter_stats["usable"] == src.filter_stats["usable"]
@@ -264,7 +264,7 @@ def test_save_load_round_trip(plane_scene, tmp_path, fmt, mode):
             np.testing.assert_allclose(a.uv_b, b.uv_b, atol=1e-3)
         L.split(0.5)  # loaded mappings are fully functional
     with pytest.raises(ValueError):
-        M.materialize().save(tmp_path / "x.npz", format="compact")
+        save_mappings(M.materialize(), tmp_path / "x.npz", format="compact")
 
 
 def test_load_rejects_other_files(tmp_path):
@@ -301,11 +301,12 @@ def test_cli_mappings(occluder_scene, tmp_path, capsys):
     L = load_mappings(out)
     assert L.counts == compute_mappings(occluder_scene, max_angle=80).counts
     assert (tmp_path / "maps_v0_v1.png").is_file()
+    assert main(["-q", "mappings", str(root), "--out", str(out)]) == 2  # an existing file needs --overwrite
     rc = main(["-q", "mappings", str(root), "--out", str(out), "--mode", "dense", "--plot", str(tmp_path / "figs"),
-               "--arrays", "--disable", "depth"])
+               "--arrays", "--disable", "depth", "--overwrite"])
     assert rc == 0 and load_mappings(out).mode == "dense"
     assert len(list((tmp_path / "figs").glob("mappings_v0_v1.png"))) == 1
-    assert main(["-q", "mappings", str(root), "--out", str(out), "--plot", "v0,nope"]) == 2
+    assert main(["-q", "mappings", str(root), "--out", str(out), "--plot", "v0,nope", "--overwrite"]) == 2
     assert "valid names" in capsys.readouterr().err
 
 

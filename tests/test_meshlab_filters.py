@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from meshlab_filters.mlp import CENTER_SHIFT, load_mlp, project_meshlab, save_mlp, vcg_camera_attributes
-from o3d_seqcc._io import write_image
+from o3d_seqcc.io.meshlab import CENTER_SHIFT, load_mlp, project_meshlab, save_mlp, vcg_camera_attributes
+from o3d_seqcc.io.files import write_image
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Scene, View
 
@@ -126,7 +126,7 @@ W, H = 320, 160
 
 @pytest.fixture(scope="module")
 def plane_scene(tmp_path_factory) -> tuple[Scene, np.ndarray]:
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     root = tmp_path_factory.mktemp("plane")
     rng = np.random.default_rng(0)
     img = cv2.resize(rng.integers(0, 256, (20, 40, 3), dtype=np.uint8), (W, H), interpolation=cv2.INTER_CUBIC)
@@ -160,7 +160,7 @@ def _render_error(mesh_path: Path, scene: Scene, img: np.ndarray) -> float:
 def test_meshlab_peer_reproduces_photo(plane_scene, tmp_path: Path):
     """MeshLab's filter, fed our .mlp, textures the plane so that a render from the same camera
     is the photo again: checks the camera convention (incl. the half-pixel shift) end to end."""
-    from meshlab_filters.peers import meshlab_available, run_meshlab
+    from benchmarks.peers import meshlab_available, run_meshlab
 
     reason = meshlab_available()
     if reason:
@@ -174,8 +174,8 @@ def test_meshlab_peer_reproduces_photo(plane_scene, tmp_path: Path):
 
 
 def test_open3d_peer_reproduces_photo(plane_scene, tmp_path: Path):
-    pytest.importorskip("open3d")
-    from meshlab_filters.peers import run_open3d
+    import open3d  # noqa: F401
+    from benchmarks.peers import run_open3d
 
     scene, img = plane_scene
     res = run_open3d(scene, tmp_path / "o3d", texture_size=512)

@@ -10,9 +10,9 @@ from o3d_seqcc.errors import InputError
 from o3d_seqcc.render import raycast, render_selection, render_textured, selection_palette, sharpness
 from o3d_seqcc.scene import View
 
-trimesh = pytest.importorskip("trimesh")
-PIL = pytest.importorskip("PIL.Image")
-pytest.importorskip("open3d")
+import trimesh
+import PIL.Image as PIL
+import open3d  # noqa: F401
 
 W, H = 160, 80
 

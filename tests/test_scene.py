@@ -311,7 +311,7 @@ def test_colmap_text_model(tmp_path, rng):
     assert b.intrinsic[0, 0] == b.intrinsic[1, 1] == 90
     # distortion is refused with the fix
     (root / "sparse" / "cameras.txt").write_text("1 OPENCV 64 48 100 100 32 24 0.1 0 0 0\n2 PINHOLE 64 48 1 1 1 1\n")
-    with pytest.raises(InputError, match=r"cameras\.txt: camera 1 uses model OPENCV with distortion.*undistort"):
+    with pytest.raises(InputError, match=r"cameras\.txt: camera line .*camera model OPENCV with distortion.*undistort"):
         load_scene(root / "sparse", mesh=root / "mesh.ply")
 
 

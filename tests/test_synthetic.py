@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from o3d_seqcc import load_scene
-from o3d_seqcc._io import read_depth, read_image
+from o3d_seqcc.io.files import read_depth, read_image
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.synthetic import ALBEDO_RANGE, ROOM, apply_photometric, load_synthetic, make_synthetic_scene
+from o3d_seqcc.synthetic import ALBEDO_RANGE, apply_photometric, load_synthetic, make_synthetic_scene
+from o3d_seqcc.synthetic.room import ROOM
 
 W, H, N = 160, 120, 6
 

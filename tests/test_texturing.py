@@ -13,15 +13,18 @@ import pytest
 
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Mesh
+from o3d_seqcc.meshops import face_adjacency
 from o3d_seqcc.texturing import (
-    FALLBACK_GREY,
     SELECTION_METHODS,
     bake_texture,
     count_transitions,
-    face_adjacency,
     select_views,
     selection_stats,
 )
+from o3d_seqcc.texturing.fallback import FALLBACK_GREY
+
+#: the plain bake: no seam leveling (the defaults, like the command line's, level both ways)
+RAW = {"leveling": False, "local_leveling": False}
 
 
 def grid_mesh(n: int, *, split: bool = False, extra_triangle: bool = False) -> Mesh:
@@ -214,7 +217,7 @@ def test_bake_reproduces_source_colours(rng, method):
     images = smooth_images(rng, CAMS)
     before = [im.copy() for im in images]
     lab = select_views(vis, method=method, seed=1)
-    tm = bake_texture(mesh, images, vis, lab, atlas_size=512, padding=3)
+    tm = bake_texture(mesh, images, vis, lab, atlas_size=512, padding=3, **RAW)
     for a, b in zip(images, before):
         np.testing.assert_array_equal(a, b)  # inputs untouched
     assert tm.texture.shape == (tm.atlas_size, tm.atlas_size, 3) and tm.texture.dtype == np.uint8
@@ -222,7 +225,7 @@ def test_bake_reproduces_source_colours(rng, method):
     np.testing.assert_array_equal(tm.face_view, lab)
     # every face's centroid: atlas colour == colour of its selected image at the centroid's projection
     S = tm.atlas_size
-    c_uv = tm.uv[tm.faces].mean(axis=1) * S - 0.5
+    c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     cen = mesh.vertices[mesh.faces].mean(axis=1)
     want = np.empty_like(got)
@@ -245,9 +248,9 @@ def test_bake_texel_scale(rng, texel_scale):
     vis = project(mesh, CAMS)
     images = smooth_images(rng, CAMS, cell=16)  # resampling low-passes: compare on smooth images
     lab = select_views(vis, method="largest-area")
-    tm = bake_texture(mesh, images, vis, lab, atlas_size=512, texel_scale=texel_scale)
+    tm = bake_texture(mesh, images, vis, lab, atlas_size=512, texel_scale=texel_scale, **RAW)
     assert tm.stats["texel_scale"] == texel_scale
-    c_uv = tm.uv[tm.faces].mean(axis=1) * tm.atlas_size - 0.5
+    c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     c_img = vis.uv[lab[:, None], mesh.faces].mean(axis=1)  # fronto-parallel-ish: centroid of projections
     want = np.stack([bilinear(images[v], c_img[i:i + 1, 0], c_img[i:i + 1, 1])[0] for i, v in enumerate(lab)])
@@ -257,7 +260,7 @@ def test_bake_texel_scale(rng, texel_scale):
 def test_charts_never_mix_views_and_vertices_are_split(scene_vis, rng):
     mesh, vis = scene_vis
     lab = select_views(vis, method="random", seed=0)
-    tm = bake_texture(mesh, smooth_images(rng, CAMS), vis, lab, atlas_size=1024)
+    tm = bake_texture(mesh, smooth_images(rng, CAMS), vis, lab, atlas_size=1024, **RAW)
     seen = lab >= 0
     for c in np.unique(tm.face_chart[seen]):
         assert len(np.unique(lab[tm.face_chart == c])) == 1
@@ -278,11 +281,11 @@ def test_unseen_faces_get_fallback_colour(rng):
     vis.usable[:, 0] = False  # a grid face next to seen faces
     vis.usable[:, -1] = False  # the separate triangle: no seen neighbour
     lab = select_views(vis, method="largest-area")
-    tm = bake_texture(mesh, images, vis, lab, atlas_size=256)
+    tm = bake_texture(mesh, images, vis, lab, atlas_size=256, **RAW)
     assert tm.stats["unseen_faces"] == 2 and (tm.face_view[[0, -1]] == -1).all()
     S = tm.atlas_size
     for f, want in ((0, (200, 40, 10)), (len(mesh.faces) - 1, FALLBACK_GREY)):
-        x, y = (tm.uv[tm.faces[f]].mean(axis=0) * S - 0.5).round().astype(int)
+        x, y = tm.texel_xy()[tm.faces[f]].mean(axis=0).round().astype(int)
         np.testing.assert_array_equal(tm.texture[y, x], want)
 
 
@@ -290,13 +293,13 @@ def test_atlas_overflow(scene_vis, rng):
     mesh, vis = scene_vis
     images = smooth_images(rng, CAMS)
     lab = select_views(vis, method="random")
-    tm = bake_texture(mesh, images, vis, lab, atlas_size=64, overflow="grow")
+    tm = bake_texture(mesh, images, vis, lab, atlas_size=64, overflow="grow", **RAW)
     assert tm.atlas_size > 64 and tm.stats["grew"]
     with pytest.raises(InputError, match="atlas"):
         bake_texture(mesh, images, vis, lab, atlas_size=64, overflow="error")
     with pytest.raises(InputError, match="max_atlas_size"):
         bake_texture(mesh, images, vis, lab, atlas_size=64, max_atlas_size=64)
-    small = bake_texture(mesh, images, vis, lab, atlas_size=128, padding=1, overflow="scale")
+    small = bake_texture(mesh, images, vis, lab, atlas_size=128, padding=1, overflow="scale", **RAW)
     assert small.atlas_size == 128 and small.stats["texel_scale"] < 1.0
     assert small.uv.min() >= 0 and small.uv.max() <= 1
     with pytest.raises(InputError, match="padding"):  # the gutters alone do not fit
@@ -326,11 +329,9 @@ def test_bake_bad_input(scene_vis, rng):
 
 def test_fountain_selection_and_bake(fountain_scene):
     """Fountain (16k faces, 33 views): mrf cuts transitions; the atlas reproduces the photos."""
-    vis_mod = pytest.importorskip("o3d_seqcc.visibility")
-    try:
-        vis = vis_mod.compute_visibility(fountain_scene)
-    except NotImplementedError:
-        pytest.skip("o3d_seqcc.visibility.compute_visibility not implemented yet")
+    import o3d_seqcc.visibility as vis_mod
+
+    vis = vis_mod.compute_visibility(fountain_scene)
     mesh = vis.mesh
     adj = face_adjacency(mesh.faces, mesh.vertices)
     la = select_views(vis, method="largest-area")
@@ -339,10 +340,10 @@ def test_fountain_selection_and_bake(fountain_scene):
     seen = mrf >= 0
     assert vis.usable[mrf[seen], np.flatnonzero(seen)].all()
     images = [v.load_image() for v in fountain_scene.views]
-    tm = bake_texture(mesh, images, vis, mrf, adjacency=adj)
+    tm = bake_texture(mesh, images, vis, mrf, adjacency=adj, **RAW)
     assert tm.atlas_size == 2048 and not tm.stats["grew"]
     S = tm.atlas_size
-    c_uv = tm.uv[tm.faces[seen]].mean(axis=1) * S - 0.5
+    c_uv = tm.texel_xy()[tm.faces[seen]].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     cen = mesh.vertices[mesh.faces[seen]].mean(axis=1)
     lab = mrf[seen]
@@ -385,10 +386,10 @@ def _laplacian_var_in_faces(tm) -> float:
     """Variance of the Laplacian of the atlas over the texels inside faces (eroded by 2)."""
     import cv2
 
-    from o3d_seqcc.texturing import _rasterize_uv
+    from o3d_seqcc.texturing.leveling import _rasterize_uv
 
     S = tm.atlas_size
-    idx, _, _ = _rasterize_uv(tm.uv * S - 0.5, tm.faces, np.ones((S, S), bool))
+    idx, _, _ = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((S, S), bool))
     mask = np.zeros(S * S, np.uint8)
     mask[idx] = 1
     mask = cv2.erode(mask.reshape(S, S), np.ones((5, 5), np.uint8)).astype(bool)
@@ -398,16 +399,15 @@ def _laplacian_var_in_faces(tm) -> float:
 
 @pytest.mark.parametrize("split", [False, True])
 def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
-    from o3d_seqcc.cli.texture import to_seam_mesh
     from o3d_seqcc.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0, split=split)
-    plain = bake_texture(mesh, images, vis, labels, atlas_size=512)
-    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True)
+    plain = bake_texture(mesh, images, vis, labels, atlas_size=512, **RAW)
+    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True, local_leveling=False)
     assert plain.stats["leveling"] is None and lev.stats["leveling"]["seam_pairs"] > 0
     # samples 0.1 texel inside each face: the photo's own gradient across the seam hardly counts
-    s0 = seam_metric(to_seam_mesh(plain), offset=0.1)
-    s1 = seam_metric(to_seam_mesh(lev), offset=0.1)
+    s0 = seam_metric(plain, offset=0.1)
+    s1 = seam_metric(lev, offset=0.1)
     assert s0.n_seam_edges == 10 and s0.seam_mean > 5.0  # the known step is visible
     assert s1.mean < 0.2 * s0.mean, (s0.mean, s1.mean)
     # detail inside the charts kept: only a smooth offset field was added
@@ -416,7 +416,7 @@ def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
     # the offset is split between the two charts and is nearly constant (+-10 levels)
     S = lev.atlas_size
     diff = lev.texture.astype(np.float64) - plain.texture.astype(np.float64)
-    c_uv = lev.uv[lev.faces].mean(axis=1) * S - 0.5
+    c_uv = lev.texel_xy()[lev.faces].mean(axis=1)
     d = bilinear(diff, c_uv[:, 0], c_uv[:, 1]).mean(axis=1)
     assert np.all(d[labels == 0] > 5) and np.all(d[labels == 1] < -5)
     np.testing.assert_allclose(d[labels == 0].mean() - d[labels == 1].mean(), 20.0, atol=2.5)
@@ -425,8 +425,8 @@ def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
 def test_leveling_without_seams_is_identity(rng):
     mesh, vis, images, _ = _two_chart_offset_scene(rng, 20.0)
     labels = np.zeros(len(mesh.faces), np.int64)  # one chart: nothing to level
-    plain = bake_texture(mesh, images, vis, labels, atlas_size=512)
-    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True)
+    plain = bake_texture(mesh, images, vis, labels, atlas_size=512, **RAW)
+    lev = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True, local_leveling=False)
     assert lev.stats["leveling"]["seam_pairs"] == 0
     np.testing.assert_array_equal(lev.texture, plain.texture)
 
@@ -454,7 +454,6 @@ def test_seam_leveling_offsets_known_answer():
 def test_smooth_fallback_interpolates_neighbour_colours():
     """Faces seen by no view, inside a region textured with a linear colour ramp: the Gouraud
     fallback reproduces the ramp (no step at their edges), the flat one does not."""
-    from o3d_seqcc.cli.texture import to_seam_mesh
     from o3d_seqcc.seams import seam_metric
 
     mesh = grid_mesh(8)
@@ -470,16 +469,16 @@ def test_smooth_fallback_interpolates_neighbour_colours():
     assert set(np.flatnonzero(lab < 0)) == set(unseen)
     S_err, S_seam = {}, {}
     for fb in ("smooth", "flat"):
-        tm = bake_texture(mesh, [img], vis, lab, atlas_size=256, fallback=fb)
+        tm = bake_texture(mesh, [img], vis, lab, atlas_size=256, fallback=fb, **RAW)
         assert tm.stats["unseen_faces"] == len(unseen) and tm.stats["fallback"] == fb
         S = tm.atlas_size
-        c_uv = tm.uv[tm.faces[unseen]].mean(axis=1) * S - 0.5
+        c_uv = tm.texel_xy()[tm.faces[unseen]].mean(axis=1)
         got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
         cen = mesh.vertices[mesh.faces[unseen]].mean(axis=1)
         xc = cen @ R.T + t
         p = xc[:, :2] / xc[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
         S_err[fb] = np.abs(got - bilinear(img, p[:, 0], p[:, 1])).max()
-        S_seam[fb] = seam_metric(to_seam_mesh(tm)).seam_mean
+        S_seam[fb] = seam_metric(tm).seam_mean
     assert S_err["smooth"] < 1.5, S_err
     assert S_seam["smooth"] < 0.5 and S_seam["flat"] > 2 * S_seam["smooth"], S_seam
     with pytest.raises(ValueError, match="fallback"):
@@ -493,10 +492,10 @@ def _laplacian_var_away_from_seam(tm, min_abs_x: float) -> float:
     """Variance of the atlas Laplacian over texels inside faces whose 3D point has |x| > min_abs_x."""
     import cv2
 
-    from o3d_seqcc.texturing import _rasterize_uv
+    from o3d_seqcc.texturing.leveling import _rasterize_uv
 
     S = tm.atlas_size
-    idx, face, bary = _rasterize_uv(tm.uv * S - 0.5, tm.faces, np.ones((S, S), bool))
+    idx, face, bary = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((S, S), bool))
     x3 = np.einsum("nk,nk->n", bary, tm.vertices[tm.faces[face], 0])
     inner = np.zeros(S * S, np.uint8)
     inner[idx] = 1
@@ -513,19 +512,18 @@ def _laplacian_var_away_from_seam(tm, min_abs_x: float) -> float:
 def test_local_leveling_removes_known_seam_and_keeps_detail(rng, split):
     """Two charts of one photo, one +20 levels: local leveling alone removes > 90% of the seam
     metric, changes only a strip along the seam and keeps the detail away from it."""
-    from o3d_seqcc.cli.texture import to_seam_mesh
     from o3d_seqcc.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0, split=split)
     band = 8
-    plain = bake_texture(mesh, images, vis, labels, atlas_size=512)
-    loc = bake_texture(mesh, images, vis, labels, atlas_size=512, local_leveling=True, local_band=band)
+    plain = bake_texture(mesh, images, vis, labels, atlas_size=512, **RAW)
+    loc = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=False, local_leveling=True, local_band=band)
     assert plain.stats["local_leveling"] is None
     st = loc.stats["local_leveling"]
     assert st["seam_edges"] == 10 and st["band"] == band
     np.testing.assert_allclose(st["mean_abs_diff"], 20.0, atol=3.0)  # the known step, sampled across the seam
-    s0 = seam_metric(to_seam_mesh(plain))
-    s1 = seam_metric(to_seam_mesh(loc))
+    s0 = seam_metric(plain)
+    s1 = seam_metric(loc)
     assert s0.n_seam_edges == 10 and s0.seam_mean > 5.0
     assert s1.mean < 0.1 * s0.mean, (s0.mean, s1.mean)
     # away from the strip (band + 3 texels; 1 px = 0.024 world units here) nothing changes ...
@@ -533,7 +531,7 @@ def test_local_leveling_removes_known_seam_and_keeps_detail(rng, split):
     l0, l1 = _laplacian_var_away_from_seam(plain, far), _laplacian_var_away_from_seam(loc, far)
     assert abs(l1 / l0 - 1.0) < 0.05, (l0, l1)
     S = loc.atlas_size
-    c_uv = loc.uv[loc.faces].mean(axis=1) * S - 0.5
+    c_uv = loc.texel_xy()[loc.faces].mean(axis=1)
     diff = loc.texture.astype(np.float64) - plain.texture.astype(np.float64)
     d = bilinear(diff, c_uv[:, 0], c_uv[:, 1]).mean(axis=1)
     cx = np.abs(mesh.vertices[mesh.faces].mean(axis=1)[:, 0])
@@ -543,23 +541,22 @@ def test_local_leveling_removes_known_seam_and_keeps_detail(rng, split):
     v_view[loc.faces.reshape(-1)] = np.repeat(loc.face_view, 3)
     on = np.abs(loc.vertices[:, 0]) < 1e-9
     on &= np.abs(loc.vertices[:, 1]) < 0.9  # not the plane's corners
-    p = loc.uv[on] * S - 0.5
+    p = loc.texel_xy()[on]
     ds = bilinear(diff, p[:, 0], p[:, 1]).mean(axis=1)
     assert np.all(np.abs(ds[v_view[on] == 0] - 10.0) < 3.0), ds[v_view[on] == 0]
     assert np.all(np.abs(ds[v_view[on] == 1] + 10.0) < 3.0), ds[v_view[on] == 1]
 
 
 def test_local_leveling_after_global_and_without_seams(rng):
-    from o3d_seqcc.cli.texture import to_seam_mesh
     from o3d_seqcc.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0)
-    glob = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True)
+    glob = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True, local_leveling=False)
     both = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True, local_leveling=True)
-    assert seam_metric(to_seam_mesh(both)).mean <= seam_metric(to_seam_mesh(glob)).mean + 1e-9
+    assert seam_metric(both).mean <= seam_metric(glob).mean + 1e-9
     one = np.zeros(len(mesh.faces), np.int64)  # one chart: no seam, nothing changes
-    a = bake_texture(mesh, images, vis, one, atlas_size=512)
-    b = bake_texture(mesh, images, vis, one, atlas_size=512, local_leveling=True)
+    a = bake_texture(mesh, images, vis, one, atlas_size=512, **RAW)
+    b = bake_texture(mesh, images, vis, one, atlas_size=512, leveling=False, local_leveling=True)
     assert b.stats["local_leveling"]["seam_edges"] == 0
     np.testing.assert_array_equal(a.texture, b.texture)
     with pytest.raises(InputError, match="local_band"):

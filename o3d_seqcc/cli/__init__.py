@@ -1,8 +1,8 @@
 """The ``o3d-seqcc`` command line.
 
-Each sub-command lives in its own module of this package and exposes
-``register(subparsers) -> argparse.ArgumentParser`` that sets ``func`` (a callable taking the
-parsed ``argparse.Namespace`` and returning an exit code) with ``set_defaults``.
+Each sub-command lives in its own module of this package, named after it: the module docstring
+is the command's help (first line) and description, ``add_arguments(parser)`` declares its
+options and ``run(args) -> exit code`` calls the library and prints.
 """
 
 from __future__ import annotations
@@ -35,14 +35,22 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
-        importlib.import_module(f"{__name__}.{name}").register(sub)
+        mod = importlib.import_module(f"{__name__}.{name}")
+        doc = (mod.__doc__ or "").strip()
+        p = sub.add_parser(name, help=doc.split("\n", 1)[0].rstrip("."), description=doc,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        mod.add_arguments(p)
+        p.set_defaults(func=mod.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse: --help (0) or a usage error (2, message already printed)
+        return int(e.code or 0)
     level = logging.WARNING if args.quiet else (logging.INFO if args.verbose <= 1 else logging.DEBUG)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from joblib import parallel_config

@@ -1,11 +1,17 @@
-"""``o3d-seqcc seams MESH [--json FILE]``: seam metric of a textured OBJ/GLB."""
+"""Seam metric of a textured mesh: CIEDE2000 across interior edges (mean, p99, share > 5).
+
+For every interior edge on a UV seam, samples both adjacent faces' textures --offset texels
+inside the edge (edges inside a chart, with the same UVs on both sides, are continuous and count
+0) and reports the CIEDE2000 between the two sides: mean, median, 99th percentile, share of
+edges above 5. Works on any textured OBJ/GLB (or a mesh with vertex colours).
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
 
-from .._io import write_json
+from ..io.files import write_json
 from ..seams import seam_metric
 
 
@@ -18,18 +24,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "seams",
-        help="seam metric of a textured mesh: CIEDE2000 across interior edges (mean, p99, fraction > 5)",
-        description="For every interior edge on a UV seam, sample both adjacent faces' textures --offset texels inside the "
-        "edge (edges inside a chart, with the same UVs on both sides, are continuous and count 0) and report the CIEDE2000 between the two sides: mean, median, 99th percentile, fraction of edges above 5. "
-        "Works on any textured OBJ/GLB (or a mesh with vertex colours).",
-    )
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("mesh", help="textured mesh: OBJ (+MTL+image), GLB/glTF, or PLY with vertex colours")
     p.add_argument("--json", metavar="FILE", help="also write the figures to this JSON file")
     p.add_argument("--offset", type=float, default=0.5,
                    help="distance of the samples from the edge, in texels inward in each face's own UVs (default 0.5)")
     p.add_argument("--samples-per-edge", type=int, default=4, help="samples along each edge (default 4)")
-    p.set_defaults(func=run)
-    return p

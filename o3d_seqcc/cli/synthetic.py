@@ -1,10 +1,14 @@
-"""``o3d-seqcc synthetic OUT``: generate a synthetic room scene (see :mod:`o3d_seqcc.synthetic`)."""
+"""Generate a synthetic textured room scene with known photometric changes.
+
+Renders a closed room with furniture, textured with photos, from N cameras; writes scene.json,
+mesh.ply, images/, gt/ (unchanged renders), depth/, face_ids/, points/, synthetic.json.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from ..synthetic import DEFAULT_CELL_SIZE, PHOTOMETRIC_MODES
+from ..synthetic import DEFAULT_CELL_SIZE, PHOTOMETRIC_MODES, make_synthetic_scene
 
 
 def add_synthetic_arguments(p: argparse.ArgumentParser, *, views: int = 12) -> None:
@@ -28,23 +32,9 @@ def add_synthetic_arguments(p: argparse.ArgumentParser, *, views: int = 12) -> N
     p.add_argument("--overwrite", action="store_true", help="write into a non-empty output folder")
 
 
-def generate_from_args(args: argparse.Namespace, out):
-    from ..synthetic import make_synthetic_scene
-
-    return make_synthetic_scene(
-        out,
-        n_views=args.views,
-        width=args.width,
-        height=args.height,
-        seed=args.seed,
-        photometric=args.photometric,
-        overwrite=args.overwrite,
-        cell_size=args.cell_size,
-    )
-
-
 def run(args: argparse.Namespace) -> int:
-    syn = generate_from_args(args, args.out)
+    syn = make_synthetic_scene(args.out, n_views=args.views, width=args.width, height=args.height, seed=args.seed,
+                               photometric=args.photometric, overwrite=args.overwrite, cell_size=args.cell_size)
     m = syn.metadata
     print(
         f"synthetic scene: {m['n_views']} views {m['width']}x{m['height']}, {m['n_faces']} faces, "
@@ -53,14 +43,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "synthetic",
-        help="generate a synthetic textured room scene with known photometric changes",
-        description="Render a closed room with furniture, textured with photos, from N cameras; writes "
-        "scene.json, mesh.ply, images/, gt/ (unchanged renders), depth/, face_ids/, points/, synthetic.json.",
-    )
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", help="output folder (must be empty or absent unless --overwrite)")
     add_synthetic_arguments(p)
-    p.set_defaults(func=run)
-    return p

@@ -31,11 +31,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from o3d_seqcc._io import write_image, write_json
 from o3d_seqcc.errors import InputError
+from o3d_seqcc.io.files import write_image, write_json
+from o3d_seqcc.io.meshlab import CENTER_SHIFT, save_mlp
 from o3d_seqcc.scene import Scene
-
-from .mlp import CENTER_SHIFT, save_mlp
 
 __all__ = ["PeerResult", "XVFB_ARGS", "meshlab_available", "run_meshlab", "run_open3d"]
 
@@ -149,8 +148,8 @@ def run_meshlab(
         Seconds before the subprocess is killed.
     overwrite : bool, default False
         Allow a non-empty ``out_dir``.
-    center_shift : (float, float), default meshlab_filters.mlp.CENTER_SHIFT
-        Half-pixel convention of the cameras written to the project (see :mod:`meshlab_filters.mlp`).
+    center_shift : (float, float), default o3d_seqcc.io.meshlab.CENTER_SHIFT
+        Half-pixel convention of the cameras written to the project (see :mod:`o3d_seqcc.io.meshlab`).
 
     Returns
     -------
@@ -179,7 +178,7 @@ def run_meshlab(
     }
     job_path = write_json(out / "meshlab_job.json", job)
     env = {**os.environ, **QT_ENV}
-    cmd = [*XVFB_ARGS, sys.executable, "-m", "meshlab_filters._meshlab_worker", str(job_path)]
+    cmd = [*XVFB_ARGS, sys.executable, str(Path(__file__).with_name("_meshlab_worker.py")), str(job_path)]
     logger.info("running MeshLab: %s", " ".join(cmd))
     try:
         proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout, cwd=out)
@@ -247,7 +246,7 @@ def run_open3d(
     """
     import open3d as o3d
 
-    from o3d_seqcc._io import read_image
+    from o3d_seqcc.io.files import read_image
 
     out = _prepare_out(out_dir, overwrite)
     t0 = time.perf_counter()

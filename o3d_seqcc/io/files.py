@@ -1,4 +1,4 @@
-"""File I/O adapters: images, depth maps, JSON, all writes atomic.
+"""File I/O adapters: images, depth maps, JSON; every write is atomic.
 
 Images are returned as RGB (never BGR) numpy arrays of shape (H, W, 3), dtype uint8 or uint16.
 """
@@ -15,23 +15,28 @@ from typing import Any, Iterator
 import cv2
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = [
+    "IMAGE_SUFFIXES",
     "atomic_path",
     "atomic_write_bytes",
+    "default_mode",
+    "find_file",
     "to_jsonable",
     "read_depth",
     "read_image",
+    "read_view_images",
     "write_image",
     "write_json",
 ]
 
 
-def _umask() -> int:
+def default_mode(mode: int = 0o666) -> int:
+    """``mode`` masked by the process umask: the permissions a plain ``open``/``mkdir`` would give."""
     mask = os.umask(0)
     os.umask(mask)
-    return mask
+    return mode & ~mask
 
 
 @contextmanager
@@ -48,7 +53,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual permissions
+        os.chmod(tmp, default_mode())  # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -196,3 +201,47 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
     out = d.astype(np.float64) / float(depth_scale)
     out[~np.isfinite(out) | (out < 0)] = 0.0
     return out
+
+
+#: image file suffixes tried by :func:`read_view_images`
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+
+
+def read_view_images(scene: Any, folder: str | os.PathLike) -> list[np.ndarray]:
+    """One image per view of ``scene`` from ``folder``, named after the views (``<name>.png``, ``.jpg``, ...)
+    or like the view's own image file.
+
+    Returns
+    -------
+    list of (H, W, 3) uint8 / uint16 arrays
+
+    Raises
+    ------
+    InputError
+        Not a folder, a view without an image, an image of the wrong size.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"--images {folder} is not a folder")
+    out = []
+    for v in scene.views:
+        cands = [folder / f"{v.name}{s}" for s in IMAGE_SUFFIXES] + [folder / v.image.name]
+        p = next((c for c in cands if c.is_file()), None)
+        if p is None:
+            raise InputError(f"--images {folder}: no image for view {v.name!r} (expected {v.name}.png or {v.image.name})")
+        img = read_image(p)
+        if img.shape[:2] != (v.height, v.width):
+            raise InputError(f"{p} is {img.shape[1]}x{img.shape[0]} but view {v.name!r} is {v.width}x{v.height}")
+        out.append(img)
+    return out
+
+
+def find_file(path: Path, *, name: str, suffix: str) -> Path | None:
+    """``path`` when it is a file ending in ``suffix``, ``path / name`` when ``path`` is a folder holding it, else None.
+
+    The ``detect`` step of the scene formats that are one file (``scene.json``, ``cameras.sfm``).
+    """
+    path = Path(path)
+    if path.is_dir():
+        return path / name if (path / name).is_file() else None
+    return path if path.is_file() and path.suffix.lower() == suffix else None

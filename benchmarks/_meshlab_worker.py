@@ -1,6 +1,6 @@
-"""Subprocess entry point of :func:`meshlab_filters.peers.run_meshlab` (needs an X display with GLX).
+"""Subprocess entry point of :func:`peers.run_meshlab` (benchmarks/peers.py) (needs an X display with GLX).
 
-``python -m meshlab_filters._meshlab_worker JOB.json``: loads the MeshLab project named in the
+``python benchmarks/_meshlab_worker.py JOB.json``: loads the MeshLab project named in the
 job, makes the mesh manifold, runs
 ``compute_texcoord_parametrization_and_texture_from_registered_rasters`` and saves a textured
 OBJ; writes timings to the job's ``result`` JSON.

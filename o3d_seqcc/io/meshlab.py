@@ -37,9 +37,9 @@ from typing import Sequence
 
 import numpy as np
 
-from o3d_seqcc._io import atomic_write_bytes
-from o3d_seqcc.errors import InputError
-from o3d_seqcc.scene import Scene, View
+from ..errors import InputError
+from ..scene import Scene, View
+from .files import atomic_write_bytes
 
 __all__ = [
     "CENTER_SHIFT",

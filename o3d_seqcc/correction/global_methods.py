@@ -2,7 +2,7 @@
 
 Both are *global*: they use every view pair with at least ``t_npm`` mappings at once (not the
 graph's paths) and give each view one affine function per channel, returned as
-:class:`~o3d_seqcc.correction.LutTransform`. Both fix the reference view (identity); views
+:class:`~o3d_seqcc.correction.base.LutTransform`. Both fix the reference view (identity); views
 with no pair of ``>= t_npm`` mappings in the reference's connected component stay unchanged.
 
 ``"gain-compensation"`` (Table 1 #5)
@@ -39,8 +39,8 @@ from __future__ import annotations
 import logging
 import numpy as np
 
-from .correction import IdentityTransform, LutTransform, register_method
-from .errors import InputError
+from .base import IdentityTransform, LutTransform, register_method
+from ..errors import InputError
 
 __all__ = [
     "affine_lut",

@@ -1,0 +1,125 @@
+"""Options shared by several commands; their defaults come from the library, never from here."""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, Callable
+
+from ..correction import available_methods
+from ..errors import InputError
+from ..export import FORMATS
+from ..io.load import load_scene
+from ..mappings import MODES
+from ..texturing import SELECTION_METHODS, TextureSettings
+from ..texturing.settings import FALLBACKS, OVERFLOWS
+
+__all__ = [
+    "add_correction_arguments",
+    "add_scene_arguments",
+    "add_texture_arguments",
+    "library_default",
+    "prepare_out_dir",
+    "print_run_summary",
+    "scene_from_args",
+    "texture_settings_from_args",
+]
+
+_DEFAULTS = TextureSettings()
+
+
+def add_scene_arguments(p: argparse.ArgumentParser) -> None:
+    """The scene argument and the loader options every command shares."""
+    p.add_argument("scene", help="scene.json (or its folder), a MeshLab .mlp, Meshroom cameras.sfm, an Open3D RGB-D "
+                   "folder, or a COLMAP model folder (text or binary)")
+    p.add_argument("--mesh", help="mesh file (required for RGB-D folders, COLMAP and Meshroom; overrides the others')")
+
+
+def scene_from_args(args: argparse.Namespace):
+    """The scene named on the command line (validated)."""
+    return load_scene(args.scene, mesh=args.mesh)
+
+
+def add_correction_arguments(p: argparse.ArgumentParser) -> None:
+    """Reference, method, t_npm and mapping mode (``correct`` and ``run``)."""
+    p.add_argument("--reference", default="auto", help="reference view name (or index), or 'auto' (default)")
+    p.add_argument("--method", default="seqcc", choices=available_methods(), metavar="METHOD",
+                   help=f"colour-correction method: {', '.join(available_methods())} (default seqcc)")
+    p.add_argument("--t-npm", type=int, default=400, help="minimum pairwise mappings (vertex units) for a graph edge "
+                   "(default 400)")
+    p.add_argument("--mappings", choices=MODES, default="vertices", help="pairwise mappings mode (default vertices, "
+                   "the paper's)")
+
+
+def add_texture_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of :class:`~o3d_seqcc.texturing.TextureSettings` and of the outputs (``texture`` and ``run``)."""
+    d = _DEFAULTS
+    p.add_argument("--out", required=True, help="output folder (refused if it exists, unless --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
+    p.add_argument("--format", default="glb,obj", help=f"comma-separated export formats among {', '.join(FORMATS)} "
+                   "(default glb,obj)")
+    p.add_argument("--selection", default=d.selection, choices=sorted(SELECTION_METHODS),
+                   help="per-face image selection: mrf (default: largest areas with few image transitions), "
+                   "largest-area or random (the paper's two)")
+    p.add_argument("--smoothness", type=float, default=d.smoothness,
+                   help=f"mrf: Potts weight per interior edge (default {d.smoothness:g})")
+    p.add_argument("--seed", type=int, default=d.seed, help="seed of random selection / mrf order (default 0)")
+    p.add_argument("--atlas-size", type=int, default=d.atlas_size, help=f"atlas side in texels (default {d.atlas_size})")
+    p.add_argument("--texel-scale", type=float, default=d.texel_scale, help="atlas texels per image pixel (default 1)")
+    p.add_argument("--padding", type=int, default=d.padding, help=f"gutter texels around every chart (default {d.padding})")
+    p.add_argument("--overflow", choices=OVERFLOWS, default=d.overflow,
+                   help="when the charts do not fit the atlas: grow it (default), shrink the texels, or fail")
+    p.add_argument("--no-leveling", dest="leveling", action="store_false",
+                   help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "
+                   "steps at chart seams; on by default)")
+    p.add_argument("--leveling-smoothness", type=float, default=d.leveling_smoothness,
+                   help=f"seam leveling: smoothness of the offsets inside charts (default {d.leveling_smoothness})")
+    p.add_argument("--no-local-leveling", dest="local_leveling", action="store_false",
+                   help="skip local seam leveling (the colour steps left along chart borders are blended away in a "
+                   "strip of --local-band texels; on by default)")
+    p.add_argument("--local-band", type=int, default=d.local_band,
+                   help=f"local seam leveling: width of the blended strip in texels (default {d.local_band})")
+    p.add_argument("--fallback", choices=FALLBACKS, default=d.fallback,
+                   help="colour of faces seen by no view: smooth (default: vertex colours of the seen faces around, "
+                   "interpolated) or flat (one colour per face)")
+    p.add_argument("--selection-view", default=None,
+                   help="view (name or index) from which OUT/selection.png is rendered (default: the view that sees "
+                   "the most faces); 'none' to skip the picture")
+    p.add_argument("--unlit", action="store_true", help="GLB material with KHR_materials_unlit")
+    p.add_argument("--no-seams", dest="seams", action="store_false", help="skip the seam metric in report.json")
+
+
+def texture_settings_from_args(args: argparse.Namespace) -> TextureSettings:
+    """:class:`~o3d_seqcc.texturing.TextureSettings` from the parsed texture options."""
+    return TextureSettings(**{f.name: getattr(args, f.name) for f in fields(TextureSettings) if hasattr(args, f.name)})
+
+
+def prepare_out_dir(out: str | Path, overwrite: bool) -> Path:
+    """Check ``out`` before any work: refuse (InputError) an existing one without ``overwrite``."""
+    out = Path(out)
+    if out.exists():
+        if not out.is_dir():
+            raise InputError(f"--out {out} exists and is not a folder; choose another path")
+        if not overwrite and any(out.iterdir()):
+            raise InputError(f"output folder {out} exists; choose another --out or pass --overwrite")
+    return out
+
+
+def library_default(fn: Callable) -> dict[str, Any]:
+    """The keyword defaults of a library function (so a command's defaults are the library's)."""
+    return {n: p.default for n, p in inspect.signature(fn).parameters.items() if p.default is not inspect.Parameter.empty}
+
+
+def print_run_summary(res, out: Path) -> None:
+    """Print what a :class:`~o3d_seqcc.pipeline.RunResult` did (correction, texturing, seams, timings)."""
+    names, s, tm = res.scene.names, res.selection_stats, res.textured
+    if res.correction is not None:
+        c = res.correction
+        print(f"corrected {len(names)} views with {c.method} toward {names[c.reference]} ({len(c.unreachable)} unreachable)")
+    print(f"textured {s['faces']} faces ({s['unseen_faces']} unseen, {s['transitions']} image transitions, "
+          f"{tm.stats['charts']} charts, atlas {tm.atlas_size}^2) in {res.timings['total']:.2f} s -> {out}")
+    if res.seams is not None:
+        print(f"seams: mean {res.seams.mean:.2f}, p99 {res.seams.p99:.2f}, >5: {res.seams.frac_above_5:.3f}")
+    print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items()))

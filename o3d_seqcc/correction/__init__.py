@@ -1,0 +1,232 @@
+"""Colour correction of all views toward a reference (paper 3.3-3.7, Table 1).
+
+:func:`correct` is the one entry point: it computes the filtered pairwise mappings (unless
+given), builds the colour-correction graph and the Dijkstra paths to the reference
+(:mod:`o3d_seqcc.graph`), runs a method from the registry :data:`METHODS` and applies the
+per-view transforms it returns. The methods, one module per family:
+
+- :mod:`~o3d_seqcc.correction.seqcc`: ``"seqcc"`` (default, the paper's #7, contrast-keeping
+  CMF fit) and ``"seqcc-joint"`` (the paper's literal joint-histogram regression);
+- :mod:`~o3d_seqcc.correction.pairwise`: ``"none"``, ``"reinhard"``, ``"root-polynomial"``,
+  ``"vandermonde"`` (#1-#4, per path edge);
+- :mod:`~o3d_seqcc.correction.global_methods`: ``"gain-compensation"``,
+  ``"histogram-matching"`` (#5-#6, over all pairs at once).
+
+Unknown method names raise ``ValueError`` listing the valid ones; unknown options
+``TypeError``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
+from ..imageops import img_as_dtype, img_as_float
+from ..scene import resolve_view
+from . import global_methods, pairwise, seqcc  # noqa: F401  (register their methods)
+from .base import (
+    METHODS,
+    CorrectionContext,
+    CorrectionResult,
+    FunctionTransform,
+    IdentityTransform,
+    LutTransform,
+    Transform,
+    available_methods,
+    check_options,
+    register_method,
+)
+
+__all__ = ["METHODS", "CorrectionContext", "CorrectionResult", "FunctionTransform", "IdentityTransform",
+           "LutTransform", "Transform", "available_methods", "check_method", "correct", "register_method"]
+
+logger = logging.getLogger(__name__)
+
+
+def check_method(method: str) -> None:
+    """Raise ``InputError`` listing the valid names when ``method`` is not a registered method."""
+    if method not in METHODS:
+        raise InputError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
+
+
+def _check_images(images: Sequence[np.ndarray], names: list[str], sizes: list[tuple[int, int]] | None) -> list[np.ndarray]:
+    if len(images) != len(names):
+        raise InputError(f"got {len(images)} images for {len(names)} views; give one per view")
+    out = []
+    for k, (name, img) in enumerate(zip(names, images)):
+        img = np.asarray(img)
+        if img.ndim == 2 or (img.ndim == 3 and img.shape[2] == 1):
+            raise InputError(f"view {name!r}: image is grey-scale; colour correction needs RGB (H, W, 3) images")
+        if img.ndim != 3 or img.shape[2] != 3:
+            raise InputError(f"view {name!r}: image has shape {img.shape}; expected (H, W, 3) RGB (drop an alpha channel)")
+        if sizes is not None and img.shape[:2] != (sizes[k][1], sizes[k][0]):
+            raise InputError(
+                f"view {name!r}: image is {img.shape[1]}x{img.shape[0]} but the scene says {sizes[k][0]}x{sizes[k][1]}"
+            )
+        if not (img.dtype in (np.uint8, np.uint16) or np.issubdtype(img.dtype, np.floating)):
+            raise InputError(f"view {name!r}: image dtype {img.dtype} unsupported; use uint8, uint16 or float [0, 1]")
+        out.append(img)
+    return out
+
+
+def correct(
+    scene=None,
+    *,
+    reference: str | int = "auto",
+    method: str = "seqcc",
+    t_npm: int = 400,
+    mappings=None,
+    mappings_mode: str = "vertices",
+    images: Sequence[np.ndarray] | None = None,
+    seed: int = 0,
+    interpolation: str = "bilinear",
+    graph_weight: str = "paper",
+    **options,
+) -> CorrectionResult:
+    """Colour-correct all views toward a reference view.
+
+    Parameters
+    ----------
+    scene : o3d_seqcc.Scene, optional
+        The scene; may be omitted when both ``images`` and ``mappings`` are given (views are
+        then named by ``mappings.view_names`` or their index).
+    reference : str or int, default "auto"
+        View name, index, or ``"auto"`` (:func:`o3d_seqcc.graph.choose_reference`).
+    method : str, default "seqcc"
+        A name of :data:`METHODS` (see the module docstring).
+    t_npm : int, default 400
+        Minimum number of pairwise mappings for a graph edge, in vertex-mapping units (scaled
+        for dense mappings by :func:`o3d_seqcc.graph.scale_t_npm`).
+    mappings : o3d_seqcc.mappings.Mappings, optional
+        Precomputed filtered mappings (default: ``compute_mappings(scene, mode=mappings_mode)``).
+    mappings_mode : {"vertices", "dense"}, default "vertices"
+    images : list of (H, W, 3) arrays, optional
+        Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]).
+    seed : int, default 0
+    interpolation : {"bilinear", "nearest"}, default "bilinear"
+        Colour sampling at the mappings.
+    graph_weight : {"paper", "log"}, default "paper"
+        Edge weight formula (:func:`o3d_seqcc.graph.build_graph`).
+    **options
+        Options of the method (e.g. seqcc: ``cmf="csvr"``, ``cmf_options={...}``, ``bits``);
+        unknown names raise ``TypeError``.
+
+    Returns
+    -------
+    CorrectionResult
+        Corrected images in the input dtypes; inputs are not modified.
+
+    Raises
+    ------
+    ValueError
+        Unknown method (lists the valid ones).
+    TypeError
+        Unknown option.
+    InputError
+        Unknown reference (lists the valid names), no edge left at ``t_npm`` (says the largest
+        pair count), a reference without edges, images not matching the scene, neither a scene
+        nor images and mappings.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
+    fn = METHODS[method]
+    check_options(fn, method, options)
+    if scene is None:
+        if images is None or mappings is None:
+            raise InputError("correct() needs a scene, or both images= and mappings=")
+        names = list(getattr(mappings, "view_names", ()) or ()) or [str(i) for i in range(len(images))]
+        sizes = None
+    else:
+        names = list(scene.names)
+        sizes = [(v.width, v.height) for v in scene.views]
+    n = len(names)
+    if reference != "auto":
+        resolve_view(names, reference)  # a wrong name fails before any heavy work
+    timings: dict[str, float] = {}
+
+    t0 = time.perf_counter()
+    raw = [v.load_image() for v in scene.views] if images is None else _check_images(images, names, sizes)
+    fimgs = [img_as_float(im) for im in raw]
+    lut_size = 256 if all(im.dtype == np.uint8 for im in raw) else 4096
+    timings["load_images"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    if mappings is None:
+        from ..mappings import compute_mappings
+
+        mappings = compute_mappings(scene, mode=mappings_mode)
+    if getattr(mappings, "n_views", n) != n:
+        raise InputError(f"mappings are for {mappings.n_views} views but there are {n}; recompute them")
+    timings["mappings"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    counts = {k: int(v) for k, v in dict(mappings.counts).items()}
+    t_eff = scale_t_npm(t_npm, mappings)
+    graph = build_graph(counts, n, t_npm=t_eff, weight=graph_weight)
+    needs_graph = getattr(fn, "needs_graph", True)
+    if needs_graph and graph.number_of_edges() == 0:
+        best = max(counts.items(), key=lambda kv: kv[1], default=None)
+        if best is None or best[1] == 0:
+            raise InputError("no view pair shares any pairwise mapping: the views do not overlap on the mesh")
+        (a, b), nmax = best
+        raise InputError(
+            f"no view pair has t_npm={t_eff} or more mappings (the largest count is {nmax}, between "
+            f"{names[a]!r} and {names[b]!r}); lower t_npm to at most {nmax}"
+        )
+    if reference == "auto":
+        ref = choose_reference(graph)
+        logger.info("reference='auto': chose view %d (%s)", ref, names[ref])
+    else:
+        ref = resolve_view(names, reference)
+    if needs_graph and graph.degree(ref) == 0:
+        own = {(b if a == ref else a): c for (a, b), c in counts.items() if ref in (a, b) and c > 0}
+        hint = ""
+        if own:
+            other, c = max(own.items(), key=lambda kv: kv[1])
+            hint = f" (its largest pair count is {c}, with {names[other]!r}, below t_npm={t_eff})"
+        raise InputError(
+            f"reference view {names[ref]!r} has no edge in the colour-correction graph{hint}; "
+            f"choose another reference (e.g. 'auto' -> {names[choose_reference(graph)]!r}) or lower t_npm"
+        )
+    paths = correction_paths(graph, ref)
+    unreachable = [v for v in range(n) if v not in paths]
+    if unreachable and needs_graph:
+        msg = (
+            f"{len(unreachable)} view(s) have no colour-correction path to the reference {names[ref]!r} and stay "
+            f"unchanged: {', '.join(names[v] for v in unreachable)} (graph has several components; lower t_npm to join them)"
+        )
+        logger.warning(msg)
+        warnings.warn(msg, stacklevel=2)
+    timings["graph"] = time.perf_counter() - t0
+
+    ctx = CorrectionContext(
+        images=fimgs, mappings=mappings, reference=ref, t_npm=t_eff, seed=int(seed), graph=graph, paths=paths,
+        lut_size=lut_size, interpolation=interpolation,
+    )
+    t0 = time.perf_counter()
+    transforms = list(fn(ctx, **options))
+    if len(transforms) != n:
+        raise RuntimeError(f"method {method!r} returned {len(transforms)} transforms for {n} views")
+    timings["fit"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    out = []
+    for img, fimg, tr in zip(raw, fimgs, transforms):
+        if isinstance(tr, IdentityTransform):
+            out.append(np.array(img, copy=True))
+        elif isinstance(tr, LutTransform) and img.dtype in (np.uint8, np.uint16):
+            out.append(tr.apply_levels(img))
+        else:
+            out.append(img_as_dtype(tr.apply(fimg), img.dtype))
+    timings["apply"] = time.perf_counter() - t0
+    timings["total"] = float(sum(timings.values()))
+    return CorrectionResult(
+        images=out, transforms=transforms, reference=ref, paths=paths, unreachable=unreachable,
+        graph_edges=graph_edges(graph), timings=timings, method=method, t_npm=t_eff,
+    )

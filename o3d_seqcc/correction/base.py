@@ -1,0 +1,346 @@
+"""The correction framework: method registry, colour transforms, the context a method sees.
+
+A correction method is ``fn(ctx: CorrectionContext, **options) -> list[Transform]`` (one
+transform per view) registered under a name with :func:`register_method`; the method modules
+(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.pairwise`,
+:mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
+:mod:`o3d_seqcc.correction` imports all of them explicitly. Views without a path to the
+reference keep an :class:`IdentityTransform`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..luts import compose_luts
+from ..errors import InputError
+from ..imageops import img_as_dtype, sample_colors
+
+__all__ = [
+    "METHODS",
+    "CorrectionContext",
+    "CorrectionResult",
+    "FunctionTransform",
+    "IdentityTransform",
+    "LutTransform",
+    "Transform",
+    "available_methods",
+    "check_options",
+    "fit_context",
+    "lut_per_path",
+    "path_steps",
+    "register_method",
+    "sequential",
+]
+
+logger = logging.getLogger(__name__)
+
+#: name -> ``fn(ctx, **options) -> list[Transform]``
+METHODS: dict[str, Callable] = {}
+
+
+def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:
+    """Decorator registering a correction method under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Name used with ``correct(..., method=name)``.
+    needs_graph : bool, default True
+        When True, :func:`correct` insists on a usable graph (at least one edge, a reference
+        with an edge) and raises :class:`InputError` otherwise.
+    """
+
+    def deco(fn: Callable) -> Callable:
+        fn.needs_graph = needs_graph  # type: ignore[attr-defined]
+        METHODS[name] = fn
+        return fn
+
+    return deco
+
+
+def available_methods() -> list[str]:
+    """Sorted names of the registered correction methods."""
+    return sorted(METHODS)
+
+
+def check_options(fn: Callable, method: str, options: dict) -> None:
+    """Raise ``TypeError`` naming the valid options when ``options`` holds a name ``fn`` does not take."""
+    params = inspect.signature(fn).parameters
+    if any(p.kind == inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    allowed = sorted(n for n, p in params.items() if p.kind == inspect.Parameter.KEYWORD_ONLY)
+    bad = sorted(set(options) - set(allowed))
+    if bad:
+        raise TypeError(f"correct(method={method!r}) got unknown option(s) {bad}; valid: {allowed}")
+
+
+
+def _check_float_image(img: np.ndarray) -> np.ndarray:
+    img = np.asarray(img, dtype=np.float64)
+    if img.ndim < 1 or img.shape[-1] != 3:
+        raise ValueError(f"expected (..., 3) colours in [0, 1], got shape {img.shape}")
+    return img
+
+
+@dataclass(frozen=True, eq=False)
+class LutTransform:
+    """Per-channel lookup tables.
+
+    Attributes
+    ----------
+    lut : (3, L) float64 in [0, 1]
+        ``lut[c, i]`` is the output of channel c for input ``i / (L - 1)``; values in between
+        are interpolated linearly.
+    """
+
+    lut: np.ndarray
+
+    def __post_init__(self) -> None:
+        lut = np.array(self.lut, dtype=np.float64, copy=True)
+        if lut.ndim != 2 or lut.shape[0] != 3 or lut.shape[1] < 2:
+            raise ValueError(f"LutTransform.lut must be (3, L) with L >= 2, got {lut.shape}")
+        if not np.all(np.isfinite(lut)):
+            raise ValueError("LutTransform.lut contains NaN/inf")
+        lut = np.clip(lut, 0.0, 1.0)
+        lut.setflags(write=False)
+        object.__setattr__(self, "lut", lut)
+
+    def apply(self, img: np.ndarray) -> np.ndarray:
+        """(..., 3) float in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        img = _check_float_image(img)
+        grid = np.linspace(0.0, 1.0, self.lut.shape[1])
+        out = np.empty(img.shape, dtype=np.float64)
+        for c in range(3):
+            out[..., c] = np.interp(img[..., c], grid, self.lut[c])
+        return out
+
+    def apply_levels(self, img: np.ndarray) -> np.ndarray:
+        """(H, W, 3) uint8/uint16 -> same dtype, equal to ``img_as_dtype(apply(img_as_float(img)))``.
+
+        Tabulates the transform once per integer level (256 or 65536) and indexes: no per-pixel
+        interpolation.
+        """
+        img = np.asarray(img)
+        if img.dtype not in (np.uint8, np.uint16) or img.ndim != 3 or img.shape[2] != 3:
+            raise ValueError(f"apply_levels expects (H, W, 3) uint8/uint16, got {img.shape} {img.dtype}")
+        top = np.iinfo(img.dtype).max
+        levels = np.arange(top + 1, dtype=np.float64) / float(top)
+        grid = np.linspace(0.0, 1.0, self.lut.shape[1])
+        out = np.empty_like(img)
+        for c in range(3):
+            table = img_as_dtype(np.interp(levels, grid, self.lut[c]), img.dtype)
+            out[..., c] = table[img[..., c]]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class FunctionTransform:
+    """Any colour transform ``fn((..., 3) in [0, 1]) -> (..., 3)``; the output is clipped to [0, 1]."""
+
+    fn: Callable[[np.ndarray], np.ndarray]
+
+    def apply(self, img: np.ndarray) -> np.ndarray:
+        """(..., 3) float in [0, 1] -> (..., 3) float64 in [0, 1] (NaN -> 0)."""
+        img = _check_float_image(img)
+        out = np.asarray(self.fn(img), dtype=np.float64)
+        if out.shape != img.shape:
+            raise ValueError(f"FunctionTransform changed the shape {img.shape} -> {out.shape}")
+        return np.clip(np.nan_to_num(out, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class IdentityTransform:
+    """Leaves the image unchanged."""
+
+    def apply(self, img: np.ndarray) -> np.ndarray:
+        """Returns a float64 copy of ``img``."""
+        return np.array(_check_float_image(img), dtype=np.float64, copy=True)
+
+
+Transform = LutTransform | FunctionTransform | IdentityTransform
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionContext:
+    """Everything a correction method sees.
+
+    Attributes
+    ----------
+    images : list of (H, W, 3) float64 in [0, 1]
+        The input images (do not modify).
+    mappings : o3d_seqcc.mappings.Mappings
+        Filtered pairwise mappings.
+    reference : int
+        Reference view index.
+    t_npm : int
+        Edge threshold actually used (in the units of ``mappings``).
+    seed : int
+        Seed for any randomness.
+    graph : networkx.Graph or None
+        Colour-correction graph.
+    paths : dict[int, list[int]]
+        ``view -> [view, ..., reference]``; unreachable views are absent.
+    lut_size : int
+        Lookup-table length suited to the input bit depth (256 for 8-bit, 4096 for 16-bit/float).
+    interpolation : str
+        Colour sampling at mappings ("bilinear" or "nearest").
+    """
+
+    images: list
+    mappings: Any
+    reference: int
+    t_npm: int
+    seed: int = 0
+    graph: Any = None
+    paths: dict = field(default_factory=dict)
+    lut_size: int = 256
+    interpolation: str = "bilinear"
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    def colors(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """Colours of pair (a, b) at its mappings: ``(ca, cb)``, each (n, 3) float64 in [0, 1].
+
+        Either order of ``a`` and ``b`` works; results are cached.
+        """
+        a, b = int(a), int(b)
+        key = (min(a, b), max(a, b))
+        if key not in self._cache:
+            pm = self.mappings.pairs.get(key)
+            if pm is None:
+                raise InputError(f"no pairwise mappings between views {key[0]} and {key[1]}")
+            c0 = sample_colors(self.images[key[0]], np.asarray(pm.uv_a), interpolation=self.interpolation)
+            c1 = sample_colors(self.images[key[1]], np.asarray(pm.uv_b), interpolation=self.interpolation)
+            self._cache[key] = (c0, c1)
+        c0, c1 = self._cache[key]
+        return (c0, c1) if a <= b else (c1, c0)
+
+    def path_edges(self) -> list[tuple[int, int]]:
+        """Directed edges ``(target, source)`` used by the paths, each once, in a stable order."""
+        seen: dict[tuple[int, int], None] = {}
+        for v in sorted(self.paths):
+            p = self.paths[v]
+            for t, s in zip(p[:-1], p[1:]):
+                seen.setdefault((t, s), None)
+        return list(seen)
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionResult:
+    """Output of :func:`correct`.
+
+    Attributes
+    ----------
+    images : list of (H, W, 3) arrays
+        Corrected images, each in its input dtype (uint8 / uint16 rounded and clipped).
+    transforms : list of transforms
+        One per view (:class:`LutTransform`, :class:`FunctionTransform`, :class:`IdentityTransform`).
+    reference : int
+        Reference view index.
+    paths : dict[int, list[int]]
+        Correction path per reachable view.
+    unreachable : list[int]
+        Views without a path to the reference (left unchanged by path-based methods).
+    graph_edges : list of dict
+        ``{"a", "b", "n", "weight"}`` per graph edge.
+    timings : dict[str, float]
+        Seconds per stage.
+    method : str
+    t_npm : int
+        Edge threshold used, in the units of the mappings (see :func:`o3d_seqcc.graph.scale_t_npm`).
+    """
+
+    images: list
+    transforms: list
+    reference: int
+    paths: dict
+    unreachable: list
+    graph_edges: list
+    timings: dict
+    method: str
+    t_npm: int = 400
+
+
+def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, n_jobs: int | None = None) -> list[list | None]:
+    """Per view, the per-edge steps ``make_step(t, s)`` along its path (each directed edge made
+    once, even when several paths share it); None for the reference and unreachable views.
+
+    The edges are fitted in joblib threads (``n_jobs``, joblib semantics: None = the active
+    ``joblib.parallel_config`` or 1, -1 = all cores); scikit-learn's SVR fit releases the GIL.
+    """
+    from joblib import Parallel, delayed
+
+    paths = [ctx.paths.get(v) for v in range(len(ctx.images))]
+    edges = list(dict.fromkeys((t, s) for p in paths if p is not None for t, s in zip(p[:-1], p[1:])))
+    made = Parallel(n_jobs=n_jobs, prefer="threads")(delayed(make_step)(t, s) for t, s in edges)
+    cache = dict(zip(edges, made))
+    logger.debug("fitted %d directed edge(s) for %d path(s)", len(cache), len(ctx.paths))
+    return [
+        None if p is None or len(p) < 2 else [cache[(t, s)] for t, s in zip(p[:-1], p[1:])] for p in paths
+    ]
+
+
+def lut_per_path(
+    ctx: CorrectionContext,
+    edge_lut: Callable[[int, int], np.ndarray],
+    *,
+    extrapolate: bool = False,
+    n_jobs: int | None = None,
+) -> list:
+    """Compose per-edge (3, L) tables along every path into one table per view."""
+    return [
+        IdentityTransform()
+        if luts is None
+        else LutTransform(
+            np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])
+        )
+        for luts in path_steps(ctx, edge_lut, n_jobs=n_jobs)
+    ]
+
+
+class _BlurredImages:
+    """Lazy read-only sequence of Gaussian-blurred float images (blurred on first access)."""
+
+    def __init__(self, images: Sequence[np.ndarray], sigma: float) -> None:
+        self._images, self._sigma, self._cache = images, float(sigma), {}
+
+    def __len__(self) -> int:
+        return len(self._images)
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        if i not in self._cache:
+            import cv2
+
+            s = self._sigma
+            self._cache[i] = cv2.GaussianBlur(
+                np.asarray(self._images[i], dtype=np.float32), (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT
+            ).astype(np.float64)
+        return self._cache[i]
+
+
+def fit_context(ctx: CorrectionContext, blur: float) -> CorrectionContext:
+    """``ctx`` whose colours are sampled from images blurred by ``blur`` px (0: ctx itself)."""
+    if blur <= 0:
+        return ctx
+    return replace(ctx, images=_BlurredImages(ctx.images, blur), _cache={})
+
+
+def sequential(ctx: CorrectionContext, make_step: Callable[[int, int], Callable[[np.ndarray], np.ndarray]]) -> list:
+    """FunctionTransforms applying per-edge colour transforms in order along each path."""
+
+    def chain(steps: list) -> FunctionTransform:
+        def fn(img: np.ndarray, steps=tuple(steps)) -> np.ndarray:
+            shape = img.shape
+            x = img.reshape(-1, 3)
+            for st in steps:
+                x = np.clip(st(x), 0.0, 1.0)
+            return x.reshape(shape)
+
+        return FunctionTransform(fn)
+
+    return [IdentityTransform() if steps is None else chain(steps) for steps in path_steps(ctx, make_step)]

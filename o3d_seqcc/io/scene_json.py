@@ -1,0 +1,182 @@
+"""The native scene manifest, ``scene.json`` (format ``o3d_seqcc.scene/1``).
+
+::
+
+    {"format": "o3d_seqcc.scene/1",
+     "mesh": "mesh.ply",
+     "views": [{"name": "v00", "image": "images/v00.png", "width": 640, "height": 480,
+                "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]],
+                "extrinsic": [[r,r,r,t],[r,r,r,t],[r,r,r,t],[0,0,0,1]],
+                "depth": "depth/v00.png", "depth_scale": 1000.0,
+                "point_cloud": "scans/s0.ply"}]}
+
+Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
+1000) and ``point_cloud`` are optional. ``extrinsic`` is world-to-camera in OpenCV axes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..scene import FORMAT, Scene, View
+from .files import find_file, write_json
+
+__all__ = ["FORMAT", "detect", "load", "save"]
+
+_VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
+_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud")
+
+
+def detect(path: Path) -> Path | None:
+    """The manifest to read for ``path`` (a ``.json`` file, or a folder holding ``scene.json``), or None."""
+    return find_file(path, name="scene.json", suffix=".json")
+
+
+def _join(root: Path, rel: object, where: str) -> Path:
+    if not isinstance(rel, str) or not rel or "\x00" in rel:
+        raise InputError(f"{where} must be a non-empty relative or absolute path string, got {rel!r}")
+    return Path(os.path.normpath(root / rel))
+
+
+def _number(d: dict, key: str, where: str) -> float | int:
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise InputError(f"{where}: {key!r} must be a number, got {v!r} ({type(v).__name__})")
+    return v
+
+
+def _matrix(d: dict, key: str, shape: tuple[int, int], where: str) -> np.ndarray:
+    v = d[key]
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != shape:
+        raise InputError(f"{where}: {key!r} must be a {shape[0]}x{shape[1]} list of numbers, got {v!r:.80}")
+    return a
+
+
+def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
+    """Read a ``scene.json`` manifest.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The manifest.
+    mesh : path-like, optional
+        Overrides the manifest's mesh.
+
+    Raises
+    ------
+    InputError
+        Unreadable or non-UTF-8 file, invalid JSON, unknown format version, missing or
+        malformed keys (named with the view index and the fix).
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save the manifest as UTF-8") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read the manifest ({e.strerror})") from None
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise InputError(f"{path}: not valid JSON ({e})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected a JSON object with 'format', 'mesh' and 'views'")
+    fmt = data.get("format")
+    if fmt != FORMAT:
+        raise InputError(
+            f"{path}: unknown scene format {fmt!r:.60}; this version of o3d_seqcc reads {FORMAT!r} "
+            "(upgrade o3d_seqcc or re-export the scene)"
+        )
+    root = path.parent
+    for key in ("mesh", "views"):
+        if key not in data:
+            raise InputError(f"{path}: missing required key {key!r}")
+    if not isinstance(data["views"], list):
+        raise InputError(f"{path}: 'views' must be a list")
+    views = []
+    for i, d in enumerate(data["views"]):
+        where = f"{path}: views[{i}]"
+        if not isinstance(d, dict):
+            raise InputError(f"{where} must be an object")
+        missing = [k for k in _VIEW_KEYS if k not in d]
+        if missing:
+            raise InputError(f"{where} ({str(d.get('name', '?')):.60}) is missing {', '.join(missing)}")
+        unknown = set(d) - set(_VIEW_KEYS) - set(_OPTIONAL_KEYS)
+        if unknown:
+            raise InputError(f"{where} has unknown keys {sorted(map(str, unknown))}")
+        if not isinstance(d["name"], str):
+            raise InputError(f"{where}: 'name' must be a string, got {d['name']!r:.60}")
+        try:
+            views.append(
+                View(
+                    name=d["name"],
+                    image=_join(root, d["image"], f"{where}: 'image'"),
+                    intrinsic=_matrix(d, "intrinsic", (3, 3), where),
+                    extrinsic=_matrix(d, "extrinsic", (4, 4), where),
+                    width=_number(d, "width", where),
+                    height=_number(d, "height", where),
+                    depth=None if d.get("depth") is None else _join(root, d["depth"], f"{where}: 'depth'"),
+                    depth_scale=_number(d, "depth_scale", where) if d.get("depth_scale") is not None else 1000.0,
+                    point_cloud=None if d.get("point_cloud") is None
+                    else _join(root, d["point_cloud"], f"{where}: 'point_cloud'"),
+                )
+            )
+        except InputError as e:
+            raise InputError(e.args[0] if str(path) in e.args[0] else f"{path}: {e}") from None
+    mesh_path = Path(mesh) if mesh is not None else _join(root, data["mesh"], f"{path}: 'mesh'")
+    try:
+        return Scene(mesh=mesh_path, views=tuple(views))
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from None
+
+
+def _rel(p: Path, root: Path) -> str:
+    """``p`` relative to ``root`` without resolving symbolic links (paths stay as given)."""
+    return Path(os.path.relpath(os.path.abspath(p), os.path.abspath(root))).as_posix()
+
+
+def save(scene: Scene, path: str | os.PathLike) -> Path:
+    """Write ``scene`` as a ``scene.json`` manifest, atomically.
+
+    Paths are stored relative to the manifest's folder (symbolic links are kept, not
+    followed). ``load(save(s, p)) == s`` exactly (floats are written with full precision).
+
+    Parameters
+    ----------
+    scene : Scene
+    path : path-like
+        Manifest path (conventionally ``.../scene.json``).
+
+    Returns
+    -------
+    pathlib.Path
+        The manifest path.
+    """
+    path = Path(path)
+    root = path.parent
+    root.mkdir(parents=True, exist_ok=True)
+    views = []
+    for v in scene.views:
+        d = {
+            "name": v.name,
+            "image": _rel(v.image, root),
+            "width": v.width,
+            "height": v.height,
+            "intrinsic": v.intrinsic.tolist(),
+            "extrinsic": v.extrinsic.tolist(),
+        }
+        if v.depth is not None:
+            d["depth"] = _rel(v.depth, root)
+            d["depth_scale"] = v.depth_scale
+        if v.point_cloud is not None:
+            d["point_cloud"] = _rel(v.point_cloud, root)
+        views.append(d)
+    return write_json(path, {"format": FORMAT, "mesh": _rel(scene.mesh, root), "views": views})

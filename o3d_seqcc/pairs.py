@@ -1,0 +1,284 @@
+"""One pair of views' mappings, and the lazy machinery that builds them from a visibility.
+
+:class:`PairMapping` holds the mappings between two views; :class:`PairSource` builds them on
+demand from the per-view usable-face masks of a :class:`~o3d_seqcc.visibility.Visibility`
+(vertex mode: the three vertices of every face usable in both views; dense mode: a fixed
+barycentric pattern per subdivision level, perspective-correct), and :class:`LazyPairs` is the
+read-only ``{(a, b): PairMapping}`` that builds a pair when it is read (LRU-cached).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Mapping as _MappingABC
+from dataclasses import dataclass
+from typing import Any, Iterable, Iterator
+
+import numpy as np
+
+__all__ = ["LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key"]
+
+Pair = tuple[int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class PairMapping:
+    """The mappings between two views.
+
+    Attributes
+    ----------
+    a, b : int
+        View indices (``a < b`` inside :class:`Mappings`).
+    uv_a, uv_b : (n, 2) float64
+        Pixel coordinates of the same surface points in views ``a`` and ``b``.
+    face_ids : (n,) int64
+        Mesh face of each mapping (each face appears 3 times in ``"vertices"`` mode).
+    weights : (n, 3) float32, optional
+        Barycentric coordinates of each mapping's surface point within its face (``"dense"``
+        mode; None in ``"vertices"`` mode, where mapping ``3 i + j`` is vertex ``j`` of face
+        ``face_ids[3 i]``); the world point is
+        ``(weights[:, :, None] * vertices[faces[face_ids]]).sum(1)``.
+    """
+
+    a: int
+    b: int
+    uv_a: np.ndarray
+    uv_b: np.ndarray
+    face_ids: np.ndarray
+    weights: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "a", int(self.a))
+        object.__setattr__(self, "b", int(self.b))
+        uv_a = np.asarray(self.uv_a, dtype=np.float64).reshape(-1, 2)
+        uv_b = np.asarray(self.uv_b, dtype=np.float64).reshape(-1, 2)
+        fid = np.asarray(self.face_ids, dtype=np.int64).reshape(-1)
+        if not (len(uv_a) == len(uv_b) == len(fid)):
+            raise ValueError(
+                f"PairMapping({self.a}, {self.b}): uv_a, uv_b and face_ids lengths differ "
+                f"({len(uv_a)}, {len(uv_b)}, {len(fid)})"
+            )
+        object.__setattr__(self, "uv_a", uv_a)
+        object.__setattr__(self, "uv_b", uv_b)
+        object.__setattr__(self, "face_ids", fid)
+        if self.weights is not None:
+            w = np.asarray(self.weights, dtype=np.float32).reshape(-1, 3)
+            if len(w) != len(fid):
+                raise ValueError(f"PairMapping({self.a}, {self.b}): weights length {len(w)} != {len(fid)}")
+            object.__setattr__(self, "weights", w)
+
+    @property
+    def n(self) -> int:
+        """Number of mappings."""
+        return int(len(self.face_ids))
+
+    @property
+    def key(self) -> Pair:
+        return (self.a, self.b)
+
+    def swapped(self) -> "PairMapping":
+        """The same mappings seen from ``b`` to ``a``."""
+        return PairMapping(self.b, self.a, self.uv_b, self.uv_a, self.face_ids, self.weights)
+
+    def take(self, index: np.ndarray) -> "PairMapping":
+        """A subset (boolean mask or integer index over the n mappings)."""
+        w = None if self.weights is None else self.weights[index]
+        return PairMapping(self.a, self.b, self.uv_a[index], self.uv_b[index], self.face_ids[index], w)
+
+    def __repr__(self) -> str:
+        return f"PairMapping(a={self.a}, b={self.b}, n={self.n})"
+
+
+def norm_key(key: Any) -> Pair:
+    """``(a, b)`` as a pair of ints; anything else raises ``KeyError``."""
+    try:
+        a, b = key
+        return int(a), int(b)
+    except (TypeError, ValueError):
+        raise KeyError(key) from None
+
+
+class LazyPairs(_MappingABC):
+    """Read-only ``{(a, b): PairMapping}`` whose values are built on access (LRU-cached)."""
+
+    def __init__(self, source: "PairSource", keys: Iterable[Pair], *, cache_size: int = 8) -> None:
+        self.source = source
+        self._keys = sorted(norm_key(k) for k in keys)
+        self._keyset = set(self._keys)
+        self._cache: OrderedDict[Pair, PairMapping] = OrderedDict()
+        self._cache_size = int(cache_size)
+        self._lock = threading.Lock()
+
+    def __getitem__(self, key: Any) -> PairMapping:
+        k = norm_key(key)
+        if k not in self._keyset:
+            raise KeyError(key)
+        with self._lock:
+            pm = self._cache.get(k)
+            if pm is not None:
+                self._cache.move_to_end(k)
+                return pm
+        pm = self.source.build(*k)
+        if self._cache_size > 0:
+            with self._lock:
+                self._cache[k] = pm
+                while len(self._cache) > self._cache_size:
+                    self._cache.popitem(last=False)
+        return pm
+
+    def __contains__(self, key: object) -> bool:
+        try:
+            return norm_key(key) in self._keyset
+        except KeyError:
+            return False
+
+    def __iter__(self) -> Iterator[Pair]:
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def __repr__(self) -> str:
+        return f"<lazy pairs: {len(self)} pairs>"
+
+    def __getstate__(self) -> dict:
+        d = self.__dict__.copy()
+        d["_cache"] = OrderedDict()
+        del d["_lock"]
+        return d
+
+    def __setstate__(self, d: dict) -> None:
+        self.__dict__.update(d)
+        self._lock = threading.Lock()
+
+
+def _bary_table(max_level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dense sampling patterns for levels 1..max_level, concatenated.
+
+    Level L has the 3 vertices (first, in face order, as in ``"vertices"`` mode) followed by the
+    centroids of the L^2 sub-triangles of the level-L subdivision of the face (strictly inside
+    the face, so no two faces share a dense sample): 3 + L^2 points. Returns
+    (table (T, 3) float64 barycentric weights, start (max_level+1,), count (max_level+1,)).
+    """
+    rows = []
+    start = np.zeros(max_level + 1, dtype=np.int64)
+    count = np.zeros(max_level + 1, dtype=np.int64)
+    off = 0
+    for L in range(1, max_level + 1):
+        i, j = np.meshgrid(np.arange(L), np.arange(L), indexing="ij")
+        up = (i + j) <= L - 1
+        down = (i + j) <= L - 2
+        b1 = np.concatenate([i[up] + 1 / 3, i[down] + 2 / 3]) / L
+        b2 = np.concatenate([j[up] + 1 / 3, j[down] + 2 / 3]) / L
+        w = np.concatenate([np.eye(3), np.stack([1.0 - b1 - b2, b1, b2], axis=1)])
+        start[L] = off
+        count[L] = len(w)
+        rows.append(w)
+        off += len(w)
+    return np.concatenate(rows), start, count
+
+
+def _shared_counts(U: np.ndarray) -> np.ndarray:
+    """(V, V) int64 number of columns where both rows of the (V, F) bool matrix are True."""
+    V, F = U.shape
+    P = np.packbits(U, axis=1)
+    pad = (-P.shape[1]) % 8
+    if pad:
+        P = np.concatenate([P, np.zeros((V, pad), np.uint8)], axis=1)
+    P = np.ascontiguousarray(P).view(np.uint64)
+    C = np.zeros((V, V), dtype=np.int64)
+    for a in range(V):
+        C[a, a:] = np.bitwise_count(P[a] & P[a:]).sum(axis=1, dtype=np.int64)
+    return np.triu(C) + np.triu(C, 1).T
+
+
+class PairSource:
+    """Builds the mappings of one pair from a :class:`~o3d_seqcc.visibility.Visibility`."""
+
+    def __init__(self, vis, mode: str, level: np.ndarray | None, face_mask: np.ndarray | None) -> None:
+        self.vis = vis
+        self.mode = mode
+        self.level = level  # (F,) int per face (dense mode)
+        self.face_mask = face_mask  # (F,) bool or None
+        if mode == "dense":
+            self.table, self.start, self.count = _bary_table(int(level.max()) if len(level) else 1)
+        else:
+            self.count = np.array([0, 3])
+
+    def usable(self) -> np.ndarray:
+        u = self.vis.usable
+        return u if self.face_mask is None else (u & self.face_mask[None, :])
+
+    def per_face(self) -> np.ndarray:
+        F = self.vis.n_faces
+        if self.mode == "vertices":
+            return np.full(F, 3, dtype=np.int64)
+        return self.count[self.level]
+
+    def counts(self) -> dict[Pair, int]:
+        U = self.usable()
+        if self.mode == "vertices":
+            C = 3 * _shared_counts(U)
+        else:
+            C = np.zeros((U.shape[0], U.shape[0]), dtype=np.int64)
+            for L in np.unique(self.level):
+                C += int(self.count[L]) * _shared_counts(U & (self.level == L)[None, :])
+        a, b = np.triu_indices(U.shape[0], k=1)
+        c = C[a, b]
+        return {(int(i), int(j)): int(n) for i, j, n in zip(a, b, c) if n > 0}
+
+    def faces(self, a: int, b: int) -> np.ndarray:
+        both = self.vis.usable[a] & self.vis.usable[b]
+        if self.face_mask is not None:
+            both &= self.face_mask
+        return np.flatnonzero(both)
+
+    def build(self, a: int, b: int) -> PairMapping:
+        vis = self.vis
+        k = self.faces(a, b)
+        tri = vis.mesh.faces[k]  # (m, 3)
+        if self.mode == "vertices":
+            uv_a = vis.uv[a][tri].reshape(-1, 2)
+            uv_b = vis.uv[b][tri].reshape(-1, 2)
+            return PairMapping(a, b, uv_a, uv_b, np.repeat(k, 3))
+        # dense: faces grouped by level; per level the samples are a fixed barycentric pattern
+        lev = self.level[k]
+        order = np.argsort(lev, kind="stable")
+        k, tri, lev = k[order], tri[order], lev[order]
+        bounds = np.flatnonzero(np.diff(lev)) + 1
+        starts = np.concatenate([[0], bounds])
+        ends = np.concatenate([bounds, [len(k)]])
+        uv_out = {a: [], b: []}
+        fids, ws = [], []
+        for s0, s1 in zip(starts, ends):
+            if s1 <= s0:
+                continue
+            L = int(lev[s0])
+            Wl = self.table[self.start[L] : self.start[L] + self.count[L]]  # (p, 3)
+            t = tri[s0:s1]
+            for v in (a, b):
+                z = vis.depth[v][t].astype(np.float64)  # (m, 3)
+                uvz = vis.uv[v][t].astype(np.float64) * z[:, :, None]  # (m, 3, 2)
+                num = np.zeros((len(t), len(Wl), 2))
+                den = np.zeros((len(t), len(Wl)))
+                for j in range(3):
+                    num += Wl[None, :, j, None] * uvz[:, None, j, :]
+                    den += Wl[None, :, j] * z[:, None, j]
+                # perspective-correct: projection of sum(w_i X_i) = sum(w_i z_i uv_i) / sum(w_i z_i)
+                uv_out[v].append((num / den[:, :, None]).reshape(-1, 2))
+            fids.append(np.repeat(k[s0:s1], len(Wl)))
+            ws.append(np.broadcast_to(Wl.astype(np.float32), (s1 - s0,) + Wl.shape).reshape(-1, 3))
+        if not fids:
+            e2 = np.zeros((0, 2))
+            return PairMapping(a, b, e2, e2, np.zeros(0, np.int64), np.zeros((0, 3), np.float32))
+        return PairMapping(
+            a, b, np.concatenate(uv_out[a]), np.concatenate(uv_out[b]), np.concatenate(fids), np.concatenate(ws)
+        )
+
+    def with_mask(self, face_mask: np.ndarray) -> "PairSource":
+        fm = face_mask if self.face_mask is None else (self.face_mask & face_mask)
+        src = PairSource.__new__(PairSource)
+        src.__dict__.update(self.__dict__)
+        src.face_mask = fm
+        return src

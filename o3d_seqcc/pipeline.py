@@ -1,0 +1,466 @@
+"""The whole job as library calls, with the command line's defaults (mvs-texturing's ``texrecon``).
+
+- :func:`run`: visibility -> mappings -> colour correction -> view selection -> atlas -> seam
+  metric, one visibility computation serving both the correction and the texturing;
+- :func:`texture`: the texturing half alone, on the scene's (or given) images;
+- :func:`correct_scene`: the correction half alone, with the report the ``correct`` command writes.
+
+Each returns a result whose ``save(out)`` writes exactly what the matching command writes
+(``o3d-seqcc run`` / ``texture`` / ``correct`` call these functions and ``save``), so a Python
+user and the command line get byte-identical files for the same scene and options::
+
+    import o3d_seqcc as sc
+    res = sc.pipeline.run("scene.json", reference="auto")          # defaults = the CLI's
+    res.save("out/")                                               # mesh.glb, mesh.obj, report.json ...
+    res.textured.to_open3d()                                       # an Open3D textured mesh
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
+from .errors import InputError
+from .export import FORMATS, export_textured_mesh
+from .io.files import atomic_write_bytes, write_image, write_json
+from .io.load import load_scene, save_scene
+from .mappings import MODES, Mappings, compute_mappings
+from .meshops import face_adjacency
+from .metrics import evaluate
+from .render import write_selection_picture
+from .scene import Scene, resolve_view
+from .seams import SeamReport, seam_metric
+from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
+from .visibility import Visibility, compute_visibility
+
+__all__ = ["CorrectionRun", "RunResult", "correct_scene", "parse_formats", "run", "texture"]
+
+logger = logging.getLogger(__name__)
+
+#: export formats written by default
+DEFAULT_FORMATS = ("glb", "obj")
+
+
+def parse_formats(formats: str | Iterable[str]) -> list[str]:
+    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
+    items = formats.split(",") if isinstance(formats, str) else list(formats)
+    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
+    bad = [f for f in out if f not in FORMATS]
+    if bad or not out:
+        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
+    return out
+
+
+def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
+    if isinstance(scene, Scene):
+        return scene if mesh is None else Scene(Path(mesh), scene.views)
+    return load_scene(scene, mesh=mesh)
+
+
+def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> TextureSettings:
+    s = settings or TextureSettings()
+    s = s.updated(**options) if options else s
+    if s.selection not in SELECTION_METHODS:
+        raise InputError(f"unknown selection method {s.selection!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
+    return s
+
+
+def _timed(timings: dict[str, float], name: str, t0: float) -> None:
+    timings[name] = time.perf_counter() - t0
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """What :func:`run` and :func:`texture` produce.
+
+    Attributes
+    ----------
+    scene : Scene
+    images : list of (H, W, 3) arrays
+        The images the mesh was textured with (corrected by :func:`run`).
+    visibility : Visibility
+    selection : (F,) int64
+        View per face, -1 = seen by no view.
+    selection_stats : dict
+        Faces, unseen faces, image transitions, views used (:func:`~o3d_seqcc.texturing.selection_stats`).
+    textured : TexturedMesh
+        The textured mesh (``textured.to_open3d()`` for Open3D).
+    settings : TextureSettings
+    correction : CorrectionResult or None
+        None for :func:`texture`.
+    mappings : Mappings or None
+    seams : SeamReport or None
+        Seam metric of ``textured`` (None with ``seams=False``).
+    seams_original : SeamReport or None
+        Seam metric of the same texturing with the uncorrected images (``compare_original``).
+    timings : dict
+        Seconds per stage.
+    command : str
+        ``"run"`` or ``"texture"`` (the report's ``command``).
+    source : str
+        The scene argument as given (the report's ``scene``; empty for a Scene object).
+    images_from : str
+        ``"scene"`` (the scene's files), ``"corrected"`` (:func:`run`) or ``"given"``.
+    """
+
+    scene: Scene
+    images: list
+    visibility: Visibility
+    selection: np.ndarray
+    selection_stats: dict
+    textured: TexturedMesh
+    settings: TextureSettings
+    correction: CorrectionResult | None = None
+    mappings: Mappings | None = None
+    seams: SeamReport | None = None
+    seams_original: SeamReport | None = None
+    timings: dict = field(default_factory=dict)
+    command: str = "run"
+    source: str = ""
+    images_from: str = "scene"
+
+    def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None) -> dict[str, Any]:
+        """The ``report.json`` content (JSON types)."""
+        s = self.settings
+        names = self.scene.names
+        rep: dict[str, Any] = {"command": self.command, "scene": self.source, "images": self.images_from}
+        if self.correction is not None:
+            res = self.correction
+            rep["correction"] = {
+                "method": res.method,
+                "reference": names[res.reference],
+                "t_npm": res.t_npm,
+                "unreachable": [names[i] for i in res.unreachable],
+                "paths": {names[k]: [names[i] for i in p] for k, p in res.paths.items()},
+                "n_graph_edges": len(res.graph_edges),
+                "timings_s": {k: round(float(v), 4) for k, v in res.timings.items()},
+            }
+        rep["selection"] = {"method": s.selection, "seed": s.seed, **self.selection_stats,
+                            **({"picture_view": picture_view} if picture_view else {})}
+        rep["atlas"] = {k: v for k, v in self.textured.stats.items() if not k.startswith("time_")}
+        rep["seams"] = None if self.seams is None else self.seams.to_dict()
+        rep["files"] = dict(files or {})
+        if self.seams_original is not None:
+            rep["seams_original_images"] = self.seams_original.to_dict()
+        rep["visibility_stats"] = self.visibility.stats
+        rep["timings_s"] = {k: round(v, 4) for k, v in self.timings.items()}
+        return rep
+
+    def save(
+        self,
+        out: str | os.PathLike,
+        *,
+        formats: str | Iterable[str] = DEFAULT_FORMATS,
+        save_images: bool = False,
+        selection_view: str | int | None = None,
+        unlit: bool = False,
+    ) -> dict[str, str]:
+        """Write the textured mesh, the selection and ``report.json`` into the folder ``out``.
+
+        Parameters
+        ----------
+        out : path-like
+            Output folder (created; files in it with the same names are replaced).
+        formats : str or iterable, default ("glb", "obj")
+            Export formats among ``glb``, ``obj``, ``ply``.
+        save_images : bool, default False
+            Also write the images used (the corrected ones for :func:`run`) to ``out/images/``.
+        selection_view : str or int, optional
+            View from which ``selection.png`` (the selection coloured by image) is rendered;
+            default the view seeing the most faces; ``"none"`` skips the picture.
+        unlit : bool, default False
+            GLB material with ``KHR_materials_unlit``.
+
+        Returns
+        -------
+        dict
+            Kind -> written path (also in the report's ``files``).
+        """
+        fmts = parse_formats(formats)
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        t = time.perf_counter()
+        picture = None
+        if selection_view is None or str(selection_view).lower() != "none":
+            picture = write_selection_picture(self.scene, self.visibility, self.selection, out / "selection.png",
+                                              selection_view)
+        written = {k: str(v) for k, v in export_textured_mesh(self.textured, out, formats=fmts, unlit=unlit).items()}
+        buf = io.BytesIO()
+        np.save(buf, self.selection)
+        atomic_write_bytes(out / "selection.npy", buf.getvalue())
+        if picture is not None:
+            written["selection_png"] = str(picture[0])
+        if save_images:
+            for v, img in zip(self.scene.views, self.images):
+                write_image(out / "images" / f"{v.name}.png", img)
+            written["images"] = str(out / "images")
+        self.timings["export"] = time.perf_counter() - t
+        write_json(out / "report.json", self.report(written, picture_view=None if picture is None else picture[1]))
+        return written
+
+
+def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
+    t = time.perf_counter()
+    mesh = vis.mesh
+    adjacency = face_adjacency(mesh.faces, mesh.vertices)
+    opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
+    labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
+    _timed(timings, "selection", t)
+    t = time.perf_counter()
+    tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
+    _timed(timings, "bake", t)
+    seams = None
+    if want_seams:
+        t = time.perf_counter()
+        seams = seam_metric(tm)
+        _timed(timings, "seams", t)
+    return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
+
+
+def texture(
+    scene: Scene | str | os.PathLike,
+    *,
+    images: Sequence[np.ndarray] | None = None,
+    mesh: str | os.PathLike | None = None,
+    settings: TextureSettings | None = None,
+    seams: bool = True,
+    **texture_options: Any,
+) -> RunResult:
+    """Texture the mesh from the scene's images (or ``images``): selection, atlas, seam metric.
+
+    Parameters
+    ----------
+    scene : Scene or path
+        A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
+    images : list of (H, W, 3) arrays, optional
+        One per view, instead of the scene's files (e.g. corrected images).
+    mesh : path-like, optional
+        Mesh to use instead of the scene's.
+    settings : TextureSettings, optional
+        Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
+    seams : bool, default True
+        Compute the seam metric of the result.
+    **texture_options
+        Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
+        ``atlas_size=4096``, ...).
+
+    Returns
+    -------
+    RunResult
+    """
+    source = str(scene) if not isinstance(scene, Scene) else ""
+    timings: dict[str, float] = {}
+    t_all = time.perf_counter()
+    s = _settings(settings, texture_options)
+    sc = _as_scene(scene, mesh)
+    t = time.perf_counter()
+    if images is None:
+        imgs = [v.load_image() for v in sc.views]
+    else:
+        imgs = list(images)
+        if len(imgs) != len(sc.views):
+            raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
+    _timed(timings, "load_images", t)
+    t = time.perf_counter()
+    vis = compute_visibility(sc)
+    _timed(timings, "visibility", t)
+    labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
+    _timed(timings, "total", t_all)
+    return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
+                     settings=s, seams=sm, timings=timings, command="texture", source=source,
+                     images_from="scene" if images is None else "given")
+
+
+def run(
+    scene: Scene | str | os.PathLike,
+    *,
+    reference: str | int = "auto",
+    method: str = "seqcc",
+    t_npm: int = 400,
+    mappings: str = "vertices",
+    mesh: str | os.PathLike | None = None,
+    settings: TextureSettings | None = None,
+    seams: bool = True, compare_original: bool = False,
+    **texture_options: Any,
+) -> RunResult:
+    """Colour-correct every view toward a reference, then texture the mesh with the corrected images.
+
+    Parameters
+    ----------
+    scene : Scene or path
+        A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
+    reference : str or int, default "auto"
+        Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
+    method : str, default "seqcc"
+        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`).
+    t_npm : int, default 400
+        Minimum pairwise mappings (vertex units) for a graph edge.
+    mappings : {"vertices", "dense"}, default "vertices"
+        Pairwise mapping mode.
+    mesh : path-like, optional
+        Mesh to use instead of the scene's.
+    settings : TextureSettings, optional
+        Texturing options; default :class:`~o3d_seqcc.texturing.TextureSettings`.
+    seams : bool, default True
+        Compute the seam metric of the result.
+    compare_original : bool, default False
+        Also bake the uncorrected images (in memory) and report their seam metric.
+    **texture_options
+        Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection``, ``atlas_size``,
+        ``seed``, ...); ``seed`` also seeds the correction.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    InputError
+        Unknown method, reference, mapping mode or texture option value, checked before any
+        heavy work; bad scenes.
+    """
+    source = str(scene) if not isinstance(scene, Scene) else ""
+    timings: dict[str, float] = {}
+    t_all = time.perf_counter()
+    check_method(method)
+    if mappings not in MODES:
+        raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
+    s = _settings(settings, texture_options)
+    sc = _as_scene(scene, mesh)
+    if reference != "auto":
+        resolve_view(sc.names, reference)
+    t = time.perf_counter()
+    vis = compute_visibility(sc)
+    _timed(timings, "visibility", t)
+    t = time.perf_counter()
+    maps = compute_mappings(sc, visibility=vis, mode=mappings)
+    _timed(timings, "mappings", t)
+    t = time.perf_counter()
+    originals = [v.load_image() for v in sc.views]
+    _timed(timings, "load_images", t)
+    t = time.perf_counter()
+    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=s.seed)
+    _timed(timings, "correction", t)
+    labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
+    sm0 = None
+    if compare_original:
+        t = time.perf_counter()
+        s0 = s.updated(atlas_size=tm.atlas_size, texel_scale=tm.stats["texel_scale"], overflow="scale")
+        sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s0))
+        _timed(timings, "compare_original", t)
+    _timed(timings, "total", t_all)
+    return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
+                     settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
+                     command="run", source=source, images_from="corrected")
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionRun:
+    """What :func:`correct_scene` produces: the correction, its inputs and its report.
+
+    Attributes
+    ----------
+    scene : Scene
+    result : CorrectionResult
+        Corrected images (``result.images``), transforms, reference, paths.
+    mappings : Mappings
+    originals : list of (H, W, 3) arrays
+    report : dict
+        The ``report.json`` content: graph edges, paths, unreachable views, per-pair metrics
+        before / after (unless ``metrics=False``), per-view lookup tables, timings.
+    """
+
+    scene: Scene
+    result: CorrectionResult
+    mappings: Mappings
+    originals: list
+    report: dict
+
+    def save(self, out: str | os.PathLike) -> Path:
+        """Write ``out/images/<view>.png``, ``out/scene.json`` (pointing at them) and ``out/report.json``.
+
+        The folder ``out`` is created if needed and filled as it is. Returns ``out``.
+        """
+        out = Path(out)
+        t = time.perf_counter()
+        paths = []
+        for v, img in zip(self.scene.views, self.result.images):
+            paths.append(write_image(out / "images" / f"{v.name}.png", img))
+        rep = dict(self.report)
+        rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
+        save_scene(self.scene.replace_images(paths), out / "scene.json")
+        write_json(out / "report.json", rep)
+        return out
+
+
+def correct_scene(
+    scene: Scene | str | os.PathLike,
+    *,
+    reference: str | int = "auto", method: str = "seqcc", t_npm: int = 400, mappings: str = "vertices",
+    graph_weight: str = "paper",
+    seed: int = 0,
+    metrics: bool = True,
+    mesh: str | os.PathLike | None = None,
+) -> CorrectionRun:
+    """Colour-correct every view of a scene (the ``correct`` command), with its report.
+
+    Parameters
+    ----------
+    scene : Scene or path
+    reference, method, t_npm, mappings, seed
+        As :func:`run`.
+    graph_weight : {"paper", "log"}, default "paper"
+        Edge weight formula of the colour-correction graph.
+    metrics : bool, default True
+        Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
+    mesh : path-like, optional
+
+    Returns
+    -------
+    CorrectionRun
+    """
+    check_method(method)
+    if mappings not in MODES:
+        raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
+    sc = _as_scene(scene, mesh)
+    if reference != "auto":
+        resolve_view(sc.names, reference)
+    t = time.perf_counter()
+    maps = compute_mappings(sc, mode=mappings)
+    t_map = time.perf_counter() - t
+    originals = [v.load_image() for v in sc.views]
+    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=seed,
+                  graph_weight=graph_weight)
+    res.timings["mappings"] = t_map
+    names = sc.names
+    report: dict[str, Any] = {
+        "method": res.method, "reference": names[res.reference], "reference_index": res.reference, "t_npm": t_npm,
+        "t_npm_effective": res.t_npm, "mappings": mappings, "views": names,
+        "graph_edges": [{**e, "a_name": names[e["a"]], "b_name": names[e["b"]]} for e in res.graph_edges],
+        "paths": {names[v]: [names[x] for x in p] for v, p in sorted(res.paths.items())},
+        "unreachable": [names[v] for v in res.unreachable],
+    }
+    t = time.perf_counter()
+    if metrics:
+        report["metrics"] = {"before": evaluate(originals, maps).to_dict(per_pair=True),
+                             "after": evaluate(res.images, maps).to_dict(per_pair=True)}
+    t_metrics = time.perf_counter() - t
+    if any(isinstance(tr, LutTransform) for tr in res.transforms):
+        luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")
+                for v, tr in enumerate(res.transforms) if isinstance(tr, (LutTransform, IdentityTransform))}
+        report["lookup_tables"] = {
+            "note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced inputs in [0, 1], "
+            "or 'identity' (reference, unreachable views)",
+            "tables": luts,
+        }
+    report["timings"] = {**{k: round(float(v), 4) for k, v in res.timings.items()}, "metrics": round(t_metrics, 4)}
+    report["graph_weight"] = graph_weight
+    return CorrectionRun(scene=sc, result=res, mappings=maps, originals=originals, report=report)

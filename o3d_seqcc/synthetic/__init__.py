@@ -1,0 +1,23 @@
+"""Synthetic scenes with ground truth: a textured room (:mod:`.room`) rendered with known
+camera-like photometric changes (:mod:`o3d_seqcc.photometric`) by :mod:`.generate`."""
+
+from __future__ import annotations
+
+from ..photometric import apply_photometric, identity_photometric, sample_photometric
+from .generate import PHOTOMETRIC_MODES, SYNTHETIC_FORMAT, SyntheticScene, load_synthetic, make_synthetic_scene, perturb_poses
+from .room import ALBEDO_RANGE, DEFAULT_CELL_SIZE, ring_slots
+
+__all__ = [
+    "ALBEDO_RANGE",
+    "DEFAULT_CELL_SIZE",
+    "PHOTOMETRIC_MODES",
+    "SYNTHETIC_FORMAT",
+    "SyntheticScene",
+    "apply_photometric",
+    "identity_photometric",
+    "load_synthetic",
+    "make_synthetic_scene",
+    "perturb_poses",
+    "ring_slots",
+    "sample_photometric",
+]

@@ -1,0 +1,38 @@
+"""Texture mapping (paper 3.8), one module per stage, as mvs-texturing's ``libs/tex``.
+
+- :mod:`~o3d_seqcc.texturing.settings`: :class:`TextureSettings`, the one settings struct whose
+  defaults every entry point uses;
+- :mod:`~o3d_seqcc.texturing.selection`: per-face view selection (:func:`select_views`:
+  ``"mrf"``, ``"largest-area"``, ``"random"``);
+- :mod:`~o3d_seqcc.texturing.atlas`: charts cut from the selected photos, packed and baked
+  (:func:`bake_texture`);
+- :mod:`~o3d_seqcc.texturing.fallback`: colours of the faces seen by no view;
+- :mod:`~o3d_seqcc.texturing.leveling`: global and local seam leveling;
+- :mod:`~o3d_seqcc.texturing.textured_mesh`: :class:`TexturedMesh`, the one textured-mesh type
+  (UVs with the origin bottom-left, as OBJ, trimesh and Open3D), with ``to_open3d`` /
+  ``to_trimesh`` and :func:`load_textured_mesh`.
+"""
+
+from __future__ import annotations
+
+from .atlas import bake_texture
+from .leveling import seam_leveling_offsets
+from .selection import SELECTION_METHODS, count_transitions, register_selection, select_views, selection_stats
+from .settings import LEVELING_SMOOTHNESS, MRF_SMOOTHNESS, TextureSettings
+from .textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
+
+__all__ = [
+    "LEVELING_SMOOTHNESS",
+    "MRF_SMOOTHNESS",
+    "SELECTION_METHODS",
+    "TextureSettings",
+    "TexturedMesh",
+    "bake_texture",
+    "count_transitions",
+    "load_textured_mesh",
+    "register_selection",
+    "sample_texture",
+    "seam_leveling_offsets",
+    "select_views",
+    "selection_stats",
+]

@@ -1,0 +1,308 @@
+"""Per-face view selection (paper 3.8, and an MRF beyond it).
+
+:func:`select_views` picks one view per face (``(F,) int64``, ``-1`` = seen by no view) with one
+of the methods of :data:`SELECTION_METHODS`:
+
+- ``"mrf"`` (default, beyond the paper): a Potts Markov random field over face adjacency with a
+  quality data term, solved by alpha-expansion graph cuts (PyMaxflow), as mvs-texturing does;
+  it trades a little resolution for far fewer image transitions (texture seams);
+- ``"largest-area"``: the usable view with the largest projected face area, paper 3.8;
+- ``"random"``: uniform among the views where the face is *usable* (seeded), paper 3.8.
+
+Only usable views are ever selected: never a view where the face is outside the image,
+occluded, depth-inconsistent or too oblique (``visibility.usable``).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import InputError
+from ..meshops import face_adjacency
+from .settings import MRF_SMOOTHNESS, TextureSettings, VisibilityLike
+
+__all__ = ["SELECTION_METHODS", "count_transitions", "register_selection", "select_views", "selection_stats"]
+
+logger = logging.getLogger(__name__)
+
+
+def count_transitions(labels: np.ndarray, adjacency: np.ndarray) -> int:
+    """Number of interior edges whose two faces use different views (both faces seen).
+
+    Parameters
+    ----------
+    labels : (F,) int array
+        View per face, -1 = unseen (edges touching an unseen face are not counted).
+    adjacency : (E, 2) int array
+        Face pairs from :func:`face_adjacency`.
+    """
+    lab = np.asarray(labels)
+    if len(adjacency) == 0:
+        return 0
+    a, b = lab[adjacency[:, 0]], lab[adjacency[:, 1]]
+    return int(np.count_nonzero((a != b) & (a >= 0) & (b >= 0)))
+
+
+def selection_stats(labels: np.ndarray, adjacency: np.ndarray, n_views: int | None = None) -> dict[str, Any]:
+    """Summary of a per-face selection: faces, unseen faces, transitions, views used.
+
+    Returns
+    -------
+    dict
+        ``faces``, ``unseen_faces``, ``transitions`` (see :func:`count_transitions`),
+        ``interior_edges``, ``views_used`` and ``faces_per_view`` (list, length ``n_views``).
+    """
+    lab = np.asarray(labels, dtype=np.int64)
+    nv = int(n_views if n_views is not None else (lab.max() + 1 if lab.size else 0))
+    per_view = np.bincount(lab[lab >= 0], minlength=nv)
+    return {
+        "faces": int(len(lab)),
+        "unseen_faces": int(np.count_nonzero(lab < 0)),
+        "transitions": count_transitions(lab, adjacency),
+        "interior_edges": int(len(adjacency)),
+        "views_used": int(np.count_nonzero(per_view)),
+        "faces_per_view": per_view.tolist(),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# per-face view selection
+# --------------------------------------------------------------------------------------------
+
+SelectionFn = Callable[..., np.ndarray]
+#: name -> ``fn(visibility, *, seed, **options) -> (F,) int64``
+SELECTION_METHODS: dict[str, SelectionFn] = {}
+
+
+def register_selection(name: str) -> Callable[[SelectionFn], SelectionFn]:
+    """Decorator adding a selection method to :data:`SELECTION_METHODS`."""
+
+    def deco(fn: SelectionFn) -> SelectionFn:
+        SELECTION_METHODS[name] = fn
+        return fn
+
+    return deco
+
+
+def _usable(visibility: VisibilityLike) -> np.ndarray:
+    usable = np.asarray(visibility.usable, dtype=bool)
+    if usable.ndim != 2:
+        raise InputError(f"visibility.usable must be (V, F) bool, got shape {usable.shape}")
+    return usable
+
+
+@register_selection("random")
+def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
+    """Uniformly random usable view per face (paper 3.8), reproducible for a given seed."""
+    usable = _usable(visibility)
+    count = usable.sum(axis=0)
+    rng = np.random.default_rng(seed)
+    k = np.floor(rng.random(usable.shape[1]) * np.maximum(count, 1)).astype(np.int64)
+    csum = np.cumsum(usable, axis=0)  # (V, F)
+    lab = np.argmax(csum > k[None, :], axis=0).astype(np.int64)
+    lab[count == 0] = -1
+    return lab
+
+
+@register_selection("largest-area")
+def _select_largest_area(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
+    """Usable view with the largest projected face area (paper 3.8); ``seed`` is unused."""
+    usable = _usable(visibility)
+    area = np.asarray(visibility.area, dtype=np.float64)
+    score = np.where(usable, np.nan_to_num(area, nan=-1.0), -np.inf)
+    lab = np.argmax(score, axis=0).astype(np.int64)
+    lab[~usable.any(axis=0)] = -1
+    return lab
+
+
+_BIG = 1e6  # data cost of an unusable view in the MRF (never selected: > any smoothness gain)
+
+
+def _mrf_data_cost(visibility: VisibilityLike, usable: np.ndarray, data_term: str, max_cost: float) -> np.ndarray:
+    area = np.nan_to_num(np.asarray(visibility.area, dtype=np.float64), nan=0.0)
+    if data_term == "log-area":
+        q = area
+    elif data_term == "log-area-cos":
+        q = area * np.clip(np.nan_to_num(np.asarray(visibility.cos_angle, dtype=np.float64)), 0.0, 1.0)
+    else:
+        raise ValueError(f"unknown data_term {data_term!r}; valid: 'log-area', 'log-area-cos'")
+    q = np.where(usable, np.maximum(q, 0.0), 0.0)
+    qmax = q.max(axis=0, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cost = -np.log(q / np.where(qmax > 0, qmax, 1.0))
+    cost = np.clip(np.nan_to_num(cost, nan=max_cost, posinf=max_cost), 0.0, max_cost)
+    return np.where(usable, cost, _BIG)
+
+
+def _mrf_energy(labels: np.ndarray, data: np.ndarray, pairs: np.ndarray, smoothness: float) -> float:
+    seen = labels >= 0
+    e = float(data[labels[seen], np.flatnonzero(seen)].sum())
+    if len(pairs):
+        e += smoothness * float(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
+    return e
+
+
+@register_selection("mrf")
+def _select_mrf(
+    visibility: VisibilityLike,
+    *,
+    seed: int = 0,
+    smoothness: float = MRF_SMOOTHNESS,
+    data_term: str = "log-area",
+    max_data_cost: float = 10.0,
+    n_sweeps: int = 4,
+    adjacency: np.ndarray | None = None,
+    mesh: Any = None,
+) -> np.ndarray:
+    """Potts MRF labelling by alpha-expansion (beyond the paper; mvs-texturing's idea).
+
+    Energy ``E(l) = sum_f D_f(l_f) + smoothness * #{(p, q) adjacent: l_p != l_q}`` with
+    ``D_f(l) = -log(q_f(l) / max_l' q_f(l'))`` clipped to ``[0, max_data_cost]`` for usable
+    views (``q`` = projected area, or area x cos for ``"log-area-cos"``) and a prohibitive cost
+    for unusable ones. Starts from ``"largest-area"`` (energy only decreases, so the result
+    never has more transitions *plus* data cost than it); each sweep runs one expansion move
+    per view in a seeded random order, restricted to the faces where that view is usable;
+    stops after ``n_sweeps`` or when a sweep changes nothing.
+
+    Options
+    -------
+    smoothness : float, default :data:`MRF_SMOOTHNESS` (4.0)
+        Potts weight per interior edge, in units of the data term (a factor e of area costs 1).
+        On fountain, 1 / 4 / 8 give 962 / 680 / 602 image transitions, with seam metric (mean,
+        after leveling) 0.26 / 0.20 / 0.19 and the sharpness of the render of view 16 unchanged
+        (1.02x / 1.12x / 1.12x of the photo).
+    data_term : {"log-area", "log-area-cos"}, default "log-area"
+    max_data_cost : float, default 10.0
+    n_sweeps : int, default 4
+    adjacency : (E, 2) int array, optional
+        Face pairs (:func:`face_adjacency`); computed from ``mesh`` or ``visibility.mesh``.
+    mesh : Mesh, optional
+        Used only to compute the adjacency when not given.
+    """
+    import maxflow
+
+    if smoothness < 0:
+        raise ValueError(f"smoothness must be >= 0, got {smoothness}")
+    usable = _usable(visibility)
+    n_views, n_faces = usable.shape
+    if adjacency is None:
+        m = mesh if mesh is not None else getattr(visibility, "mesh", None)
+        if m is None:
+            raise InputError("mrf selection needs the mesh adjacency: pass adjacency= or mesh=")
+        adjacency = face_adjacency(m.faces, m.vertices)
+    adjacency = np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
+    labels = _select_largest_area(visibility)
+    seen = labels >= 0
+    pairs = adjacency[seen[adjacency[:, 0]] & seen[adjacency[:, 1]]]
+    if smoothness == 0 or len(pairs) == 0:
+        return labels
+    data = _mrf_data_cost(visibility, usable, data_term, max_data_cost)
+    w = float(smoothness)
+    rng = np.random.default_rng(seed)
+    energy = _mrf_energy(labels, data, pairs, w)
+    logger.debug("mrf: start energy %.1f, %d transitions", energy, count_transitions(labels, pairs))
+    pos = np.empty(n_faces, dtype=np.int64)
+    for sweep in range(int(n_sweeps)):
+        changed = 0
+        for alpha in rng.permutation(n_views):
+            free = usable[alpha] & (labels != alpha)  # unusable/unseen faces are never free
+            nfree = int(np.count_nonzero(free))
+            if nfree == 0:
+                continue
+            fidx = np.flatnonzero(free)
+            pos[fidx] = np.arange(nfree)
+            lp_all = labels
+            # unary costs of keeping (x=0) / switching to alpha (x=1)
+            cost0 = data[lp_all[fidx], fidx].copy()
+            cost1 = data[alpha, fidx].copy()
+            fp, fq = free[pairs[:, 0]], free[pairs[:, 1]]
+            # both free: Potts expansion term, submodular
+            both = pairs[fp & fq]
+            bi, bj = pos[both[:, 0]], pos[both[:, 1]]
+            A = w * (lp_all[both[:, 0]] != lp_all[both[:, 1]])
+            # E = A + (C-A) x_i + (D-C) x_j + (B+C-A-D)(1-x_i) x_j with B = C = w, D = 0
+            cost1 += np.bincount(bi, weights=w - A, minlength=nfree)
+            cost1 -= w * np.bincount(bj, minlength=nfree)
+            cost0_add = np.zeros(nfree)
+            # one free, one fixed: unary on the free one
+            for a_col, b_col, mask in ((0, 1, fp & ~fq), (1, 0, fq & ~fp)):
+                pp = pairs[mask]
+                i = pos[pp[:, a_col]]
+                lf = lp_all[pp[:, a_col]]
+                lo = lp_all[pp[:, b_col]]
+                cost0_add += w * np.bincount(i, weights=(lf != lo).astype(np.float64), minlength=nfree)
+                cost1 += w * np.bincount(i, weights=(lo != alpha).astype(np.float64), minlength=nfree)
+            cost0 += cost0_add
+            g = maxflow.Graph[float](nfree, len(both))
+            nodes = g.add_nodes(nfree)
+            if len(both):
+                g.add_edges(nodes[bi], nodes[bj], 2.0 * w - A, np.zeros(len(both)))
+            mn = np.minimum(cost0, cost1)
+            g.add_grid_tedges(np.asarray(nodes), cost1 - mn, cost0 - mn)
+            g.maxflow()
+            switch = np.asarray(g.get_grid_segments(np.asarray(nodes)), dtype=bool)
+            if switch.any():
+                new = labels.copy()
+                new[fidx[switch]] = alpha
+                e_new = _mrf_energy(new, data, pairs, w)
+                if e_new < energy - 1e-9:
+                    labels, energy = new, e_new
+                    changed += int(switch.sum())
+        logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
+        if changed == 0:
+            break
+    return labels
+
+
+def select_views(
+    visibility: VisibilityLike,
+    *,
+    method: str = TextureSettings.selection,
+    seed: int = 0,
+    **options: Any,
+) -> np.ndarray:
+    """Choose one view per face for texturing.
+
+    Parameters
+    ----------
+    visibility : Visibility
+        From :func:`o3d_seqcc.visibility.compute_visibility`; uses ``usable`` (V, F) bool,
+        ``area`` (V, F) projected area in px^2, ``cos_angle`` (V, F) and, for ``"mrf"``, ``mesh``.
+    method : {"mrf", "largest-area", "random"}, default "mrf"
+        See the module docstring and :data:`SELECTION_METHODS`.
+    seed : int, default 0
+        Seed of ``"random"`` and of the expansion order of ``"mrf"``.
+    **options
+        Method options (``"mrf"``: ``smoothness``, ``data_term``, ``max_data_cost``,
+        ``n_sweeps``, ``adjacency``, ``mesh``); unknown ones raise ``TypeError``.
+
+    Returns
+    -------
+    (F,) int64
+        Selected view index per face, always a view where the face is usable; ``-1`` where the
+        face is usable in no view (counted and logged).
+
+    Raises
+    ------
+    ValueError
+        Unknown method (the message lists the valid ones).
+    InputError
+        No face is usable in any view (wrong cameras or mesh, or filters too strict).
+    """
+    if method not in SELECTION_METHODS:
+        raise ValueError(f"unknown selection method {method!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
+    usable = _usable(visibility)
+    if usable.shape[1] == 0 or not usable.any():
+        raise InputError(
+            f"no face of the mesh is usable in any of the {usable.shape[0]} views (outside every image, occluded, "
+            "depth-inconsistent or too oblique): check that the mesh and the cameras are in the same coordinates "
+            "(extrinsic = world-to-camera), or relax the visibility filters"
+        )
+    labels = np.asarray(SELECTION_METHODS[method](visibility, seed=seed, **options), dtype=np.int64)
+    n_unseen = int(np.count_nonzero(labels < 0))
+    if n_unseen:
+        logger.info("select_views(%s): %d of %d faces are seen by no view", method, n_unseen, len(labels))
+    return labels
