@@ -113,7 +113,7 @@ def run_demo(
     res = run(out / "scene" / "scene.json", reference=scene.names[0], mappings="dense", t_npm=t_npm,
               compare_original=True)
     run_dir = out / "run"
-    res.save(run_dir, save_images=True)
+    res.save(run_dir, overwrite=True, save_images=True)
     timings["run"] = time.perf_counter() - t
     t = time.perf_counter()
     rows, per_view = [], []

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-__all__ = ["InputError"]
+import warnings
+
+__all__ = ["InputError", "O3dSeqccWarning", "warn"]
 
 
 class InputError(ValueError):
@@ -10,3 +12,12 @@ class InputError(ValueError):
 
     The message always names the offending file or view and says how to fix it.
     """
+
+
+class O3dSeqccWarning(UserWarning):
+    """A result that works but is worse than it could be (views left uncorrected, depth that disagrees, ...)."""
+
+
+def warn(message: str, *, stacklevel: int = 3) -> None:
+    """Emit an :class:`O3dSeqccWarning` once (the command line routes warnings to its log, so it is shown once)."""
+    warnings.warn(message, O3dSeqccWarning, stacklevel=stacklevel)

@@ -32,6 +32,7 @@ from .errors import InputError
 from .export import FORMATS, export_textured_mesh
 from .io.files import atomic_write_bytes, write_image, write_json
 from .io.load import load_scene, save_scene
+from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import evaluate
@@ -61,7 +62,7 @@ def parse_formats(formats: str | Iterable[str]) -> list[str]:
 
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
     if isinstance(scene, Scene):
-        return scene if mesh is None else Scene(Path(mesh), scene.views)
+        return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
     return load_scene(scene, mesh=mesh)
 
 
@@ -158,17 +159,21 @@ class RunResult:
         self,
         out: str | os.PathLike,
         *,
+        overwrite: bool = False,
         formats: str | Iterable[str] = DEFAULT_FORMATS,
         save_images: bool = False,
         selection_view: str | int | None = None,
         unlit: bool = False,
     ) -> dict[str, str]:
-        """Write the textured mesh, the selection and ``report.json`` into the folder ``out``.
+        """Write the textured mesh, the selection and ``report.json`` as the folder ``out``, all at once.
 
         Parameters
         ----------
         out : path-like
-            Output folder (created; files in it with the same names are replaced).
+            Output folder, written as a whole (:func:`o3d_seqcc.io.output.output_folder`: staged,
+            then swapped in); it may not hold any input of the scene.
+        overwrite : bool, default False
+            Replace an earlier output of o3d_seqcc in ``out`` (never a folder with other files).
         formats : str or iterable, default ("glb", "obj")
             Export formats among ``glb``, ``obj``, ``ply``.
         save_images : bool, default False
@@ -185,26 +190,30 @@ class RunResult:
             Kind -> written path (also in the report's ``files``).
         """
         fmts = parse_formats(formats)
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
+        view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
+        if view is not None:
+            self.scene.index(view)
         t = time.perf_counter()
-        picture = None
-        if selection_view is None or str(selection_view).lower() != "none":
-            picture = write_selection_picture(self.scene, self.visibility, self.selection, out / "selection.png",
-                                              selection_view)
-        written = {k: str(v) for k, v in export_textured_mesh(self.textured, out, formats=fmts, unlit=unlit).items()}
-        buf = io.BytesIO()
-        np.save(buf, self.selection)
-        atomic_write_bytes(out / "selection.npy", buf.getvalue())
-        if picture is not None:
-            written["selection_png"] = str(picture[0])
-        if save_images:
-            for v, img in zip(self.scene.views, self.images):
-                write_image(out / "images" / f"{v.name}.png", img)
-            written["images"] = str(out / "images")
-        self.timings["export"] = time.perf_counter() - t
-        write_json(out / "report.json", self.report(written, picture_view=None if picture is None else picture[1]))
-        return written
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage:
+            picture = None
+            if selection_view is None or view is not None:
+                picture = write_selection_picture(self.scene, self.visibility, self.selection,
+                                                  stage / "selection.png", view)
+            written = {k: Path(v) for k, v in export_textured_mesh(self.textured, stage, formats=fmts,
+                                                                    unlit=unlit).items()}
+            buf = io.BytesIO()
+            np.save(buf, self.selection)
+            atomic_write_bytes(stage / "selection.npy", buf.getvalue())
+            if picture is not None:
+                written["selection_png"] = picture[0]
+            if save_images:
+                for v, img in zip(self.scene.views, self.images):
+                    write_image(stage / "images" / f"{v.name}.png", img)
+                written["images"] = stage / "images"
+            written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
+            self.timings["export"] = time.perf_counter() - t
+            write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1]))
+        return written_out
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
@@ -330,7 +339,7 @@ def run(
     source = str(scene) if not isinstance(scene, Scene) else ""
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
-    check_method(method)
+    check_method(method, t_npm=t_npm)
     if mappings not in MODES:
         raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
     s = _settings(settings, texture_options)
@@ -384,21 +393,23 @@ class CorrectionRun:
     originals: list
     report: dict
 
-    def save(self, out: str | os.PathLike) -> Path:
+    def save(self, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write ``out/images/<view>.png``, ``out/scene.json`` (pointing at them) and ``out/report.json``.
 
-        The folder ``out`` is created if needed and filled as it is. Returns ``out``.
+        The folder is written as a whole (:func:`o3d_seqcc.io.output.output_folder`: staged, then
+        swapped in; it may not hold any input of the scene); ``overwrite`` replaces an earlier
+        output of o3d_seqcc there. Returns ``out``.
         """
-        out = Path(out)
         t = time.perf_counter()
-        paths = []
-        for v, img in zip(self.scene.views, self.result.images):
-            paths.append(write_image(out / "images" / f"{v.name}.png", img))
-        rep = dict(self.report)
-        rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
-        save_scene(self.scene.replace_images(paths), out / "scene.json")
-        write_json(out / "report.json", rep)
-        return out
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage:
+            paths = [write_image(stage / "images" / f"{v.name}.png", img)
+                     for v, img in zip(self.scene.views, self.result.images)]
+            rep = dict(self.report)
+            rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
+            # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
+            save_scene(self.scene.replace_images(paths), stage / "scene.json")
+            write_json(stage / "report.json", rep)
+        return Path(out)
 
 
 def correct_scene(
@@ -427,7 +438,7 @@ def correct_scene(
     -------
     CorrectionRun
     """
-    check_method(method)
+    check_method(method, t_npm=t_npm)
     if mappings not in MODES:
         raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
     sc = _as_scene(scene, mesh)

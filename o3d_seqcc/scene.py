@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .io.files import read_depth, read_image
+from .io.files import check_image_file, read_depth, read_image
 from .meshops import face_normals
 from .errors import InputError
 
@@ -41,10 +41,15 @@ FORMAT = "o3d_seqcc.scene/1"
 PRIMESENSE_INTRINSIC = np.array([[525.0, 0.0, 319.5], [0.0, 525.0, 239.5], [0.0, 0.0, 1.0]])
 
 _RIGID_TOL = 1e-4
+#: longest view name (names become output file names)
+MAX_NAME_LENGTH = 120
 
 
 def _frozen_array(a: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarray:
-    arr = np.array(a, dtype=np.float64, copy=True)
+    try:
+        arr = np.array(a, dtype=np.float64, copy=True)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a {'x'.join(map(str, shape))} array of numbers") from None
     if arr.shape != shape:
         raise InputError(f"{what} must have shape {shape}, got {arr.shape}")
     arr.setflags(write=False)
@@ -145,11 +150,14 @@ class View:
     point_cloud: Path | None = None
 
     def __post_init__(self) -> None:
-        where = f"view {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
-            raise InputError(f"view name must be a non-empty string, got {self.name!r}")
-        if any(c in self.name for c in '/\\:*?"<>|') or self.name in (".", ".."):
-            raise InputError(f"{where}: name is used as a file name; avoid / \\ : * ? \" < > |")
+            raise InputError(f"view name must be a non-empty string, got {self.name!r:.80}")
+        where = f"view {self.name!r:.80}"
+        if any(c in self.name for c in '/\\:*?"<>|') or self.name in (".", "..") or any(ord(c) < 32 for c in self.name):
+            raise InputError(f"{where}: name is used as a file name; avoid / \\ : * ? \" < > | and control characters")
+        if len(self.name) > MAX_NAME_LENGTH:
+            raise InputError(f"{where}: name is {len(self.name)} characters long; at most {MAX_NAME_LENGTH} (it names "
+                             "output files)")
         object.__setattr__(self, "image", Path(self.image))
         object.__setattr__(self, "depth", None if self.depth is None else Path(self.depth))
         object.__setattr__(self, "point_cloud", None if self.point_cloud is None else Path(self.point_cloud))
@@ -159,7 +167,7 @@ class View:
         _check_extrinsic(self.extrinsic, where)
         try:
             w, h = int(self.width), int(self.height)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"{where}: width/height must be integers") from None
         if w <= 0 or h <= 0 or w != self.width or h != self.height:
             raise InputError(f"{where}: width/height must be positive integers, got {self.width}x{self.height}")
@@ -322,9 +330,11 @@ class Scene:
 
     mesh: Path
     views: tuple[View, ...] = field(default_factory=tuple)
+    source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mesh", Path(self.mesh))
+        object.__setattr__(self, "source", None if self.source is None else Path(self.source))
         object.__setattr__(self, "views", tuple(self.views))
         if not self.views:
             raise InputError("scene has no views; add at least one registered image")
@@ -365,13 +375,20 @@ class Scene:
         """The mesh as arrays (see :func:`load_mesh`)."""
         return load_mesh(self.mesh)
 
+    def input_paths(self) -> list[Path]:
+        """Every file the scene reads: its source (manifest, project, model folder), mesh, images, depth, point clouds."""
+        paths = [self.mesh] + ([self.source] if self.source is not None else [])
+        for v in self.views:
+            paths += [p for p in (v.image, v.depth, v.point_cloud) if p is not None]
+        return paths
+
     def replace_images(self, images: Sequence[str | os.PathLike]) -> "Scene":
         """A copy whose views point at other image files (same cameras)."""
         if len(images) != len(self.views):
             raise ValueError("one image per view is needed")
         from dataclasses import replace
 
-        return Scene(self.mesh, tuple(replace(v, image=Path(p)) for v, p in zip(self.views, images)))
+        return Scene(self.mesh, tuple(replace(v, image=Path(p)) for v, p in zip(self.views, images)), source=self.source)
 
     def validate(self, *, check_images: bool = True) -> None:
         """Check that every referenced file exists and images have the declared size and type.
@@ -389,25 +406,10 @@ class Scene:
 
 
 def _check_image_header(v: View) -> None:
-    from PIL import Image, UnidentifiedImageError
-
-    if not v.image.is_file():
-        raise InputError(f"view {v.name!r}: image not found: {v.image} (check the path in the scene file)")
     try:
-        with Image.open(v.image) as im:
-            size, mode = im.size, im.mode
-    except (UnidentifiedImageError, OSError) as e:
-        raise InputError(f"view {v.name!r}: cannot read image {v.image}: {e}; re-save it as PNG or JPEG") from None
-    if mode in ("L", "I;16", "I;16B", "I", "F", "1", "LA", "P", "PA"):
-        # palette images may still be colour; let OpenCV decide on load
-        if mode not in ("P", "PA"):
-            kind = "grey-scale" if "A" not in mode else "grey-scale with alpha"
-            raise InputError(f"view {v.name!r}: image {v.image} is {kind}; colour correction needs RGB images")
-    if mode in ("RGBA", "RGBa", "LA", "PA"):
-        raise InputError(
-            f"view {v.name!r}: image {v.image} has an alpha channel; save it as 3-channel RGB "
-            "(e.g. `convert in.png -alpha off out.png`)"
-        )
+        size = check_image_file(v.image)[:2]
+    except InputError as e:
+        raise InputError(f"view {v.name!r}: {e}") from None
     if size != (v.width, v.height):
         raise InputError(
             f"view {v.name!r}: image {v.image} is {size[0]}x{size[1]} but the scene says {v.width}x{v.height}; "

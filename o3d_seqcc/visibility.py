@@ -37,7 +37,6 @@ import logging
 import math
 import os
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
@@ -45,7 +44,7 @@ import numpy as np
 
 from .camera import project_columns, project_points
 from .depthmaps import depth_edges, depth_from_point_cloud, load_point_cloud
-from .errors import InputError
+from .errors import InputError, warn
 from .meshops import oriented_face_normals
 from .occlusion import occluded_faces
 from .scene import Mesh, load_mesh
@@ -431,8 +430,7 @@ def compute_visibility(
                     f"max({opts['depth_atol']}, {opts['depth_tol']:.0%} of depth); is it registered to the mesh "
                     "(same units / depth_scale, same pose)?"
                 )
-                logger.warning(msg)
-                warnings.warn(msg, stacklevel=2)
+                warn(msg)
         elif "depth" in filters:
             logger.info("view %r has neither a depth map nor a point cloud: depth-consistency filter skipped", view.name)
         per_view.append(entry)
@@ -442,8 +440,7 @@ def compute_visibility(
     nothing = [views[v].name for v in range(V) if not valid[v].any()]
     for name in nothing:
         msg = f"view {name!r} sees no face of the mesh entirely (wrong pose, or looking away?); it gets no mappings"
-        logger.warning(msg)
-        warnings.warn(msg, stacklevel=2)
+        warn(msg)
     if V and not valid.any():
         raise InputError(
             f"no overlap: none of the {V} views sees a whole face of the mesh {getattr(scene, 'mesh', '')}; "

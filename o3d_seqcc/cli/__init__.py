@@ -11,11 +11,27 @@ import argparse
 import importlib
 import logging
 import sys
+from contextlib import contextmanager
+from typing import Iterator
 
 from ..errors import InputError
 
 # sub-command modules, in the order --help lists them
 COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate", "texture", "run", "demo", "synthetic")
+
+
+def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
+    """Options accepted before or after the command (``o3d-seqcc -q run ...`` and ``o3d-seqcc run ... -q``)."""
+    from ..io.files import MAX_IMAGE_PIXELS
+
+    d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
+    p.add_argument("-v", "--verbose", action="count", default=d(0),
+                   help="more log output: -v the library's progress messages, -vv debug")
+    p.add_argument("-q", "--quiet", action="store_true", default=d(False), help="only errors")
+    p.add_argument("-j", "--jobs", type=int, default=d(-1),
+                   help="parallel workers (joblib threads) for per-view and per-edge work (default -1: all cores)")
+    p.add_argument("--max-image-pixels", type=int, default=d(MAX_IMAGE_PIXELS), metavar="N",
+                   help=f"refuse images with more pixels than N before decoding them (default {MAX_IMAGE_PIXELS})")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,12 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Sequential pairwise colour correction and texture mapping of registered photos onto a mesh.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
-    parser.add_argument(
-        "-j", "--jobs", type=int, default=-1,
-        help="parallel workers (joblib threads) for per-view and per-edge work (default -1: all cores)",
-    )
+    _add_global_options(parser, suppress=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
@@ -40,28 +51,67 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=doc.split("\n", 1)[0].rstrip("."), description=doc,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
+        _add_global_options(p, suppress=True)
         p.set_defaults(func=mod.run)
     return parser
 
 
+@contextmanager
+def _logging(verbose: int, quiet: bool) -> Iterator[None]:
+    """Our log lines on stderr for the duration of a command, then the logging state as it was.
+
+    The package's loggers at WARNING (default), INFO (-v), DEBUG (-vv) or ERROR (-q); third-party
+    loggers untouched (WARNING, Python's default); library warnings
+    (:class:`~o3d_seqcc.errors.O3dSeqccWarning`) routed through logging so they show once.
+    """
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    saved = []
+    for name, lvl in (("o3d_seqcc", level), ("py.warnings", max(level, logging.WARNING))):
+        lg = logging.getLogger(name)
+        saved.append((lg, lg.level, lg.propagate))
+        lg.setLevel(lvl)
+        lg.propagate = False
+        lg.addHandler(handler)
+    logging.captureWarnings(True)
+    try:
+        yield
+    finally:
+        logging.captureWarnings(False)
+        for lg, lvl, prop in saved:
+            lg.removeHandler(handler)
+            lg.setLevel(lvl)
+            lg.propagate = prop
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # argparse: --help (0) or a usage error (2, message already printed)
-        return int(e.code or 0)
-    level = logging.WARNING if args.quiet else (logging.INFO if args.verbose <= 1 else logging.DEBUG)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
-    from joblib import parallel_config
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # argparse: --help (0) or a usage error (2, message already printed)
+            return int(e.code or 0)
+        from joblib import parallel_config
 
-    try:
-        with parallel_config(n_jobs=args.jobs):
-            return int(args.func(args) or 0)
-    except InputError as e:
-        print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        from ..io.files import set_max_image_pixels
+
+        try:
+            old = set_max_image_pixels(args.max_image_pixels)
+            try:
+                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs):
+                    return int(args.func(args) or 0)
+            finally:
+                set_max_image_pixels(old)
+        except InputError as e:
+            print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
+            return 2
+        except OSError as e:
+            print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
+            return 1
     except KeyboardInterrupt:
+        print("o3d-seqcc: interrupted", file=sys.stderr)
         return 130
 
 

@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ..correction import available_methods
-from ..errors import InputError
 from ..export import FORMATS
 from ..io.load import load_scene
+from ..io.output import check_output
 from ..mappings import MODES
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import FALLBACKS, OVERFLOWS
@@ -96,15 +96,10 @@ def texture_settings_from_args(args: argparse.Namespace) -> TextureSettings:
     return TextureSettings(**{f.name: getattr(args, f.name) for f in fields(TextureSettings) if hasattr(args, f.name)})
 
 
-def prepare_out_dir(out: str | Path, overwrite: bool) -> Path:
-    """Check ``out`` before any work: refuse (InputError) an existing one without ``overwrite``."""
-    out = Path(out)
-    if out.exists():
-        if not out.is_dir():
-            raise InputError(f"--out {out} exists and is not a folder; choose another path")
-        if not overwrite and any(out.iterdir()):
-            raise InputError(f"output folder {out} exists; choose another --out or pass --overwrite")
-    return out
+def prepare_out_dir(args: argparse.Namespace, scene) -> Path:
+    """Check ``--out`` against the scene's inputs before any work (:func:`o3d_seqcc.io.output.check_output`)."""
+    check_output(args.out, overwrite=args.overwrite, inputs=scene.input_paths())
+    return Path(args.out)
 
 
 def library_default(fn: Callable) -> dict[str, Any]:

@@ -15,18 +15,16 @@ from __future__ import annotations
 import argparse
 
 from ..graph import WEIGHTS
-from ..io.output import staged_folder
 from ..pipeline import correct_scene
-from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir
+from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, scene_from_args
 
 
 def run(args: argparse.Namespace) -> int:
-    out = prepare_out_dir(args.out, args.overwrite)
-    job = correct_scene(args.scene, mesh=args.mesh, reference=args.reference, method=args.method, t_npm=args.t_npm,
-                        mappings=args.mappings, graph_weight=args.graph_weight, seed=args.seed,
-                        metrics=not args.no_metrics)
-    with staged_folder(out) as stage:
-        job.save(stage)
+    scene = scene_from_args(args)
+    out = prepare_out_dir(args, scene)
+    job = correct_scene(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
+                        graph_weight=args.graph_weight, seed=args.seed, metrics=not args.no_metrics)
+    job.save(out, overwrite=args.overwrite)
     r, names = job.result, job.scene.names
     print(f"corrected {len(names)} views with {r.method} toward {names[r.reference]} "
           f"({len(r.graph_edges)} graph edges, {len(r.unreachable)} unreachable) -> {out}")

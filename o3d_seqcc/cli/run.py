@@ -10,21 +10,23 @@ timings).
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from .. import pipeline
 from .common import add_correction_arguments, add_scene_arguments, add_texture_arguments, prepare_out_dir, \
-    print_run_summary, texture_settings_from_args
+    print_run_summary, scene_from_args, texture_settings_from_args
 
 
 def run(args: argparse.Namespace) -> int:
     pipeline.parse_formats(args.format)
     settings = texture_settings_from_args(args)
-    out = prepare_out_dir(args.out, args.overwrite)
-    res = pipeline.run(args.scene, mesh=args.mesh, reference=args.reference, method=args.method, t_npm=args.t_npm,
-                       mappings=args.mappings, settings=settings, seams=args.seams,
-                       compare_original=args.compare_original)
-    res.save(out, formats=args.format, save_images=args.save_images, selection_view=args.selection_view,
-             unlit=args.unlit)
+    scene = scene_from_args(args)
+    out = prepare_out_dir(args, scene)
+    res = pipeline.run(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
+                       settings=settings, seams=args.seams, compare_original=args.compare_original)
+    res = replace(res, source=args.scene)
+    res.save(out, overwrite=args.overwrite, formats=args.format, save_images=args.save_images,
+             selection_view=args.selection_view, unlit=args.unlit)
     print_run_summary(res, out)
     return 0
 

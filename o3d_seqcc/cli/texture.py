@@ -20,14 +20,12 @@ from .common import add_scene_arguments, add_texture_arguments, prepare_out_dir,
 def run(args: argparse.Namespace) -> int:
     pipeline.parse_formats(args.format)
     settings = texture_settings_from_args(args)
-    out = prepare_out_dir(args.out, args.overwrite)
-    if args.images:
-        scene = scene_from_args(args)
-        res = pipeline.texture(scene, images=read_view_images(scene, args.images), settings=settings, seams=args.seams)
-        res = replace(res, source=args.scene, images_from=str(args.images))
-    else:
-        res = pipeline.texture(args.scene, mesh=args.mesh, settings=settings, seams=args.seams)
-    res.save(out, formats=args.format, selection_view=args.selection_view, unlit=args.unlit)
+    scene = scene_from_args(args)
+    out = prepare_out_dir(args, scene)
+    images = read_view_images(scene, args.images) if args.images else None
+    res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams)
+    res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
+    res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view, unlit=args.unlit)
     print_run_summary(res, out)
     return 0
 

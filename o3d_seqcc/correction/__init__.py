@@ -20,12 +20,11 @@ from __future__ import annotations
 
 import logging
 import time
-import warnings
 from typing import Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, warn
 from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
 from ..imageops import img_as_dtype, img_as_float
 from ..scene import resolve_view
@@ -49,10 +48,12 @@ __all__ = ["METHODS", "CorrectionContext", "CorrectionResult", "FunctionTransfor
 logger = logging.getLogger(__name__)
 
 
-def check_method(method: str) -> None:
-    """Raise ``InputError`` listing the valid names when ``method`` is not a registered method."""
+def check_method(method: str, *, t_npm: int = 400) -> None:
+    """Raise ``InputError`` for an unknown ``method`` (listing the valid names) or a ``t_npm`` below 1."""
     if method not in METHODS:
         raise InputError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
+    if isinstance(t_npm, bool) or not isinstance(t_npm, (int, np.integer)) or t_npm < 1:
+        raise InputError(f"t_npm must be a positive integer (minimum pairwise mappings for a graph edge), got {t_npm!r}")
 
 
 def _check_images(images: Sequence[np.ndarray], names: list[str], sizes: list[tuple[int, int]] | None) -> list[np.ndarray]:
@@ -135,6 +136,7 @@ def correct(
     """
     if method not in METHODS:
         raise ValueError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
+    check_method(method, t_npm=t_npm)
     fn = METHODS[method]
     check_options(fn, method, options)
     if scene is None:
@@ -201,8 +203,7 @@ def correct(
             f"{len(unreachable)} view(s) have no colour-correction path to the reference {names[ref]!r} and stay "
             f"unchanged: {', '.join(names[v] for v in unreachable)} (graph has several components; lower t_npm to join them)"
         )
-        logger.warning(msg)
-        warnings.warn(msg, stacklevel=2)
+        warn(msg)
     timings["graph"] = time.perf_counter() - t0
 
     ctx = CorrectionContext(

@@ -19,7 +19,9 @@ from ..errors import InputError
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "MAX_IMAGE_PIXELS",
     "atomic_path",
+    "check_image_file",
     "atomic_write_bytes",
     "default_mode",
     "find_file",
@@ -27,6 +29,7 @@ __all__ = [
     "read_depth",
     "read_image",
     "read_view_images",
+    "set_max_image_pixels",
     "write_image",
     "write_json",
 ]
@@ -105,6 +108,96 @@ def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> 
     return atomic_write_bytes(path, (text + "\n").encode("utf-8"))
 
 
+#: images with more pixels than this are refused before they are decoded (a decompression bomb, or
+#: a photo far larger than texturing needs); change it with :func:`set_max_image_pixels`
+MAX_IMAGE_PIXELS = 100_000_000
+
+_GREY_MODES = ("L", "I;16", "I;16B", "I;16L", "I", "F", "1", "LA")
+_ALPHA_MODES = ("RGBA", "RGBa", "LA", "PA")
+
+
+def set_max_image_pixels(n: int) -> int:
+    """Set the pixel budget of :func:`check_image_file` (and every image read); returns the previous one."""
+    global MAX_IMAGE_PIXELS
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InputError(f"max_image_pixels must be a positive integer, got {n!r}")
+    old, MAX_IMAGE_PIXELS = MAX_IMAGE_PIXELS, int(n)
+    return old
+
+
+def _check_complete(path: Path, head: bytes) -> None:
+    """Refuse JPEG / PNG files cut short (no end-of-image marker / IEND chunk): decoders fill the rest with grey."""
+    if head.startswith(b"\xff\xd8"):
+        marker, kind = b"\xff\xd9", "JPEG end-of-image marker"
+    elif head.startswith(b"\x89PNG"):
+        marker, kind = b"IEND", "PNG IEND chunk"
+    else:
+        return
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - 65536))
+        tail = f.read()
+    if marker not in tail:
+        raise InputError(f"image {path} is truncated (no {kind}: the file was cut short, e.g. by an interrupted "
+                         "copy or download); copy or export it again")
+
+
+def _pixels(n: int) -> str:
+    return f"{n / 1e6:.0f} Mpx" if n >= 10**6 else f"{n} pixels"
+
+
+def check_image_file(path: str | os.PathLike) -> tuple[int, int, str]:
+    """Check an image file from its header, without decoding it.
+
+    Returns
+    -------
+    (width, height, mode)
+        Pillow's mode (``"RGB"``, ``"I;16"``, ...).
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable, more than :data:`MAX_IMAGE_PIXELS` pixels (before decoding: a
+        decompression bomb is never decoded), truncated JPEG / PNG, grey-scale, alpha channel.
+    """
+    import warnings
+
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"image not found: {path} (check the path in the scene file)")
+    pillow_limit = Image.MAX_IMAGE_PIXELS
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            Image.MAX_IMAGE_PIXELS = None  # only the header is read here; our own budget is checked below
+            with open(path, "rb") as fh:
+                head = fh.read(16)
+                fh.seek(0)
+                with Image.open(fh) as im:
+                    (w, h), mode = im.size, im.mode
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as e:
+        raise InputError(f"cannot read image {path}: {e}; re-save it as PNG or JPEG") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = pillow_limit
+    if w * h > MAX_IMAGE_PIXELS:
+        raise InputError(
+            f"image {path} is {w}x{h} = {_pixels(w * h)}, over the limit of {_pixels(MAX_IMAGE_PIXELS)} "
+            "(a decompression bomb, or far more than texturing needs); downscale it, or raise the limit with "
+            "--max-image-pixels"
+        )
+    _check_complete(path, head)
+    if mode in _GREY_MODES:
+        kind = "grey-scale with alpha" if "A" in mode else "grey-scale"
+        raise InputError(f"image {path} is {kind}; colour correction needs RGB images "
+                         "(convert it, e.g. cv2.cvtColor(img, cv2.COLOR_GRAY2RGB), and save as RGB)")
+    if mode in _ALPHA_MODES:
+        raise InputError(f"image {path} has an alpha channel; save it as 3-channel RGB "
+                         "(e.g. `convert in.png -alpha off out.png` or drop the 4th channel with numpy)")
+    return int(w), int(h), str(mode)
+
+
 def read_image(path: str | os.PathLike, *, allow_16bit: bool = True) -> np.ndarray:
     """Read an RGB image.
 
@@ -123,12 +216,12 @@ def read_image(path: str | os.PathLike, *, allow_16bit: bool = True) -> np.ndarr
     Raises
     ------
     InputError
-        Missing or unreadable file, grey-scale image, image with an alpha channel, or an
-        unsupported bit depth; the message names the file and the fix.
+        Missing, unreadable, too large (:data:`MAX_IMAGE_PIXELS`) or truncated file, grey-scale
+        image, image with an alpha channel, or an unsupported bit depth; the message names the
+        file and the fix.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"image not found: {path} (check the path in the scene file)")
+    check_image_file(path)
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(f"cannot read image {path}: not an image OpenCV can decode (re-save it as PNG or JPEG)")

@@ -129,6 +129,7 @@ def load_scene(
             raise InputError(f"{name}= does not apply to {fmt.description} ({p}); drop it")
         options[name] = value
     scene = fmt.load(target, **options)
+    scene = Scene(scene.mesh, scene.views, source=target)
     if validate:
         scene.validate()
     return scene

@@ -120,6 +120,8 @@ def _floats(attrs: dict[str, str], key: str, n: int, where: str) -> np.ndarray:
         raise InputError(f"{where}: VCGCamera {key}={attrs[key]!r} is not numeric") from None
     if len(vals) < n:
         raise InputError(f"{where}: VCGCamera {key} needs {n} numbers, got {attrs[key]!r}")
+    if not np.all(np.isfinite(vals[:n])):
+        raise InputError(f"{where}: VCGCamera {key}={attrs[key]!r} holds NaN or infinite values")
     return vals[:n]
 
 
