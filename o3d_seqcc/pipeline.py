@@ -28,10 +28,11 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
-from .errors import InputError
+from .errors import InputError, warn
 from .export import FORMATS, export_textured_mesh
 from .io.files import atomic_write_bytes, write_image, write_json
 from .io.load import load_scene, save_scene
+from .io.meshlab import save_mlp
 from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
@@ -206,14 +207,32 @@ class RunResult:
             atomic_write_bytes(stage / "selection.npy", buf.getvalue())
             if picture is not None:
                 written["selection_png"] = picture[0]
+            rasters = None
             if save_images:
-                for v, img in zip(self.scene.views, self.images):
-                    write_image(stage / "images" / f"{v.name}.png", img)
+                rasters = [write_image(stage / "images" / f"{v.name}.png", img)
+                           for v, img in zip(self.scene.views, self.images)]
                 written["images"] = stage / "images"
+            layer = next((written[f] for f in ("obj", "glb", "ply") if f in written), None)
+            project = _meshlab_project(self.scene, stage, mesh=layer, images=rasters)
+            if project is not None:
+                written["meshlab_project"] = project
             written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
             self.timings["export"] = time.perf_counter() - t
             write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1]))
         return written_out
+
+
+def _meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: list | None) -> Path | None:
+    """``folder/project.mlp``: the mesh layer and the rasters, so MeshLab opens the result as it opened the input.
+
+    ``images`` default to the scene's own; a camera MeshLab cannot represent (skew) leaves the
+    project out, with a warning.
+    """
+    try:
+        return save_mlp(scene, folder / "project.mlp", mesh=mesh, images=images)
+    except InputError as e:
+        warn(f"no MeshLab project written: {e}")
+        return None
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
@@ -408,6 +427,7 @@ class CorrectionRun:
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
             save_scene(self.scene.replace_images(paths), stage / "scene.json")
+            _meshlab_project(self.scene, stage, mesh=None, images=paths)
             write_json(stage / "report.json", rep)
         return Path(out)
 
