@@ -12,7 +12,8 @@ set -euo pipefail
 cd "$(dirname "$0")"
 ROOT=$(pwd)
 VENV=${VENV:-$ROOT/.venv}
-APT_PACKAGES=(libusb-1.0-0 libgomp1 libgl1 libegl1 xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm)
+APT_PACKAGES=(libusb-1.0-0 libgomp1 libgl1 libegl1 xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
+              libvulkan1 mesa-vulkan-drivers)
 
 log() { printf '\033[1m[dev.sh]\033[0m %s\n' "$*" >&2; }
 

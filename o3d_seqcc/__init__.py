@@ -88,6 +88,9 @@ _LAZY: dict[str, str] = {
     "render_selection": "render",
     "sharpness": "render",
     "plot_pair": "render",
+    # Open3D front door
+    "correct_images": "open3d_api",
+    "texture_mesh": "open3d_api",
     # the whole job
     "RunResult": "pipeline",
     "run_demo": "demo",
@@ -96,7 +99,7 @@ _LAZY: dict[str, str] = {
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
     "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
-    "jih", "mappings", "meshops", "metrics", "occlusion", "photometric", "pipeline", "render", "scene", "seams",
+    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "scene", "seams",
     "synthetic", "texturing", "visibility",
 })
 

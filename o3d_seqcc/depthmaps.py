@@ -7,14 +7,11 @@ does; :func:`depth_edges` marks the pixels near depth discontinuities.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from .camera import inside_image, pixel_index, project_points
-from .errors import InputError
 
-__all__ = ["depth_edges", "depth_from_point_cloud", "load_point_cloud"]
+__all__ = ["depth_edges", "depth_from_point_cloud"]
 
 
 def depth_from_point_cloud(
@@ -72,19 +69,6 @@ def depth_from_point_cloud(
             filled = cv2.inpaint(D.astype(np.float32), mask, float(inpaint_radius), cv2.INPAINT_NS)
             D = np.where(mask > 0, np.maximum(filled.astype(np.float64), 0.0), D)
     return D
-
-
-def load_point_cloud(path: str | os.PathLike) -> np.ndarray:
-    """(M, 3) float64 points of a point-cloud file (PLY, PCD, ...); raises InputError when empty."""
-    import open3d as o3d
-
-    if not os.path.isfile(path):
-        raise InputError(f"point cloud not found: {path}")
-    pc = o3d.io.read_point_cloud(str(path))
-    pts = np.asarray(pc.points, dtype=np.float64)
-    if len(pts) == 0:
-        raise InputError(f"point cloud {path} has no points (unreadable or empty file); give a PLY/PCD with points")
-    return pts
 
 
 def depth_edges(D: np.ndarray, margin: int, atol: float, rtol: float) -> np.ndarray:

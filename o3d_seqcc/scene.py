@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .io.files import check_image_file, read_depth, read_image
+from .io.files import check_image_file, read_depth, read_image, read_point_cloud
 from .meshops import face_normals
 from .errors import InputError
 
@@ -123,8 +123,8 @@ class View:
     ----------
     name : str
         Unique name, used for output file names.
-    image : pathlib.Path
-        RGB image file (8- or 16-bit).
+    image : pathlib.Path or None
+        RGB image file (8- or 16-bit); None for an in-memory view (``pixels``).
     intrinsic : (3, 3) float64 array
         Pinhole matrix in pixels, pixel centres at integer coordinates.
     extrinsic : (4, 4) float64 array
@@ -137,10 +137,17 @@ class View:
         Depth units per metre.
     point_cloud : pathlib.Path, optional
         Partial point cloud (world coordinates) captured from this view's set-up.
+    pixels : (H, W, 3) uint8 / uint16 array, optional
+        The image in memory, instead of a file (the Open3D front door builds such views);
+        kept read-only, never written to.
+    depth_map : (H, W) float array, optional
+        Depth in metres in memory (0 = missing), instead of a depth file.
+    points : (M, 3) float array, optional
+        Partial point cloud in memory, instead of a file.
     """
 
     name: str
-    image: Path
+    image: Path | None
     intrinsic: np.ndarray
     extrinsic: np.ndarray
     width: int
@@ -148,6 +155,9 @@ class View:
     depth: Path | None = None
     depth_scale: float = 1000.0
     point_cloud: Path | None = None
+    pixels: np.ndarray | None = field(default=None, repr=False)
+    depth_map: np.ndarray | None = field(default=None, repr=False)
+    points: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -158,7 +168,9 @@ class View:
         if len(self.name) > MAX_NAME_LENGTH:
             raise InputError(f"{where}: name is {len(self.name)} characters long; at most {MAX_NAME_LENGTH} (it names "
                              "output files)")
-        object.__setattr__(self, "image", Path(self.image))
+        if self.image is None and self.pixels is None:
+            raise InputError(f"{where}: give an image file (image=) or the pixels in memory (pixels=)")
+        object.__setattr__(self, "image", None if self.image is None else Path(self.image))
         object.__setattr__(self, "depth", None if self.depth is None else Path(self.depth))
         object.__setattr__(self, "point_cloud", None if self.point_cloud is None else Path(self.point_cloud))
         object.__setattr__(self, "intrinsic", _frozen_array(self.intrinsic, (3, 3), f"{where}: intrinsic"))
@@ -177,6 +189,44 @@ class View:
         if not np.isfinite(ds) or ds <= 0:
             raise InputError(f"{where}: depth_scale must be > 0 (units per metre), got {self.depth_scale}")
         object.__setattr__(self, "depth_scale", ds)
+        self._freeze_memory(where)
+
+    def _freeze_memory(self, where: str) -> None:
+        """Check the in-memory arrays against width x height and keep read-only copies."""
+        if self.pixels is not None:
+            px = np.asarray(self.pixels)
+            if px.ndim != 3 or px.shape[2] != 3 or px.shape[:2] != (self.height, self.width):
+                raise InputError(f"{where}: pixels must be ({self.height}, {self.width}, 3) RGB, got shape {px.shape}")
+            if px.dtype not in (np.uint8, np.uint16):
+                raise InputError(f"{where}: pixels must be uint8 or uint16, got {px.dtype} (convert floats with "
+                                 "o3d_seqcc.imageops.img_as_dtype)")
+            px = np.array(px, copy=True)
+            px.setflags(write=False)
+            object.__setattr__(self, "pixels", px)
+        if self.depth_map is not None:
+            d = np.array(self.depth_map, dtype=np.float64, copy=True)
+            if d.shape != (self.height, self.width):
+                raise InputError(f"{where}: depth_map must be ({self.height}, {self.width}) metres, got shape {d.shape}")
+            d[~np.isfinite(d) | (d < 0)] = 0.0
+            d.setflags(write=False)
+            object.__setattr__(self, "depth_map", d)
+        if self.points is not None:
+            p = np.array(self.points, dtype=np.float64, copy=True).reshape(-1, 3)
+            p = p[np.isfinite(p).all(axis=1)]
+            if not len(p):
+                raise InputError(f"{where}: points holds no finite point")
+            p.setflags(write=False)
+            object.__setattr__(self, "points", p)
+
+    @property
+    def in_memory(self) -> bool:
+        """The image is held in memory (``pixels``), not in a file."""
+        return self.pixels is not None
+
+    @property
+    def has_depth(self) -> bool:
+        """A depth map or a point cloud is available for the depth-consistency filter."""
+        return any(x is not None for x in (self.depth, self.depth_map, self.point_cloud, self.points))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, View):
@@ -188,6 +238,8 @@ class View:
             and np.array_equal(self.extrinsic, other.extrinsic)
             and (self.width, self.height, self.depth, self.depth_scale, self.point_cloud)
             == (other.width, other.height, other.depth, other.depth_scale, other.point_cloud)
+            and all(a is b for a, b in zip((self.pixels, self.depth_map, self.points),
+                                           (other.pixels, other.depth_map, other.points)))
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -214,6 +266,8 @@ class View:
 
     def load_image(self) -> np.ndarray:
         """Read the image: (H, W, 3) uint8/uint16 RGB; raises if its size is not width x height."""
+        if self.pixels is not None:
+            return self.pixels
         img = read_image(self.image)
         if img.shape[:2] != (self.height, self.width):
             raise InputError(
@@ -224,9 +278,19 @@ class View:
 
     def load_depth(self) -> np.ndarray | None:
         """Read the depth map in metres ((H, W) float64, 0 = missing), or None without one."""
+        if self.depth_map is not None:
+            return self.depth_map
         if self.depth is None:
             return None
         return read_depth(self.depth, self.depth_scale, shape=(self.height, self.width))
+
+    def load_points(self) -> np.ndarray | None:
+        """The partial point cloud ((M, 3) float64 world points), or None without one."""
+        if self.points is not None:
+            return self.points
+        if self.point_cloud is None:
+            return None
+        return read_point_cloud(self.point_cloud)
 
     def to_open3d(self):
         """This camera as ``open3d.camera.PinholeCameraParameters``."""
@@ -322,18 +386,22 @@ class Scene:
 
     Parameters
     ----------
-    mesh : pathlib.Path
-        Mesh file (PLY, OBJ, ...), world coordinates in metres.
+    mesh : pathlib.Path or Mesh
+        Mesh file (PLY, OBJ, ...), world coordinates in metres, or the mesh in memory.
     views : tuple of View
         Views with unique names.
+    source : pathlib.Path, optional
+        The file or folder the scene was read from (set by :func:`~o3d_seqcc.load_scene`; not
+        part of equality).
     """
 
-    mesh: Path
+    mesh: Path | Mesh
     views: tuple[View, ...] = field(default_factory=tuple)
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "mesh", Path(self.mesh))
+        if not isinstance(self.mesh, Mesh):
+            object.__setattr__(self, "mesh", Path(self.mesh))
         object.__setattr__(self, "source", None if self.source is None else Path(self.source))
         object.__setattr__(self, "views", tuple(self.views))
         if not self.views:
@@ -373,11 +441,16 @@ class Scene:
 
     def load_mesh(self) -> Mesh:
         """The mesh as arrays (see :func:`load_mesh`)."""
-        return load_mesh(self.mesh)
+        return self.mesh if isinstance(self.mesh, Mesh) else load_mesh(self.mesh)
+
+    @property
+    def in_memory(self) -> bool:
+        """The mesh or any image is held in memory rather than in a file."""
+        return isinstance(self.mesh, Mesh) or any(v.in_memory for v in self.views)
 
     def input_paths(self) -> list[Path]:
         """Every file the scene reads: its source (manifest, project, model folder), mesh, images, depth, point clouds."""
-        paths = [self.mesh] + ([self.source] if self.source is not None else [])
+        paths = ([] if isinstance(self.mesh, Mesh) else [self.mesh]) + ([self.source] if self.source else [])
         for v in self.views:
             paths += [p for p in (v.image, v.depth, v.point_cloud) if p is not None]
         return paths
@@ -395,9 +468,9 @@ class Scene:
 
         Reads only image headers (Pillow), not pixels. Raises :class:`InputError`.
         """
-        load_mesh(self.mesh)
+        self.load_mesh()
         for v in self.views:
-            if check_images:
+            if check_images and not v.in_memory:
                 _check_image_header(v)
             if v.depth is not None and not v.depth.is_file():
                 raise InputError(f"view {v.name!r}: depth map not found: {v.depth}")
@@ -427,7 +500,7 @@ def summarise(scene: Scene) -> dict:
         "image_size": sorted({f"{v.width}x{v.height}" for v in scene.views}),
         "with_depth": sum(v.depth is not None for v in scene.views),
         "with_point_cloud": sum(v.point_cloud is not None for v in scene.views),
-        "mesh": str(scene.mesh),
+        "mesh": "(in memory)" if isinstance(scene.mesh, Mesh) else str(scene.mesh),
         "mesh_vertices": int(len(m.vertices)),
         "mesh_faces": int(len(m.faces)),
         "mesh_bounds": [m.vertices.min(0).round(3).tolist(), m.vertices.max(0).round(3).tolist()],

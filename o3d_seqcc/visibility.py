@@ -43,7 +43,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from .camera import project_columns, project_points
-from .depthmaps import depth_edges, depth_from_point_cloud, load_point_cloud
+from .depthmaps import depth_edges, depth_from_point_cloud
 from .errors import InputError, warn
 from .meshops import oriented_face_normals
 from .occlusion import occluded_faces
@@ -204,15 +204,14 @@ def _per_view(view, i: int, g: _Geometry, opts, res: dict[str, np.ndarray]) -> d
     }
     if "depth" not in opts["filters"]:
         return out
-    D = None
-    if view.depth is not None:
-        D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
+    D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
+    if D is not None:
         out["depth_source"] = "depth"
-    elif view.point_cloud is not None:
-        D = depth_from_point_cloud(
-            load_point_cloud(view.point_cloud), view.intrinsic, view.extrinsic, W, H, fill_radius=opts["fill_radius"]
-        )
-        out["depth_source"] = "point_cloud"
+    else:
+        points = view.load_points()
+        if points is not None:
+            D = depth_from_point_cloud(points, view.intrinsic, view.extrinsic, W, H, fill_radius=opts["fill_radius"])
+            out["depth_source"] = "point_cloud"
     if D is None:
         return out
     vid = np.flatnonzero(inside)
@@ -423,7 +422,7 @@ def compute_visibility(
             frac = float(p["vertex_depth_bad"][vert].mean()) if n_known else 0.0
             entry["depth_disagreement"] = frac
             if n_known >= 30 and frac > opts["max_depth_disagreement"]:
-                src = view.depth if p["depth_source"] == "depth" else view.point_cloud
+                src = (view.depth if p["depth_source"] == "depth" else view.point_cloud) or "(in memory)"
                 msg = (
                     f"view {view.name!r}: {frac:.0%} of the visible mesh vertices disagree with its "
                     f"{p['depth_source'].replace('_', ' ')} {src} by more than "
@@ -435,6 +434,10 @@ def compute_visibility(
             logger.info("view %r has neither a depth map nor a point cloud: depth-consistency filter skipped", view.name)
         per_view.append(entry)
     timings["depth-compare"] = time.perf_counter() - t3
+    if "depth" in filters and V and not any(v.has_depth for v in views):
+        warn("no view has a depth map or a point cloud: the depth-consistency filter is off, so surfaces hidden "
+             "from a camera by geometry the mesh lacks may be mapped wrongly; give depth maps (--depth-dir, "
+             "load_scene(..., depth_dir=)) when you have them")
 
     usable = valid & ~occluded & ~depth_bad & ~oblique
     nothing = [views[v].name for v in range(V) if not valid[v].any()]

@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
+from o3d_seqcc.gltf_validator import find_validator, validate_glb
 from o3d_seqcc.export import export_glb, export_obj, export_ply, export_textured_mesh, glb_bytes
 from o3d_seqcc.texturing import TexturedMesh
 
@@ -103,32 +100,6 @@ def test_glb_layout(textured):
     assert "KHR_materials_unlit" in unlit["materials"][0]["extensions"]
 
 
-def _validator_dir() -> Path | None:
-    """Folder holding node_modules/gltf-validator: $GLTF_VALIDATOR_DIR (dev.sh: .cache/node), the repo, npm's global root."""
-    cands = [os.environ.get("GLTF_VALIDATOR_DIR"), str(Path(__file__).resolve().parents[1] / ".cache" / "node")]
-    npm = shutil.which("npm")
-    if npm:
-        try:
-            root = subprocess.run([npm, "root", "-g"], capture_output=True, text=True, timeout=30).stdout.strip()
-            if root:
-                cands.append(str(Path(root).parent))
-        except (subprocess.SubprocessError, OSError):
-            pass
-    for c in cands:
-        if c and (Path(c) / "node_modules" / "gltf-validator" / "package.json").is_file():
-            return Path(c).resolve()
-    return None
-
-
-VALIDATE_JS = """
-const fs = require('fs');
-const validator = require(process.argv[3] + '/node_modules/gltf-validator');
-validator.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), {maxIssues: 100}).then(
-  (r) => console.log(JSON.stringify(r.issues)),
-  (e) => { console.error(String(e)); process.exit(3); });
-"""
-
-
 def _baked(rng) -> TexturedMesh:
     """A real bake: a 6 x 6 grid seen by two cameras, one face seen by none (fallback colour)."""
     from types import SimpleNamespace
@@ -157,20 +128,12 @@ def _baked(rng) -> TexturedMesh:
 
 
 def test_glb_passes_khronos_validator(tmp_path, textured, rng):
-    node = shutil.which("node")
-    if node is None:
-        pytest.skip("Node.js not installed (CI: apt-get install nodejs npm)")
-    vdir = _validator_dir()
-    if vdir is None:
-        pytest.skip("npm package gltf-validator not found (npm install --prefix $GLTF_VALIDATOR_DIR gltf-validator)")
-    (tmp_path / "v.js").write_text(VALIDATE_JS)
+    if find_validator() is None:
+        pytest.skip("Node.js or the npm package gltf-validator is missing (./dev.sh setup installs both)")
     baked = _baked(rng)
     assert baked.stats["unseen_faces"] == 1
     for k, (tm, unlit) in enumerate(((textured, False), (textured, True), (baked, False))):
-        path = export_glb(tm, tmp_path / f"m{k}.glb", unlit=unlit)
-        r = subprocess.run([node, str(tmp_path / "v.js"), str(path), str(vdir)], capture_output=True, text=True, timeout=120)
-        assert r.returncode == 0, r.stderr
-        issues = json.loads(r.stdout)
+        issues = validate_glb(export_glb(tm, tmp_path / f"m{k}.glb", unlit=unlit))
         assert issues["numErrors"] == 0, issues["messages"]
         assert issues["numWarnings"] == 0, issues["messages"]
 

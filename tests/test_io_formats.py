@@ -12,6 +12,7 @@ import open3d as o3d
 import pycolmap
 import pytest
 
+import o3d_seqcc as sc
 from o3d_seqcc import InputError, Scene, View, load_scene
 from o3d_seqcc.camera import project_points
 from o3d_seqcc.cli import main
@@ -202,3 +203,23 @@ def test_loader_table_checks(tmp_path, colmap_model):
         load_scene(root / "sparse_txt", mesh=mesh, intrinsic=np.eye(3))
     scene = load_scene(root / "sparse_txt", format="colmap", mesh=mesh, image_dir=root / "images")
     assert len(scene) == 3
+
+
+def test_mlp_without_depth_warns_and_depth_dir_turns_the_filter_on(tmp_path):
+    syn = sc.make_synthetic_scene(tmp_path / "S", n_views=3, width=64, height=48, seed=0, cell_size=0.3)
+    mlp = save_mlp(syn.scene, tmp_path / "project.mlp")
+    scene = load_scene(mlp)
+    assert not any(v.has_depth for v in scene.views)
+    with pytest.warns(sc.errors.O3dSeqccWarning, match="depth-consistency filter is off"):
+        sc.compute_visibility(scene)
+    with_depth = load_scene(mlp, depth_dir=tmp_path / "S" / "depth")
+    assert [v.depth.name for v in with_depth.views] == ["v00.png", "v01.png", "v02.png"]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", sc.errors.O3dSeqccWarning)
+        vis = sc.compute_visibility(with_depth)
+    assert vis.stats["depth_inconsistent"] > 0  # the depth filter ran (and the room's occluders trip it)
+    with pytest.raises(InputError, match="no depth map for view 'v00'"):
+        load_scene(mlp, depth_dir=tmp_path)
+    assert main(["-q", "info", str(mlp), "--depth-dir", str(tmp_path / "S" / "depth")]) == 0

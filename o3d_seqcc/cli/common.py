@@ -35,11 +35,15 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene.json (or its folder), a MeshLab .mlp, Meshroom cameras.sfm, an Open3D RGB-D "
                    "folder, or a COLMAP model folder (text or binary)")
     p.add_argument("--mesh", help="mesh file (required for RGB-D folders, COLMAP and Meshroom; overrides the others')")
+    p.add_argument("--depth-dir", help="folder of depth maps named after the views, for scenes without depth (MeshLab "
+                   "projects, COLMAP, Meshroom): turns the depth-consistency filter on")
+    p.add_argument("--depth-scale", type=float, default=1000.0,
+                   help="depth units per metre of the --depth-dir maps (default 1000: millimetres)")
 
 
 def scene_from_args(args: argparse.Namespace):
     """The scene named on the command line (validated)."""
-    return load_scene(args.scene, mesh=args.mesh)
+    return load_scene(args.scene, mesh=args.mesh, depth_dir=args.depth_dir, depth_scale=args.depth_scale)
 
 
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:

@@ -28,6 +28,7 @@ __all__ = [
     "to_jsonable",
     "read_depth",
     "read_image",
+    "read_point_cloud",
     "read_view_images",
     "set_max_image_pixels",
     "write_image",
@@ -338,3 +339,16 @@ def find_file(path: Path, *, name: str, suffix: str) -> Path | None:
     if path.is_dir():
         return path / name if (path / name).is_file() else None
     return path if path.is_file() and path.suffix.lower() == suffix else None
+
+
+def read_point_cloud(path: str | os.PathLike) -> np.ndarray:
+    """(M, 3) float64 points of a point-cloud file (PLY, PCD, ...); raises InputError when empty."""
+    import open3d as o3d
+
+    if not os.path.isfile(path):
+        raise InputError(f"point cloud not found: {path}")
+    pc = o3d.io.read_point_cloud(str(path))
+    pts = np.asarray(pc.points, dtype=np.float64)
+    if len(pts) == 0:
+        raise InputError(f"point cloud {path} has no points (unreadable or empty file); give a PLY/PCD with points")
+    return pts

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import inspect
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from ..errors import InputError
-from ..scene import Scene
+from ..scene import Scene, View
 from . import colmap, meshlab, meshroom, rgbd_folder, scene_json
 from .files import find_file
 
@@ -69,6 +69,8 @@ def load_scene(
     format: str = "auto",
     intrinsic: np.ndarray | None = None,
     image_dir: str | os.PathLike | None = None,
+    depth_dir: str | os.PathLike | None = None,
+    depth_scale: float = 1000.0,
     validate: bool = True,
 ) -> Scene:
     """Load a scene, detecting its format.
@@ -87,6 +89,12 @@ def load_scene(
         RGB-D folders only; default PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5).
     image_dir : path-like, optional
         COLMAP and Meshroom only: folder of the images.
+    depth_dir : path-like, optional
+        Folder of depth maps registered to the images, for the views that have none (MeshLab
+        projects, COLMAP and Meshroom models carry no depth): ``<view name>.png`` or the image's
+        file name with a depth extension (``.png``, ``.tif``, ``.tiff``, ``.exr``).
+    depth_scale : float, default 1000.0
+        Units per metre of the depth maps of ``depth_dir`` (1000: millimetres).
     validate : bool, default True
         Check files, image headers (size, grey, alpha) and the mesh now rather than later.
 
@@ -129,10 +137,29 @@ def load_scene(
             raise InputError(f"{name}= does not apply to {fmt.description} ({p}); drop it")
         options[name] = value
     scene = fmt.load(target, **options)
-    scene = Scene(scene.mesh, scene.views, source=target)
+    views = scene.views if depth_dir is None else _with_depth(scene.views, Path(depth_dir), depth_scale)
+    scene = Scene(scene.mesh, views, source=target)
     if validate:
         scene.validate()
     return scene
+
+
+def _with_depth(views: tuple[View, ...], folder: Path, depth_scale: float) -> tuple[View, ...]:
+    """The views with a depth map from ``folder`` where they have none (named after the view or its image)."""
+    if not folder.is_dir():
+        raise InputError(f"depth_dir {folder} is not a folder")
+    out = []
+    for v in views:
+        if v.depth is not None:
+            out.append(v)
+            continue
+        stems = [v.name] + ([v.image.stem] if v.image is not None else [])
+        cands = [folder / f"{s}{ext}" for s in stems for ext in (".png", ".tif", ".tiff", ".exr")]
+        found = next((c for c in cands if c.is_file()), None)
+        if found is None:
+            raise InputError(f"depth_dir {folder}: no depth map for view {v.name!r} (expected {v.name}.png)")
+        out.append(replace(v, depth=found, depth_scale=depth_scale))
+    return tuple(out)
 
 
 def save_scene(scene: Scene, path: str | os.PathLike) -> Path:

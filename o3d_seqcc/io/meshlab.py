@@ -229,9 +229,13 @@ def save_mlp(
     path = Path(path)
     root = path.parent
     root.mkdir(parents=True, exist_ok=True)
+    if mesh is None and not isinstance(scene.mesh, Path):
+        raise InputError("the scene's mesh is in memory: give the mesh file of the project (mesh=)")
     mesh_path = Path(mesh) if mesh is not None else scene.mesh
     if images is not None and len(images) != len(scene.views):
         raise InputError(f"images: {len(images)} given for {len(scene.views)} views; give one image per view")
+    if images is None and any(v.image is None for v in scene.views):
+        raise InputError("the scene's images are in memory: give the image files of the rasters (images=)")
     proj = ET.Element("MeshLabProject")
     group = ET.SubElement(proj, "MeshGroup")
     m = ET.SubElement(group, "MLMesh", label=mesh_path.name, filename=_rel(mesh_path, root), visible="1")

@@ -161,6 +161,10 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
         The manifest path.
     """
     path = Path(path)
+    if scene.in_memory:
+        raise InputError(f"cannot save an in-memory scene as {path}: its mesh or images have no files; write them "
+                         "first (o3d_seqcc.io.files.write_image, open3d.io.write_triangle_mesh) and build the scene "
+                         "from the files")
     root = path.parent
     root.mkdir(parents=True, exist_ok=True)
     views = []

@@ -1,0 +1,306 @@
+"""The Open3D front door: Open3D objects in, Open3D objects out.
+
+Called the way Open3D's own ``TriangleMesh.project_images_to_albedo`` and
+``color_map.run_rigid_optimizer`` are::
+
+    import open3d as o3d
+    import o3d_seqcc
+
+    traj = o3d.io.read_pinhole_camera_trajectory("scene/key.log")
+    images = [o3d.io.read_image(p) for p in image_paths]
+    mesh = o3d.io.read_triangle_mesh("mesh.ply")
+    corrected = o3d_seqcc.correct_images(mesh, images, traj)          # list of o3d.geometry.Image
+    textured = o3d_seqcc.texture_mesh(mesh, images, traj)             # o3d.t.geometry.TriangleMesh
+    o3d.visualization.draw(textured)
+
+Accepted inputs (checked before any work; a wrong type or size raises
+:class:`~o3d_seqcc.errors.InputError` naming the argument and what it should be):
+
+- ``mesh``: ``o3d.geometry.TriangleMesh`` or ``o3d.t.geometry.TriangleMesh``;
+- ``images``: a list of ``o3d.geometry.Image``, ``o3d.t.geometry.Image`` or (H, W, 3) arrays,
+  uint8, uint16 or float in [0, 1]; corrected images come back in the type (and dtype) that
+  came in;
+- ``cameras``: an ``o3d.camera.PinholeCameraTrajectory``, a list of
+  ``o3d.camera.PinholeCameraParameters``, or ``(intrinsic_matrices, extrinsic_matrices)`` as
+  ``project_images_to_albedo`` takes them ((3, 3) and (4, 4) world-to-camera, arrays or tensors);
+- ``depths``: optional, one per image: Open3D depth images (uint16 in ``depth_scale`` units per
+  metre, or float metres), ``o3d.geometry.RGBDImage`` (its float depth in metres), point clouds
+  (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays.
+
+Everything runs in memory (an in-memory :class:`~o3d_seqcc.scene.Scene`): nothing is written.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Sequence
+
+import numpy as np
+
+from . import pipeline
+from .errors import InputError
+from .imageops import img_as_dtype
+from .meshops import vertex_normals
+from .scene import Mesh, Scene, View
+
+__all__ = ["correct_images", "scene_from_open3d", "texture_mesh"]
+
+logger = logging.getLogger(__name__)
+
+
+def _mesh(mesh: Any) -> Mesh:
+    import open3d as o3d
+
+    if isinstance(mesh, o3d.geometry.TriangleMesh):
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.triangles, dtype=np.int64)
+        n = np.asarray(mesh.vertex_normals, dtype=np.float64) if mesh.has_vertex_normals() else None
+    elif isinstance(mesh, o3d.t.geometry.TriangleMesh):
+        if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
+            raise InputError("mesh: the o3d.t.geometry.TriangleMesh has no vertex positions or triangle indices")
+        v = mesh.vertex.positions.numpy().astype(np.float64)
+        f = mesh.triangle.indices.numpy().astype(np.int64)
+        n = mesh.vertex.normals.numpy().astype(np.float64) if "normals" in mesh.vertex else None
+    else:
+        raise InputError(f"mesh must be an o3d.geometry.TriangleMesh or o3d.t.geometry.TriangleMesh, got "
+                         f"{type(mesh).__name__}")
+    if len(f) == 0 or v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"mesh has no triangles ({len(v)} vertices, {len(f)} triangles); give a triangle mesh")
+    if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
+        raise InputError("mesh has non-finite vertices or triangle indices outside the vertex array; clean it first")
+    n = vertex_normals(v, f, n)
+    for a in (v, f, n):
+        a.setflags(write=False)
+    return Mesh(vertices=v, faces=f, vertex_normals=n)
+
+
+def _to_array(img: Any, where: str) -> np.ndarray:
+    import open3d as o3d
+
+    if isinstance(img, o3d.geometry.Image):
+        return np.asarray(img)
+    if isinstance(img, o3d.t.geometry.Image):
+        return img.as_tensor().cpu().numpy()
+    if isinstance(img, np.ndarray):
+        return img
+    raise InputError(f"{where} must be an o3d.geometry.Image, o3d.t.geometry.Image or numpy array, got "
+                     f"{type(img).__name__}")
+
+
+def _image(img: Any, i: int) -> tuple[np.ndarray, np.dtype]:
+    """(H, W, 3) uint8/uint16 pixels of image ``i`` and the dtype it came in."""
+    a = _to_array(img, f"images[{i}]")
+    if a.ndim == 3 and a.shape[2] == 4:
+        raise InputError(f"images[{i}] has an alpha channel; give (H, W, 3) RGB images")
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise InputError(f"images[{i}] has shape {a.shape}; give (H, W, 3) RGB images (not grey or depth images)")
+    dtype = a.dtype
+    if dtype in (np.uint8, np.uint16):
+        return np.ascontiguousarray(a), dtype
+    if np.issubdtype(dtype, np.floating):
+        return img_as_dtype(a, np.uint16), dtype  # 16 bits keep a float image's precision
+    raise InputError(f"images[{i}] has dtype {dtype}; give uint8, uint16 or float images in [0, 1]")
+
+
+def _cameras(cameras: Any, n: int, sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(intrinsic (3, 3), extrinsic (4, 4)) per image."""
+    import open3d as o3d
+
+    if isinstance(cameras, o3d.camera.PinholeCameraTrajectory):
+        cameras = list(cameras.parameters)
+    if isinstance(cameras, tuple) and len(cameras) == 2:
+        Ks, Es = cameras
+        try:
+            Ks = [np.asarray(k.numpy() if hasattr(k, "numpy") else k, dtype=np.float64) for k in Ks]
+            Es = [np.asarray(e.numpy() if hasattr(e, "numpy") else e, dtype=np.float64) for e in Es]
+        except (TypeError, ValueError):
+            raise InputError("cameras: (intrinsic_matrices, extrinsic_matrices) must hold (3, 3) and (4, 4) numeric "
+                             "matrices") from None
+        out = list(zip(Ks, Es))
+        if len(Ks) != len(Es):
+            raise InputError(f"cameras: {len(Ks)} intrinsic matrices but {len(Es)} extrinsic matrices")
+    elif isinstance(cameras, (list, tuple)) and all(isinstance(c, o3d.camera.PinholeCameraParameters) for c in cameras):
+        out = []
+        for i, c in enumerate(cameras):
+            w, h = c.intrinsic.width, c.intrinsic.height
+            if (w, h) != (0, 0) and i < len(sizes) and (w, h) != sizes[i]:
+                raise InputError(f"cameras[{i}] is for {w}x{h} images but images[{i}] is {sizes[i][0]}x{sizes[i][1]}")
+            out.append((np.asarray(c.intrinsic.intrinsic_matrix, dtype=np.float64), np.asarray(c.extrinsic, np.float64)))
+    else:
+        raise InputError(
+            "cameras must be an o3d.camera.PinholeCameraTrajectory, a list of o3d.camera.PinholeCameraParameters, "
+            f"or (intrinsic_matrices, extrinsic_matrices); got {type(cameras).__name__}"
+        )
+    if len(out) != n:
+        raise InputError(f"cameras: {len(out)} cameras for {n} images; give one camera per image")
+    for i, (K, E) in enumerate(out):
+        if K.shape != (3, 3) or E.shape != (4, 4):
+            raise InputError(f"cameras[{i}]: intrinsic must be (3, 3) and extrinsic (4, 4), got {K.shape}, {E.shape}")
+    return out
+
+
+def _depth(d: Any, i: int, size: tuple[int, int], depth_scale: float) -> dict[str, np.ndarray]:
+    """``{"depth_map": (H, W) metres}`` or ``{"points": (M, 3)}`` for ``depths[i]``."""
+    import open3d as o3d
+
+    if isinstance(d, o3d.geometry.PointCloud):
+        return {"points": np.asarray(d.points)}
+    if isinstance(d, o3d.t.geometry.PointCloud):
+        return {"points": d.point.positions.numpy()}
+    w, h = size
+    if isinstance(d, o3d.geometry.RGBDImage):
+        a, scale = np.asarray(d.depth), 1.0  # Open3D stores RGB-D depth as float metres
+    else:
+        a = _to_array(d, f"depths[{i}]")
+        if a.ndim == 2 and a.shape[1] == 3 and a.shape != (h, w):
+            return {"points": a}  # an (M, 3) array of world points
+        if a.ndim == 3 and a.shape[2] == 1:
+            a = a[..., 0]
+        scale = 1.0 if np.issubdtype(a.dtype, np.floating) else float(depth_scale)
+    if a.shape != (h, w):
+        raise InputError(f"depths[{i}] has shape {a.shape}; give a ({h}, {w}) depth image, an RGBDImage or a point "
+                         "cloud")
+    return {"depth_map": a.astype(np.float64) / scale}
+
+
+def scene_from_open3d(
+    mesh: Any, images: Sequence[Any], cameras: Any, *, depths: Sequence[Any] | None = None, depth_scale: float = 1000.0,
+    names: Sequence[str] | None = None,
+) -> tuple[Scene, list[np.dtype]]:
+    """An in-memory :class:`~o3d_seqcc.scene.Scene` from Open3D objects (see the module docstring).
+
+    Returns
+    -------
+    (Scene, list of numpy.dtype)
+        The scene, and the dtype each image came in (to give the corrected ones back the same way).
+    """
+    if isinstance(images, (str, bytes)) or not isinstance(images, Sequence) or not len(images):
+        raise InputError(f"images must be a non-empty list of images, got {type(images).__name__}")
+    pix = [_image(im, i) for i, im in enumerate(images)]
+    sizes = [(p.shape[1], p.shape[0]) for p, _ in pix]
+    cams = _cameras(cameras, len(pix), sizes)
+    if depths is not None and len(depths) != len(pix):
+        raise InputError(f"depths: {len(depths)} given for {len(pix)} images; give one per image (or None)")
+    names = [f"{i:03d}" for i in range(len(pix))] if names is None else [str(n) for n in names]
+    if len(names) != len(pix):
+        raise InputError(f"names: {len(names)} given for {len(pix)} images")
+    views = []
+    for i, ((p, _), (K, E), name) in enumerate(zip(pix, cams, names)):
+        extra = {} if depths is None or depths[i] is None else _depth(depths[i], i, sizes[i], depth_scale)
+        try:
+            views.append(View(name=name, image=None, pixels=p, intrinsic=K, extrinsic=E, width=sizes[i][0],
+                              height=sizes[i][1], **extra))
+        except InputError as e:
+            raise InputError(f"images[{i}] / cameras[{i}]: {e}") from None
+    return Scene(mesh=_mesh(mesh), views=tuple(views)), [d for _, d in pix]
+
+
+def _like(original: Any, pixels: np.ndarray, dtype: np.dtype) -> Any:
+    """``pixels`` in the type of ``original`` (Open3D legacy / tensor image or array) and its dtype."""
+    import open3d as o3d
+
+    if np.issubdtype(dtype, np.floating):
+        pixels = (pixels.astype(np.float64) / 65535.0).astype(dtype)
+    out = np.ascontiguousarray(pixels)
+    if isinstance(original, o3d.geometry.Image):
+        return o3d.geometry.Image(out)
+    if isinstance(original, o3d.t.geometry.Image):
+        return o3d.t.geometry.Image(o3d.core.Tensor(out))
+    return out
+
+
+def correct_images(
+    mesh: Any,
+    images: Sequence[Any],
+    cameras: Any,
+    *,
+    depths: Sequence[Any] | None = None,
+    reference: str | int = "auto",
+    method: str = "seqcc",
+    t_npm: int = 400,
+    mappings: str = "vertices",
+    depth_scale: float = 1000.0,
+    return_report: bool = False,
+) -> list | tuple[list, dict]:
+    """Colour-correct registered images of a mesh toward a reference view (sequential pairwise correction).
+
+    Parameters
+    ----------
+    mesh, images, cameras, depths
+        Open3D objects or arrays (see the module docstring).
+    reference : str or int, default "auto"
+        Index of the reference image, or ``"auto"`` (the view with the smallest total path cost).
+    method : str, default "seqcc"
+        A colour-correction method (:data:`o3d_seqcc.correction.METHODS`).
+    t_npm : int, default 400
+        Minimum pairwise mappings (vertex units) for a graph edge.
+    mappings : {"vertices", "dense"}, default "vertices"
+    depth_scale : float, default 1000.0
+        Units per metre of integer depth images.
+    return_report : bool, default False
+        Also return the correction report (graph edges, paths, unreachable views, per-pair
+        PSNR / CIEDE2000 before and after, per-view lookup tables, timings).
+
+    Returns
+    -------
+    list, or (list, dict)
+        The corrected images, in the type and dtype each came in.
+    """
+    scene, dtypes = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
+    job = pipeline.correct_scene(scene, reference=reference, method=method, t_npm=t_npm, mappings=mappings,
+                                 metrics=return_report)
+    out = [_like(orig, px, dt) for orig, px, dt in zip(images, job.result.images, dtypes)]
+    return (out, job.report) if return_report else out
+
+
+def texture_mesh(
+    mesh: Any,
+    images: Sequence[Any],
+    cameras: Any,
+    *,
+    depths: Sequence[Any] | None = None,
+    correct: bool = True,
+    selection: str = "mrf",
+    atlas_size: int = 2048,
+    reference: str | int = "auto",
+    method: str = "seqcc",
+    t_npm: int = 400,
+    depth_scale: float = 1000.0,
+    return_result: bool = False,
+    **texture_options: Any,
+):
+    """Texture a mesh from registered images: colour correction (optional), one image per face, an atlas.
+
+    Parameters
+    ----------
+    mesh, images, cameras, depths
+        Open3D objects or arrays (see the module docstring).
+    correct : bool, default True
+        Colour-correct the images first (``reference``, ``method``, ``t_npm`` as in
+        :func:`correct_images`); False textures with the images as they are.
+    selection : {"mrf", "largest-area", "random"}, default "mrf"
+        Per-face image selection.
+    atlas_size : int, default 2048
+        Side of the texture atlas in texels.
+    depth_scale : float, default 1000.0
+    return_result : bool, default False
+        Also return the :class:`~o3d_seqcc.pipeline.RunResult` (selection, seams, timings, and
+        ``.save(out)`` to write OBJ/GLB and the report).
+    **texture_options
+        Other fields of :class:`~o3d_seqcc.texturing.TextureSettings`.
+
+    Returns
+    -------
+    open3d.t.geometry.TriangleMesh, or (mesh, RunResult)
+        ``vertex.positions``, ``vertex.normals``, ``triangle.indices``, ``triangle.texture_uvs``
+        and the atlas as the ``albedo`` map of its material: ``o3d.visualization.draw`` shows it
+        textured and ``o3d.t.io.write_triangle_mesh`` writes it.
+    """
+    scene, _ = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
+    options = dict(selection=selection, atlas_size=atlas_size, **texture_options)
+    if correct:
+        res = pipeline.run(scene, reference=reference, method=method, t_npm=t_npm, **options)
+    else:
+        res = pipeline.texture(scene, **options)
+    out = res.textured.to_open3d()
+    return (out, res) if return_result else out
