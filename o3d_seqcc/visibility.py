@@ -47,6 +47,7 @@ from .depthmaps import depth_edges, depth_from_point_cloud
 from .errors import InputError, warn
 from .meshops import oriented_face_normals
 from .occlusion import occluded_faces
+from .progress import track
 from .scene import Mesh, load_mesh
 
 __all__ = [
@@ -387,9 +388,9 @@ def compute_visibility(
         "oblique": np.zeros((V, F), bool),
         "back": np.zeros((V, F), bool),
     }
-    per = Parallel(n_jobs=n_jobs, prefer="threads", require="sharedmem")(
-        delayed(_per_view)(view, i, geom, opts, res) for i, view in enumerate(views)
-    )
+    per = list(track(Parallel(n_jobs=n_jobs, prefer="threads", require="sharedmem", return_as="generator")(
+        delayed(_per_view)(view, i, geom, opts, res) for i, view in enumerate(views)), desc="visibility", total=V,
+        unit="view"))
     timings["project+depth"] = time.perf_counter() - t1
 
     valid, back = res["valid"], res["back"]

@@ -96,11 +96,13 @@ def main(argv: list[str] | None = None) -> int:
         from joblib import parallel_config
 
         from ..io.files import set_max_image_pixels
+        from ..progress import show_progress
 
         try:
             old = set_max_image_pixels(args.max_image_pixels)
             try:
-                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs):
+                bars = sys.stderr.isatty() and not args.quiet
+                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs), show_progress(bars):
                     return int(args.func(args) or 0)
             finally:
                 set_max_image_pixels(old)

@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..luts import compose_luts
+from ..progress import track
 from ..errors import InputError
 from ..imageops import img_as_dtype, sample_colors
 
@@ -277,7 +278,8 @@ def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, 
 
     paths = [ctx.paths.get(v) for v in range(len(ctx.images))]
     edges = list(dict.fromkeys((t, s) for p in paths if p is not None for t, s in zip(p[:-1], p[1:])))
-    made = Parallel(n_jobs=n_jobs, prefer="threads")(delayed(make_step)(t, s) for t, s in edges)
+    made = list(track(Parallel(n_jobs=n_jobs, prefer="threads", return_as="generator")(
+        delayed(make_step)(t, s) for t, s in edges), desc="fit edges", total=len(edges), unit="edge"))
     cache = dict(zip(edges, made))
     logger.debug("fitted %d directed edge(s) for %d path(s)", len(cache), len(ctx.paths))
     return [

@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import InputError
 from ..imageops import img_as_uint8
 from ..meshops import face_adjacency, vertex_normals, weld_vertices
+from ..progress import steps
 from .fallback import fallback_blocks
 from .leveling import apply_corner_offsets, leveling_corner_offsets, local_seam_leveling
 from .settings import TextureSettings, VisibilityLike
@@ -372,18 +373,27 @@ def bake_texture(
         beyond ``max_atlas_size``, or a selection where no face is seen.
     """
     s = (settings or TextureSettings()).updated(**options) if options else (settings or TextureSettings())
+    with steps("bake", 6) as step:
+        return _bake(mesh, views_images, visibility, selection, s, adjacency, step)
+
+
+def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:
     t0 = time.perf_counter()
+    step("charts")
     verts, faces, uv_all, labels, fuv = _check(mesh, views_images, visibility, selection)
     images = [img_as_uint8(im, where=f"image of view {i}") for i, im in enumerate(views_images)]
     adjacency = face_adjacency(faces, verts) if adjacency is None else np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
     ch = _make_charts(images, uv_all, verts, faces, labels, adjacency, s)
+    step("pack")
     lay = _layout(images, fuv, labels, ch, s)
     t_pack = time.perf_counter()
+    step("copy texels")
     tex, covered, region = _gather(images, ch, lay, int(s.padding), s.leveling or s.local_leveling)
     t_bake = time.perf_counter()
     new_faces, v_orig, txy = _output_vertices(uv_all, faces, ch, lay, len(verts))
     seen = labels >= 0
     lev_stats = ch.leveling
+    step("seam leveling")
     if s.leveling:
         fs = np.flatnonzero(seen)
         tex, st = apply_corner_offsets(tex, region, txy, new_faces[fs], ch.corner_offsets[fs], ch.face_chart[fs],
@@ -393,6 +403,7 @@ def bake_texture(
                     lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
                     lev_stats["seam_step_after"], lev_stats["time_solve_s"] + lev_stats["time_apply_s"])
     local_stats = None
+    step("local seam leveling")
     if s.local_leveling and int(s.padding) < 1:
         logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(s.padding))
     elif s.local_leveling:
@@ -401,6 +412,7 @@ def bake_texture(
         logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
                     local_stats["seam_edges"], local_stats["mean_abs_diff"], local_stats["texels_changed"],
                     local_stats["time_s"])
+    step("gutters")
     if s.fill_background and not covered.all():
         tex = push_pull_fill(tex, covered)
     t_end = time.perf_counter()

@@ -1,0 +1,74 @@
+"""Progress reporting: the library marks its long loops, the command line decides whether to show them.
+
+Library code wraps the loops that can take more than a second in :func:`track` (an iterable)
+or :func:`steps` (named steps of one stage); nothing is shown unless a caller turned progress
+on with :func:`show_progress` (the ``o3d-seqcc`` command does when stderr is a terminal and
+``-q`` is not given). Bars are tqdm's, on stderr, and vanish when done.
+"""
+
+from __future__ import annotations
+
+import contextvars
+import shutil
+import sys
+from contextlib import contextmanager
+from typing import Iterable, Iterator, TypeVar
+
+__all__ = ["show_progress", "steps", "track"]
+
+T = TypeVar("T")
+
+_ENABLED: contextvars.ContextVar[bool] = contextvars.ContextVar("o3d_seqcc_progress", default=False)
+
+
+@contextmanager
+def show_progress(enabled: bool = True) -> Iterator[None]:
+    """Show progress bars for the library's long loops inside the ``with`` block."""
+    token = _ENABLED.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _ENABLED.reset(token)
+
+
+def _size() -> dict[str, int]:
+    """The terminal's size for tqdm (100 x 24 when it reports none, e.g. a fresh pseudo-terminal)."""
+    size = shutil.get_terminal_size((100, 24))
+    return {"ncols": size.columns, "nrows": size.lines}
+
+
+def track(iterable: Iterable[T], *, desc: str, total: int | None = None, unit: str = "it") -> Iterable[T]:
+    """``iterable`` itself, or wrapped in a progress bar when progress is shown."""
+    if not _ENABLED.get():
+        return iterable
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, unit=unit, leave=False, file=sys.stderr, **_size())
+
+
+class _Steps:
+    def __init__(self, bar) -> None:
+        self._bar = bar
+
+    def __call__(self, name: str) -> None:
+        """Start the step ``name`` (the previous one is done)."""
+        if self._bar is not None:
+            if self._bar.n or self._bar.postfix:
+                self._bar.update(1)
+            self._bar.set_postfix_str(name, refresh=True)
+
+
+@contextmanager
+def steps(desc: str, total: int) -> Iterator[_Steps]:
+    """A stage of ``total`` named steps; call the yielded object with each step's name as it starts."""
+    if not _ENABLED.get():
+        yield _Steps(None)
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="step", leave=False, file=sys.stderr, **_size())
+    try:
+        yield _Steps(bar)
+        bar.update(total - bar.n)
+    finally:
+        bar.close()
