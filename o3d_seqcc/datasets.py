@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -56,8 +57,12 @@ def fountain(
         try:
             data = o3d.data.SampleFountainRGBDImages()
         except Exception as e:  # network failures surface as RuntimeError in Open3D
+            text = re.sub(r"\x1b\[[0-9;]*m", "", str(e))
+            reason = text.split(":")[-1].strip() or type(e).__name__
             raise InputError(
-                f"could not get Open3D's SampleFountainRGBDImages ({e}); pass root= a local copy of the folder"
+                f"could not download Open3D's SampleFountainRGBDImages (offline?): {reason[:120]}; put a copy of the set (image/, depth/, scene/key.log, "
+                "a mesh in scene/) in a folder and pass it as root= (--data-root DIR), or let Open3D download it "
+                "into ~/open3d_data once online"
             ) from None
         root = Path(data.extract_dir if hasattr(data, "extract_dir") else Path(data.color_paths[0]).parents[1])
         if mesh is None and hasattr(data, "reconstruction_path"):
@@ -73,6 +78,7 @@ def fountain(
     if rgbd_folder.detect(root) is None:
         raise InputError(f"{root}: not an Open3D RGB-D folder (needs image/ and scene/key.log)")
     scene = rgbd_folder.load(root, mesh=mesh, intrinsic=intrinsic)
+    scene = Scene(scene.mesh, scene.views, source=root)
     scene.validate()
     logger.info("fountain: %d views, mesh %s", len(scene.views), scene.mesh)
     return scene

@@ -1,10 +1,11 @@
-"""The whole job on the built-in synthetic scene, scored against its ground truth (``o3d-seqcc demo``).
+"""The whole job on a built-in scene (``o3d-seqcc demo``).
 
-:func:`run_demo` generates the synthetic room (:func:`o3d_seqcc.synthetic.make_synthetic_scene`,
-reused when an identical one is already there), runs :func:`o3d_seqcc.pipeline.run` on it
-toward the unchanged view ``v00`` (dense mappings, seams also measured with the uncorrected
-images) and measures the mean CIEDE2000 between each view and its ground-truth render over the
-pixels the mesh covers, before and after correction.
+:func:`run_demo` generates the synthetic room (:func:`o3d_seqcc.synthetic.make_synthetic_scene`
+with :data:`DEMO_SCENE`: cameras looking up and down, a mesh of what they see; reused when an
+identical one is already there), runs :func:`o3d_seqcc.pipeline.run` on it toward the unchanged
+view ``v00`` (dense mappings, seams also measured with the uncorrected images) and measures the
+mean CIEDE2000 between each view and its ground-truth render over the pixels the mesh covers,
+before and after correction. ``dataset="fountain"`` runs the real Fountain set instead.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from .errors import InputError
 from .io.files import write_json
 from .metrics import image_delta_e
 from .pipeline import RunResult, run
+from .datasets import fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
 
 __all__ = ["DemoResult", "run_demo"]
@@ -30,7 +32,11 @@ __all__ = ["DemoResult", "run_demo"]
 logger = logging.getLogger(__name__)
 
 #: options of make_synthetic_scene the demo passes through, and their defaults
-_SCENE_KEYS = ("n_views", "width", "height", "seed", "photometric", "cell_size")
+_SCENE_KEYS = ("n_views", "width", "height", "seed", "photometric", "cell_size", "layout", "seen_only")
+#: the demo's synthetic room: cameras looking up and down, a mesh of what they see (as a scan's)
+DEMO_SCENE = {"n_views": 16, "layout": "two-rings", "seen_only": True}
+#: datasets of the demo
+DATASETS = ("synthetic", "fountain")
 _SCENE_DEFAULTS = {n: p.default for n, p in inspect.signature(make_synthetic_scene).parameters.items()}
 
 
@@ -43,7 +49,8 @@ class DemoResult:
     out : pathlib.Path
         The demo folder: ``scene/`` (the synthetic scene), ``run/`` (the outputs of the run),
         ``demo_summary.json``.
-    synthetic : SyntheticScene
+    synthetic : SyntheticScene or None
+        The synthetic scene (None for the fountain).
     result : RunResult
     summary : dict
         ``synthetic``, ``load``, ``summary`` (per-view photometric changes), ``run`` and
@@ -52,7 +59,7 @@ class DemoResult:
     """
 
     out: Path
-    synthetic: SyntheticScene
+    synthetic: SyntheticScene | None
     result: RunResult
     summary: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
@@ -72,21 +79,35 @@ def _generate(out: Path, params: dict[str, Any], overwrite: bool) -> tuple[Synth
 
 
 def run_demo(
-    out: str | os.PathLike = "out/demo", *, t_npm: int = 400, overwrite: bool = False, **scene_options: Any
+    out: str | os.PathLike = "out/demo",
+    *,
+    dataset: str = "synthetic",
+    data_root: str | os.PathLike | None = None,
+    t_npm: int = 400,
+    overwrite: bool = False,
+    **scene_options: Any,
 ) -> DemoResult:
-    """Generate (or reuse) the synthetic scene, run the whole job on it, score it against the ground truth.
+    """The whole job on a built-in scene, with what it did (and, on the synthetic room, its error to the truth).
 
     Parameters
     ----------
     out : path-like, default "out/demo"
-        Demo folder.
+        Demo folder: ``scene/`` (the synthetic scene), ``run/`` (the job's outputs),
+        ``demo_summary.json``.
+    dataset : {"synthetic", "fountain"}, default "synthetic"
+        The synthetic room (generated, or reused when identical; scored against its ground-truth
+        renders), or the real Fountain set (:func:`o3d_seqcc.datasets.fountain`: ``data_root``,
+        else Open3D's download).
+    data_root : path-like, optional
+        Fountain only: a local copy of the set.
     t_npm : int, default 400
         Minimum pairwise mappings (vertex units) for a graph edge.
     overwrite : bool, default False
-        Regenerate the scene and replace the outputs of an earlier demo.
+        Regenerate the synthetic scene.
     **scene_options
-        Options of :func:`~o3d_seqcc.synthetic.make_synthetic_scene` (``n_views``, ``width``,
-        ``height``, ``seed``, ``photometric``, ``cell_size``); its defaults otherwise.
+        Synthetic only: options of :func:`~o3d_seqcc.synthetic.make_synthetic_scene` (``n_views``,
+        ``width``, ``height``, ``seed``, ``photometric``, ``cell_size``, ``layout``,
+        ``seen_only``); default :data:`DEMO_SCENE`, else the generator's defaults.
 
     Returns
     -------
@@ -95,29 +116,61 @@ def run_demo(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} is a file; give a folder")
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    params = {**{k: v for k, v in _SCENE_DEFAULTS.items() if k in _SCENE_KEYS}, **scene_options}
+    if dataset not in DATASETS:
+        raise InputError(f"unknown demo dataset {dataset!r}; valid: {', '.join(DATASETS)}")
     unknown = sorted(set(scene_options) - set(_SCENE_KEYS))
     if unknown:
         raise TypeError(f"run_demo got unknown option(s) {unknown}; valid: {sorted(_SCENE_KEYS)}")
-    syn, reused = _generate(out / "scene", params, overwrite)
-    scene = syn.scene
-    timings["synthetic"] = time.perf_counter() - t0
-    summary: dict[str, Any] = {"synthetic": {"folder": str(out / "scene"), "reused": reused}}
+    if dataset == "fountain" and scene_options:
+        raise TypeError(f"scene options {sorted(scene_options)} apply to the synthetic dataset only")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    syn = None
+    if dataset == "synthetic":
+        params = {**{k: v for k, v in _SCENE_DEFAULTS.items() if k in _SCENE_KEYS}, **DEMO_SCENE, **scene_options}
+        syn, reused = _generate(out / "scene", params, overwrite)
+        scene, source = syn.scene, out / "scene" / "scene.json"
+        summary: dict[str, Any] = {"synthetic": {"folder": str(out / "scene"), "reused": reused}}
+        run_options = {"reference": scene.names[0], "mappings": "dense", "compare_original": True}
+    else:
+        scene = fountain(data_root)
+        source = scene.source or scene.mesh
+        summary = {"dataset": {"name": "fountain", "folder": str(Path(scene.views[0].image).parents[1])}}
+        run_options = {"reference": "auto"}
+    timings["scene"] = time.perf_counter() - t0
     mesh = scene.load_mesh()
-    summary["load"] = {"scene": str(out / "scene" / "scene.json"), "views": len(scene.views),
+    summary["load"] = {"scene": str(source), "views": len(scene.views),
                        "image_size": f"{scene.views[0].width}x{scene.views[0].height}",
                        "mesh_vertices": int(len(mesh.vertices)), "mesh_faces": int(len(mesh.faces))}
     t = time.perf_counter()
-    res = run(out / "scene" / "scene.json", reference=scene.names[0], mappings="dense", t_npm=t_npm,
-              compare_original=True)
+    res = run(scene, t_npm=t_npm, **run_options)
     run_dir = out / "run"
     res.save(run_dir, overwrite=True, save_images=True)
     timings["run"] = time.perf_counter() - t
-    t = time.perf_counter()
+    c = res.correction
+    summary["run"] = {
+        "reference": scene.names[c.reference], "unreachable": [scene.names[i] for i in c.unreachable],
+        "selection": res.settings.selection, "transitions": res.selection_stats["transitions"],
+        "faces": res.selection_stats["faces"], "unseen_faces": res.selection_stats["unseen_faces"],
+        "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "charts", "utilization")},
+        "seams": None if res.seams is None else res.seams.to_dict(),
+        "seams_original": None if res.seams_original is None else res.seams_original.to_dict(),
+        "timings": {k: round(v, 4) for k, v in res.timings.items()},
+        "outputs": sorted(p.name for p in run_dir.iterdir() if not p.name.startswith(".")),
+    }
+    if syn is not None:
+        t = time.perf_counter()
+        summary.update(_ground_truth(syn, res))
+        timings["ground_truth"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    write_json(out / "demo_summary.json", {"summary": summary, "timings": timings})
+    return DemoResult(out=out, synthetic=syn, result=res, summary=summary, timings=timings)
+
+
+def _ground_truth(syn: SyntheticScene, res: RunResult) -> dict[str, Any]:
+    """Per-view photometric changes and CIEDE2000 to the ground-truth renders, before and after."""
     rows, per_view = [], []
-    for v, img in zip(scene.views, res.images):
+    for v, img in zip(syn.scene.views, res.images):
         original = v.load_image()
         gt = syn.load_gt(v.name)
         p = syn.transforms[v.name]
@@ -128,22 +181,10 @@ def run_demo(
         mask = syn.load_face_ids(v.name) >= 0
         rows.append({"name": v.name, "before": round(image_delta_e(original, gt, mask=mask), 2),
                      "after": round(image_delta_e(img, gt, mask=mask), 2)})
-    summary["summary"] = {"photometric": syn.metadata.get("photometric"), "seed": syn.metadata.get("seed"),
-                          "face_groups": {k: list(g) for k, g in syn.face_groups.items()}, "views": per_view,
-                          "mean_abs_diff_mean": round(float(np.mean([r["mean_abs_diff"] for r in per_view])), 2)}
-    c = res.correction
-    summary["run"] = {
-        "reference": scene.names[c.reference], "unreachable": [scene.names[i] for i in c.unreachable],
-        "selection": res.settings.selection, "transitions": res.selection_stats["transitions"],
-        "unseen_faces": res.selection_stats["unseen_faces"],
-        "seams": None if res.seams is None else res.seams.to_dict(),
-        "seams_original": None if res.seams_original is None else res.seams_original.to_dict(),
-        "timings": {k: round(v, 4) for k, v in res.timings.items()},
-        "outputs": sorted(p.name for p in run_dir.iterdir() if p.is_file()),
+    return {
+        "summary": {"photometric": syn.metadata.get("photometric"), "seed": syn.metadata.get("seed"),
+                    "face_groups": {k: list(g) for k, g in syn.face_groups.items()}, "views": per_view,
+                    "mean_abs_diff_mean": round(float(np.mean([r["mean_abs_diff"] for r in per_view])), 2)},
+        "ground_truth": {"views": rows, "mean_before": round(float(np.mean([r["before"] for r in rows])), 2),
+                         "mean_after": round(float(np.mean([r["after"] for r in rows])), 2)},
     }
-    summary["ground_truth"] = {"views": rows, "mean_before": round(float(np.mean([r["before"] for r in rows])), 2),
-                               "mean_after": round(float(np.mean([r["after"] for r in rows])), 2)}
-    timings["ground_truth"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t0
-    write_json(out / "demo_summary.json", {"summary": summary, "timings": timings})
-    return DemoResult(out=out, synthetic=syn, result=res, summary=summary, timings=timings)

@@ -47,3 +47,27 @@ def test_demo_reuses_an_identical_scene_and_refuses_other_parameters(demo_run, c
     other[other.index("--views") + 1] = "5"
     assert main(other) == 2
     assert "overwrite" in capsys.readouterr().err
+
+
+def test_demo_on_fountain_and_its_offline_message(fountain_root, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "f"
+    assert main(["demo", "--dataset", "fountain", "--data-root", str(fountain_root), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "real photos" in text and text.strip().splitlines()[-1].startswith("report: ")
+    summ = json.loads((out / "demo_summary.json").read_text())["summary"]
+    assert summ["load"]["views"] == 33 and "ground_truth" not in summ
+    assert summ["run"]["unseen_faces"] < 0.1 * summ["run"]["faces"]
+    import open3d as o3d
+
+    def offline():
+        raise RuntimeError("[Open3D Error] Download.cpp:182: Downloading failed from available mirrors.")
+
+    monkeypatch.setattr(o3d.data, "SampleFountainRGBDImages", offline)
+    assert main(["demo", "--dataset", "fountain", "--out", str(tmp_path / "g")]) == 2
+    assert "pass it as root= (--data-root DIR)" in capsys.readouterr().err
+
+
+def test_demo_scene_is_mostly_seen_and_quiet(demo_run, capsys):
+    out, args = demo_run
+    summ = json.loads((out / "demo_summary.json").read_text())["summary"]
+    assert summ["run"]["unseen_faces"] < 0.15 * summ["run"]["faces"], summ["run"]

@@ -350,3 +350,16 @@ def test_fountain_mesh_projects_onto_depth_map(fountain_scene):
         assert ok.sum() > 1000
         errs.append(np.median(np.abs(sensor[ok] - z[keep][visible][ok])))
     assert max(errs) < 0.05, errs
+
+
+def test_repr_is_one_line_and_save_keeps_symlinked_paths(tiny, tmp_path):
+    scene = load_scene(tiny)
+    text = repr(scene)
+    assert "\n" not in text and len(text) < 200 and "2 views 64x48" in text and "v0" in text
+    link = tmp_path / "linked"
+    link.symlink_to(tiny, target_is_directory=True)
+    through = load_scene(link)
+    out = save_scene(through, tmp_path / "copy" / "scene.json")
+    doc = json.loads(out.read_text())
+    assert doc["mesh"] == "../linked/mesh.ply"  # the path as given, not the link's target
+    assert load_scene(out) == through

@@ -326,7 +326,8 @@ def test_bad_options(tmp_path, kw, match):
 def test_cli_demo(tmp_path, capsys):
     from o3d_seqcc.cli import main
 
-    args = ["demo", "--out", str(tmp_path / "demo"), "--views", "4", "--width", "80", "--height", "60", "--cell-size", "0.15"]
+    args = ["demo", "--out", str(tmp_path / "demo"), "--views", "4", "--width", "80", "--height", "60", "--cell-size", "0.15",
+            "--t-npm", "50"]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "v03" in out and "mean |diff|" in out

@@ -42,7 +42,8 @@ from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image,
 from ..io.load import load_scene, save_scene
 from ..photometric import apply_photometric, identity_photometric, sample_photometric
 from ..scene import Scene, View
-from .room import DEFAULT_CELL_SIZE, ROOM, RoomGeometry, build_geometry, look_extrinsic, render_view, sample_cameras
+from .room import DEFAULT_CELL_SIZE, ROOM, RoomGeometry, build_geometry, keep_faces, look_extrinsic, render_view, \
+    sample_cameras
 
 __all__ = ["PHOTOMETRIC_MODES", "SYNTHETIC_FORMAT", "SyntheticScene", "load_synthetic", "make_synthetic_scene",
            "perturb_poses"]
@@ -168,6 +169,8 @@ def make_synthetic_scene(
     photometric: str = "camera",
     overwrite: bool = False,
     cell_size: float = DEFAULT_CELL_SIZE,
+    layout: str = "ring",
+    seen_only: bool = False,
 ) -> SyntheticScene:
     """Generate a synthetic room scene with known photometric changes (see the module docstring).
 
@@ -199,6 +202,12 @@ def make_synthetic_scene(
         Edge length (metres) of the square cells (two triangles each) tessellating walls, floor
         and furniture (ceiling 3x coarser): 0.06 gives about 46k faces; larger is coarser
         (fewer vertex mappings per pair).
+    layout : {"ring", "two-rings"}, default "ring"
+        Camera layout (:func:`~o3d_seqcc.synthetic.room.sample_cameras`): one ring looking slightly
+        down, or alternate cameras looking up and down (floor, ceiling and walls all seen).
+    seen_only : bool, default False
+        Keep only the faces some camera sees (hit by at least one pixel ray), as a reconstructed
+        mesh only holds what was captured; the backs of furniture and hidden corners go.
 
     Returns
     -------
@@ -228,24 +237,30 @@ def make_synthetic_scene(
     n_views, width, height = int(n_views), int(width), int(height)
     rng = np.random.default_rng(seed)
     geom = build_geometry(float(cell_size))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    mesh_path = _write_mesh(out_dir / "mesh.ply", geom)
-
     rc = o3d.t.geometry.RaycastingScene(nthreads=0)
     rc.add_triangles(o3d.core.Tensor(geom.vertices.astype(np.float32)), o3d.core.Tensor(geom.faces.astype(np.uint32)))
 
     f = 0.8 * width
     K = np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
-    cams = sample_cameras(rng, n_views)
+    cams = sample_cameras(rng, n_views, layout=layout)
     params = [identity_photometric()] + [
         sample_photometric(rng) if photometric == "camera" else identity_photometric() for _ in range(n_views - 1)
     ]
     names = [f"v{i:02d}" for i in range(n_views)]
+    extrinsics = [look_extrinsic(c, yaw, pitch, roll) for c, yaw, pitch, roll in cams]
+    renders = [render_view(rc, geom, K, ext, width, height) for ext in extrinsics]
+    if seen_only:
+        seen = np.zeros(len(geom.faces), dtype=bool)
+        for face, *_ in renders:
+            seen[face[face >= 0]] = True
+        geom, face_map = keep_faces(geom, seen)
+        renders = [(np.where(face >= 0, face_map[np.maximum(face, 0)], -1).astype(np.int32), *rest)
+                   for face, *rest in renders]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh_path = _write_mesh(out_dir / "mesh.ply", geom)
     _remove_stale(out_dir, set(names))
     views, gt_paths, fid_paths, pt_paths, transforms, per_view = [], {}, {}, {}, {}, []
-    for name, (c, yaw, pitch, roll), prm in zip(names, cams, params):
-        ext = look_extrinsic(c, yaw, pitch, roll)
-        face, pts, depth, gt = render_view(rc, geom, K, ext, width, height)
+    for name, (c, yaw, pitch, roll), ext, (face, pts, depth, gt), prm in zip(names, cams, extrinsics, renders, params):
         img = gt if photometric == "none" or name == names[0] else img_as_dtype(apply_photometric(gt, prm), np.uint8)
         gt_paths[name] = write_image(out_dir / "gt" / f"{name}.png", gt)
         img_path = write_image(out_dir / "images" / f"{name}.png", img)
@@ -282,6 +297,8 @@ def make_synthetic_scene(
         "height": height,
         "photometric": photometric,
         "cell_size": float(cell_size),
+        "layout": layout,
+        "seen_only": bool(seen_only),
         "room": list(ROOM),
         "n_faces": int(len(geom.faces)),
         "n_vertices": int(len(geom.vertices)),

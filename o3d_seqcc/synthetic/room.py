@@ -17,8 +17,8 @@ import numpy as np
 
 from ..imageops import img_as_dtype, sample_bilinear
 
-__all__ = ["ALBEDO_RANGE", "DEFAULT_CELL_SIZE", "ROOM", "TEXTURES", "RoomGeometry", "build_geometry", "look_extrinsic",
-           "render_view", "ring_slots", "sample_cameras"]
+__all__ = ["ALBEDO_RANGE", "DEFAULT_CELL_SIZE", "LAYOUTS", "ROOM", "TEXTURES", "RoomGeometry", "build_geometry",
+           "keep_faces", "look_extrinsic", "render_view", "ring_slots", "sample_cameras"]
 
 # room size (metres): x, y, z (z up)
 ROOM = (5.0, 4.0, 2.6)
@@ -253,12 +253,22 @@ def ring_slots(n_views: int) -> np.ndarray:
     return np.where(i <= n_views // 2, i, i - n_views)
 
 
-def sample_cameras(rng: np.random.Generator, n_views: int) -> list[tuple[np.ndarray, float, float, float]]:
+#: camera layouts of :func:`sample_cameras`
+LAYOUTS = ("ring", "two-rings")
+
+
+def sample_cameras(
+    rng: np.random.Generator, n_views: int, *, layout: str = "ring"
+) -> list[tuple[np.ndarray, float, float, float]]:
     """Camera centres and angles on a jittered ring inside the room, looking outwards.
 
     Neighbours are ``360 / n_views`` deg apart when that is at most 30 (12 or more views: a
     full ring), else 25 deg (an arc); view 0 is in the middle of the chain (:func:`ring_slots`).
+    ``layout="two-rings"``: every other camera is lower and looks up (12-22 deg) while the others
+    are higher and look down (26-38 deg), so floor, ceiling and walls are all seen, as in a scan.
     """
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown camera layout {layout!r}; valid: {', '.join(LAYOUTS)}")
     cx, cy, rx, ry = _RING
     step = 2 * np.pi / n_views if 2 * np.pi / n_views <= _MAX_STEP + 1e-9 else _ARC_STEP
     slots = ring_slots(n_views)
@@ -276,7 +286,35 @@ def sample_cameras(rng: np.random.Generator, n_views: int) -> list[tuple[np.ndar
         pitch = np.deg2rad(rng.uniform(-18.0, -6.0))
         roll = np.deg2rad(rng.uniform(-3.0, 3.0))
         out.append((c, float(yaw), float(pitch), float(roll)))
+    if layout == "two-rings":
+        for i, (c, yaw, _, roll) in enumerate(out):
+            up = i % 2 == 1
+            c = c.copy()
+            c[2] = rng.uniform(1.0, 1.3) if up else rng.uniform(1.6, 1.9)
+            pitch = np.deg2rad(rng.uniform(12.0, 22.0) if up else rng.uniform(-38.0, -26.0))
+            out[i] = (c, yaw, float(pitch), roll)
     return out
+
+
+def keep_faces(geom: RoomGeometry, keep: np.ndarray) -> tuple[RoomGeometry, np.ndarray]:
+    """The geometry with only the faces in ``keep`` ((F,) bool) and their vertices, order kept.
+
+    Returns the new geometry and the (F,) int64 map old face id -> new face id (-1 if dropped).
+    """
+    keep = np.asarray(keep, dtype=bool)
+    face_map = np.full(len(geom.faces), -1, dtype=np.int64)
+    face_map[keep] = np.arange(int(keep.sum()))
+    faces = geom.faces[keep]
+    used = np.unique(faces)
+    vmap = np.full(len(geom.vertices), -1, dtype=np.int64)
+    vmap[used] = np.arange(len(used))
+    groups = {}
+    for name, (a, b) in geom.groups.items():
+        n_before, n_in = int(keep[:a].sum()), int(keep[a:b].sum())
+        if n_in:
+            groups[name] = (n_before, n_before + n_in)
+    return RoomGeometry(vertices=geom.vertices[used], faces=vmap[faces], normals=geom.normals[used],
+                        face_surface=geom.face_surface[keep], surfaces=geom.surfaces, groups=groups), face_map
 
 
 def _pixel_rays(K: np.ndarray, extrinsic: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
