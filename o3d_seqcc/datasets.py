@@ -22,6 +22,8 @@ __all__ = ["fountain"]
 
 logger = logging.getLogger(__name__)
 
+#: environment variable naming a local copy of the Fountain set (used when ``root`` is not given)
+FOUNTAIN_ENV = "O3D_SEQCC_FOUNTAIN"
 #: meshes looked for, in order, in ``root/scene`` when ``mesh`` is not given
 FOUNTAIN_MESHES = ("mesh_decimated_uv_blender.ply", "integrated.ply", "tsdf_mesh.ply")
 
@@ -38,8 +40,9 @@ def fountain(
     ----------
     root : path-like, optional
         A folder in the ``SampleFountainRGBDImages`` layout (``image/``, ``depth/``,
-        ``scene/key.log``). When omitted, Open3D's own copy is used (``open3d.data`` downloads
-        it on first use, which needs internet access).
+        ``scene/key.log``). When omitted: the folder named by the environment variable
+        ``O3D_SEQCC_FOUNTAIN`` if set, else Open3D's own copy (``open3d.data`` downloads it on
+        first use, which needs internet access).
     mesh : path-like, optional
         Mesh file, absolute or relative to ``root``; default: the first of
         :data:`FOUNTAIN_MESHES` found in ``root/scene``.
@@ -51,6 +54,8 @@ def fountain(
     Scene
         33 views named after their image files, with depth maps (depth_scale 1000).
     """
+    if root is None and os.environ.get(FOUNTAIN_ENV):
+        root = os.environ[FOUNTAIN_ENV]
     if root is None:
         import open3d as o3d
 
