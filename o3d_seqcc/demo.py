@@ -81,8 +81,7 @@ def _generate(out: Path, params: dict[str, Any], overwrite: bool) -> tuple[Synth
 def run_demo(
     out: str | os.PathLike = "out/demo",
     *,
-    dataset: str = "synthetic",
-    data_root: str | os.PathLike | None = None,
+    dataset: str = "synthetic", data_root: str | os.PathLike | None = None,
     t_npm: int = 400,
     overwrite: bool = False,
     **scene_options: Any,
