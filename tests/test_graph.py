@@ -106,3 +106,20 @@ def test_log_weights_prefer_two_strong_edges_over_one_weak():
     assert correction_paths(log, 0)[2] == [2, 1, 0]
     with pytest.raises(ValueError, match="paper"):
         build_graph(counts, 4, weight="nope")
+
+
+def test_auto_reference_equals_the_brute_force_closeness_on_random_graphs():
+    import networkx as nx
+
+    rng = np.random.default_rng(7)
+    for trial in range(20):
+        V = int(rng.integers(3, 40))
+        counts = {(a, b): int(rng.integers(0, 3000)) for a in range(V) for b in range(a + 1, V) if rng.random() < 0.3}
+        g = build_graph(counts, V, t_npm=400)
+        if g.number_of_edges() == 0:
+            continue
+        comp = sorted(nx.connected_components(g), key=lambda c: (-len(c), min(c)))[0]
+        sub = g.subgraph(comp)
+        cost = {v: sum(nx.single_source_dijkstra_path_length(sub, v, weight="weight").values()) for v in sorted(comp)}
+        best = min(cost.values())
+        assert choose_reference(g) == min(v for v, c in cost.items() if c <= best + 1e-12)
