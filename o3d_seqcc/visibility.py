@@ -127,6 +127,71 @@ class Visibility(UsableFaces):
     view_names: tuple[str, ...] = ()
     options: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def from_arrays(
+        cls, mesh: Mesh, uv: np.ndarray, usable: np.ndarray, *, area: np.ndarray | None = None,
+        cos_angle: np.ndarray | None = None, depth: np.ndarray | None = None, view_names: tuple[str, ...] = (),
+    ) -> "Visibility":
+        """A visibility from your own per-view arrays (no filter run: ``valid = usable``).
+
+        Parameters
+        ----------
+        mesh : Mesh
+        uv : (V, N, 2) float
+            Pixel coordinates of every vertex in every view.
+        usable : (V, F) bool
+        area, cos_angle : (V, F) float, optional
+            Projected face areas (px^2; default: computed from ``uv``) and cosines (default 1).
+        depth : (V, N) float, optional
+            Camera z of every vertex (default 1).
+        view_names : tuple of str
+        """
+        uv = np.asarray(uv, dtype=np.float32)
+        usable = np.asarray(usable, dtype=bool)
+        V, F = usable.shape
+        faces = np.asarray(mesh.faces)
+        if uv.shape != (V, len(mesh.vertices), 2) or F != len(faces):
+            raise InputError(f"uv must be ({V}, {len(mesh.vertices)}, 2) and usable ({V}, {len(faces)}), got "
+                             f"{uv.shape} and {usable.shape}")
+        if area is None:
+            p = uv[:, faces].astype(np.float64)
+            e1, e2 = p[:, :, 1] - p[:, :, 0], p[:, :, 2] - p[:, :, 0]
+            area = 0.5 * np.abs(e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0])
+        none = np.zeros((V, F), dtype=bool)
+        return cls(uv=uv, depth=np.ones(uv.shape[:2], np.float32) if depth is None else np.asarray(depth, np.float32),
+                   valid=usable.copy(), occluded=none, depth_inconsistent=none, oblique=none, usable=usable,
+                   area=np.asarray(area, dtype=np.float32),
+                   cos_angle=np.ones((V, F), np.float32) if cos_angle is None else np.asarray(cos_angle, np.float32),
+                   stats={}, mesh=mesh, view_names=tuple(view_names))
+
+    def face_uv(self, selection: np.ndarray) -> np.ndarray:
+        """Pixel coordinates of every face's corners in its selected view.
+
+        Parameters
+        ----------
+        selection : (F,) int
+            A view per face, -1 for none.
+
+        Returns
+        -------
+        (F, 3, 2) float64
+            NaN for faces with no view (and corners behind the camera).
+        """
+        labels = np.asarray(selection, dtype=np.int64).reshape(-1)
+        if labels.shape != (self.n_faces,):
+            raise InputError(f"selection has {labels.size} entries but the mesh has {self.n_faces} faces")
+        out = np.full((self.n_faces, 3, 2), np.nan)
+        seen = labels >= 0
+        if labels.size and labels.max() >= self.n_views:
+            raise InputError(f"selection holds view indices outside -1..{self.n_views - 1}")
+        faces = np.asarray(self.mesh.faces)
+        out[seen] = self.uv[labels[seen][:, None], faces[seen]]
+        return out
+
+    def usable_counts(self) -> np.ndarray:
+        """(V,) int64: the number of usable faces of every view."""
+        return np.asarray(self.usable).sum(axis=1).astype(np.int64)
+
     def stage_masks(self) -> dict[str, np.ndarray]:
         """Cumulative (V, F) masks as in the paper's Figure 3.
 

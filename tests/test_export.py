@@ -102,7 +102,7 @@ def test_glb_layout(textured):
 
 def _baked(rng) -> TexturedMesh:
     """A real bake: a 6 x 6 grid seen by two cameras, one face seen by none (fallback colour)."""
-    from types import SimpleNamespace
+    from o3d_seqcc.visibility import Visibility
 
     from o3d_seqcc.scene import Mesh
     from o3d_seqcc.texturing import bake_texture, select_views
@@ -121,8 +121,7 @@ def _baked(rng) -> TexturedMesh:
         area.append(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
     usable = np.ones((2, len(f)), bool)
     usable[:, 0] = False
-    vis = SimpleNamespace(uv=np.array(uv, np.float32), usable=usable, area=np.array(area, np.float32),
-                          cos_angle=np.ones((2, len(f)), np.float32), mesh=mesh)
+    vis = Visibility.from_arrays(mesh, np.array(uv), usable, area=np.array(area))
     images = [rng.integers(0, 256, size=(96, 128, 3), dtype=np.uint8) for _ in range(2)]
     return bake_texture(mesh, images, vis, select_views(vis, method="random"), atlas_size=128)
 

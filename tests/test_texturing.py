@@ -6,13 +6,13 @@ a Visibility-like object (uv, usable, area, cos_angle, mesh) computed here by pr
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Mesh
+from o3d_seqcc.visibility import Visibility
 from o3d_seqcc.meshops import face_adjacency
 from o3d_seqcc.texturing import (
     SELECTION_METHODS,
@@ -55,7 +55,7 @@ def camera(center, *, yaw: float = 0.0, f: float = 100.0, w: int = 128, h: int =
     return K, R, t, w, h
 
 
-def project(mesh: Mesh, cams) -> SimpleNamespace:
+def project(mesh: Mesh, cams) -> Visibility:
     uvs, areas, coss, valid = [], [], [], []
     fn = mesh.face_normals
     cen = mesh.vertices[mesh.faces].mean(axis=1)
@@ -74,8 +74,7 @@ def project(mesh: Mesh, cams) -> SimpleNamespace:
         coss.append(np.abs((fn * d).sum(1)).astype(np.float32))
         valid.append(inside[mesh.faces].all(axis=1))
     valid = np.array(valid)
-    return SimpleNamespace(uv=np.array(uvs), area=np.array(areas), cos_angle=np.array(coss), valid=valid,
-                           usable=valid.copy(), mesh=mesh)
+    return Visibility.from_arrays(mesh, np.array(uvs), valid, area=np.array(areas), cos_angle=np.array(coss))
 
 
 def smooth_images(rng, cams, cell: int = 4) -> list[np.ndarray]:
@@ -111,7 +110,7 @@ CAMS = [
 def scene_vis(rng):
     mesh = grid_mesh(12)
     vis = project(mesh, CAMS)
-    vis.usable &= rng.random(vis.usable.shape) > 0.3
+    vis.usable[:] &= rng.random(vis.usable.shape) > 0.3
     return mesh, vis
 
 
@@ -174,8 +173,7 @@ def test_mrf_fewer_transitions_than_largest_area(rng):
     area = 100.0 + rng.normal(0, 5, size=(4, n_faces))
     usable = rng.random((4, n_faces)) > 0.15
     usable[0, :] |= ~usable.any(axis=0)
-    vis = SimpleNamespace(usable=usable, area=area.astype(np.float32), cos_angle=np.ones_like(area, dtype=np.float32),
-                          uv=None, mesh=mesh)
+    vis = Visibility.from_arrays(mesh, np.zeros((4, len(mesh.vertices), 2)), usable, area=area)
     la = select_views(vis, method="largest-area")
     mrf = select_views(vis, method="mrf", adjacency=adj)
     t_la, t_mrf = count_transitions(la, adj), count_transitions(mrf, adj)

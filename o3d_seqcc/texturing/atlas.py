@@ -139,13 +139,11 @@ class _Layout:
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    uv_all = np.asarray(visibility.uv)
     labels = np.asarray(selection, dtype=np.int64).reshape(-1)
-    n_views = uv_all.shape[0]
-    if uv_all.ndim != 3 or uv_all.shape[1] != len(verts) or uv_all.shape[2] != 2:
-        raise InputError(f"visibility.uv must be (V, {len(verts)}, 2) for this mesh, got {uv_all.shape}")
-    if len(labels) != len(faces):
-        raise InputError(f"selection has {len(labels)} entries but the mesh has {len(faces)} faces")
+    n_views = visibility.n_views
+    if len(labels) != len(faces) or visibility.n_faces != len(faces):
+        raise InputError(f"selection has {len(labels)} entries and the visibility {visibility.n_faces} faces, but the "
+                         f"mesh has {len(faces)} faces")
     if labels.size and (labels.max() >= n_views or labels.min() < -1):
         raise InputError(f"selection holds view indices outside -1..{n_views - 1}")
     if len(images) != n_views:
@@ -156,18 +154,17 @@ def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, 
             "or relax the visibility filters"
         )
     seen = labels >= 0
-    fuv = np.full((len(faces), 3, 2), np.nan)
-    fuv[seen] = uv_all[labels[seen][:, None], faces[seen]]
+    fuv = visibility.face_uv(labels)
     if not np.isfinite(fuv[seen]).all():
         bad = np.flatnonzero(seen & ~np.isfinite(fuv).all(axis=(1, 2)))
         raise InputError(
             f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to views where their vertices have no "
             "projection (NaN uv): select only usable views (select_views does)"
         )
-    return verts, faces, uv_all, labels, fuv
+    return verts, faces, labels, fuv
 
 
-def _make_charts(images, uv_all, verts, faces, labels, adjacency, s: TextureSettings) -> _Charts:
+def _make_charts(images, fuv, verts, faces, labels, adjacency, s: TextureSettings) -> _Charts:
     """Charts = connected components of same-view faces; leveling offsets; fallback blocks."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -180,10 +177,10 @@ def _make_charts(images, uv_all, verts, faces, labels, adjacency, s: TextureSett
     corner_off = lev_stats = None
     if s.leveling:
         t = time.perf_counter()
-        corner_off, lev_stats = leveling_corner_offsets(images, uv_all, verts, faces, labels, comp,
+        corner_off, lev_stats = leveling_corner_offsets(images, fuv, verts, faces, labels, comp,
                                                         smoothness=float(s.leveling_smoothness))
         lev_stats["time_solve_s"] = time.perf_counter() - t
-    blocks, fb_of_face, fb_xy = fallback_blocks(images, uv_all, verts, faces, labels, adjacency, fallback=s.fallback,
+    blocks, fb_of_face, fb_xy = fallback_blocks(images, fuv, verts, faces, labels, adjacency, fallback=s.fallback,
                                                 pad=min(int(s.padding), 1), corner_offsets=corner_off)
     n_unseen = int(np.count_nonzero(~seen))
     if n_unseen:
@@ -306,18 +303,18 @@ def _gather(images, ch: _Charts, lay: _Layout, padding: int, want_region: bool):
     return tex.reshape(size, size, 3), covered.reshape(size, size), region
 
 
-def _output_vertices(uv_all, faces, ch: _Charts, lay: _Layout, n_vertices: int):
+def _output_vertices(fuv, faces, ch: _Charts, lay: _Layout, n_vertices: int):
     """Vertices duplicated per chart: new faces, original vertex ids, texel coordinates."""
-    n_views = uv_all.shape[0]
     keys, inv = np.unique((ch.face_chart[:, None] * n_vertices + faces).reshape(-1), return_inverse=True)
     new_faces = inv.reshape(-1, 3).astype(np.int64)
     v_chart, v_orig = keys // n_vertices, keys % n_vertices
-    cv_ = ch.chart_view[v_chart]
     txy = np.empty((len(keys), 2))
-    real = cv_ < n_views
-    suv_v = (uv_all[cv_[real], v_orig[real]].astype(np.float64) + 0.5) * lay.fac[cv_[real]] - 0.5
     pos = np.stack([lay.px, lay.py], axis=1)
-    txy[real] = suv_v - lay.x0[v_chart[real]] + pos[v_chart[real]]
+    seen_faces = np.flatnonzero(ch.face_chart < ch.n_seen)
+    corners = new_faces[seen_faces].reshape(-1)  # every corner of a seen face: its view's projection of the vertex
+    cview = np.repeat(ch.chart_view[ch.face_chart[seen_faces]], 3)
+    suv = (fuv[seen_faces].reshape(-1, 2) + 0.5) * lay.fac[cview] - 0.5
+    txy[corners] = suv - lay.x0[v_chart[corners]] + pos[v_chart[corners]]
     fbf = np.flatnonzero(ch.face_chart >= ch.n_seen)
     for j in range(3):  # fallback faces: their corners' texels in their blocks
         txy[new_faces[fbf, j]] = pos[ch.face_chart[fbf]] + ch.block_xy[j]
@@ -344,7 +341,7 @@ def bake_texture(
         One image per view (typically the colour-corrected ones), uint8, uint16 or float in
         [0, 1]; the atlas is uint8.
     visibility : Visibility
-        ``uv`` (V, N, 2) pixel coordinates of every vertex in every view.
+        ``face_uv(selection)``: the pixel coordinates of every face's corners in its view.
     selection : (F,) int array
         From :func:`~o3d_seqcc.texturing.select_views`; -1 = unseen face (fallback colour).
     settings : TextureSettings, optional
@@ -380,17 +377,17 @@ def bake_texture(
 def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:
     t0 = time.perf_counter()
     step("charts")
-    verts, faces, uv_all, labels, fuv = _check(mesh, views_images, visibility, selection)
+    verts, faces, labels, fuv = _check(mesh, views_images, visibility, selection)
     images = [img_as_uint8(im, where=f"image of view {i}") for i, im in enumerate(views_images)]
     adjacency = face_adjacency(faces, verts) if adjacency is None else np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
-    ch = _make_charts(images, uv_all, verts, faces, labels, adjacency, s)
+    ch = _make_charts(images, fuv, verts, faces, labels, adjacency, s)
     step("pack")
     lay = _layout(images, fuv, labels, ch, s)
     t_pack = time.perf_counter()
     step("copy texels")
     tex, covered, region = _gather(images, ch, lay, int(s.padding), s.leveling or s.local_leveling)
     t_bake = time.perf_counter()
-    new_faces, v_orig, txy = _output_vertices(uv_all, faces, ch, lay, len(verts))
+    new_faces, v_orig, txy = _output_vertices(fuv, faces, ch, lay, len(verts))
     seen = labels >= 0
     lev_stats = ch.leveling
     step("seam leveling")

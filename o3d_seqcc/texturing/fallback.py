@@ -48,7 +48,7 @@ def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iter
 
 
 def _face_colors(
-    images: list[np.ndarray], uv: np.ndarray, faces: np.ndarray, labels: np.ndarray, adjacency: np.ndarray, *,
+    images: list[np.ndarray], fuv: np.ndarray, faces: np.ndarray, labels: np.ndarray, adjacency: np.ndarray, *,
     offsets: np.ndarray | None = None, iters: int = 64,
 ) -> np.ndarray:
     """(F, 3) colours (0-255): the selected image at the centroid projection for seen faces (plus
@@ -57,7 +57,7 @@ def _face_colors(
     known = labels >= 0
     for v in np.unique(labels[known]):
         sel = np.flatnonzero(labels == v)
-        c = uv[v][faces[sel]].mean(axis=1)
+        c = fuv[sel].mean(axis=1)
         img = images[v]
         xi = np.clip(np.rint(c[:, 0]).astype(np.int64), 0, img.shape[1] - 1)
         yi = np.clip(np.rint(c[:, 1]).astype(np.int64), 0, img.shape[0] - 1)
@@ -68,7 +68,7 @@ def _face_colors(
 
 
 def _corner_colors(
-    images: list[np.ndarray], uv_all: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
+    images: list[np.ndarray], fuv: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
     corner_offsets: np.ndarray | None = None, iters: int = 256,
 ) -> np.ndarray:
     """(F, 3, 3) colour of every face corner (0-255): per welded vertex, the mean of the seen
@@ -80,7 +80,7 @@ def _corner_colors(
     col_c = np.zeros((len(seen), 3, 3))
     for v in np.unique(labels[seen]):
         sel = labels[seen] == v
-        p = uv_all[v][faces[seen[sel]]].astype(np.float64)  # (n, 3, 2)
+        p = fuv[seen[sel]]  # (n, 3, 2)
         col_c[sel] = sample_bilinear(images[v], p[..., 0], p[..., 1])
     if corner_offsets is not None:
         col_c += corner_offsets[seen]
@@ -95,7 +95,7 @@ def _corner_colors(
 
 
 def fallback_blocks(
-    images: list[np.ndarray], uv_all: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray,
+    images: list[np.ndarray], fuv: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray,
     adjacency: np.ndarray, *, fallback: str, pad: int, corner_offsets: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texel blocks of the faces seen by no view.
@@ -103,8 +103,8 @@ def fallback_blocks(
     Parameters
     ----------
     images : list of (H, W, 3) uint8
-    uv_all : (V, N, 2) float
-        Projection of every vertex in every view.
+    fuv : (F, 3, 2) float
+        Projection of every face's corners in its selected view (NaN for unseen faces).
     verts : (N, 3) float, faces : (F, 3) int, labels : (F,) int (-1 = unseen)
     adjacency : (E, 2) int
         Face pairs sharing an edge.
@@ -129,7 +129,7 @@ def fallback_blocks(
         corner_xy = np.full((3, 2), float(pad))
         if len(unseen) == 0:
             return np.zeros((0, blk, blk, 3), np.uint8), block_of_face, corner_xy
-        cols = _face_colors(images, uv_all, faces, labels, adjacency,
+        cols = _face_colors(images, fuv, faces, labels, adjacency,
                             offsets=None if corner_offsets is None else corner_offsets.mean(axis=1))
         c8 = np.clip(np.rint(cols[unseen]), 0, 255).astype(np.uint8)
         rgb, inv = np.unique(c8, axis=0, return_inverse=True)
@@ -140,7 +140,7 @@ def fallback_blocks(
     corner_xy = np.array([[pad, pad], [pad + legs, pad], [pad, pad + legs]], dtype=np.float64)
     if len(unseen) == 0:
         return np.zeros((0, blk, blk, 3), np.uint8), block_of_face, corner_xy
-    cc = _corner_colors(images, uv_all, verts, faces, labels, corner_offsets=corner_offsets)[unseen]
+    cc = _corner_colors(images, fuv, verts, faces, labels, corner_offsets=corner_offsets)[unseen]
     t = (np.arange(blk, dtype=np.float64) - pad) / legs
     tx, ty = t[None, :, None], t[:, None, None]  # block[y, x] = c0 + (c1 - c0) x + (c2 - c0) y
     c0, c1, c2 = (cc[:, k][:, None, None, :] for k in range(3))

@@ -196,7 +196,7 @@ def _rasterize_uv(txy: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> tuple
 
 def leveling_corner_offsets(
     images: list[np.ndarray],
-    uv_all: np.ndarray,
+    fuv: np.ndarray,
     verts: np.ndarray,
     faces: np.ndarray,
     labels: np.ndarray,
@@ -215,12 +215,13 @@ def leveling_corner_offsets(
     F3 = len(seen) * 3
     f = np.zeros((F3, 3))
     lab_c = np.repeat(labels[seen], 3)
+    corner_uv = fuv[seen].reshape(-1, 2)
     vid = faces[seen].reshape(-1)
     d = np.array([-float(radius), 0.0, float(radius)])  # 3 x 3 bilinear taps spanning the neighbourhood
     dx, dy = np.meshgrid(d, d)
     for v in np.unique(lab_c):
         idx = np.flatnonzero(lab_c == v)
-        p = uv_all[v, vid[idx]].astype(np.float64)
+        p = corner_uv[idx]
         f[idx] = sample_bilinear(images[v], p[:, 0:1] + dx.ravel()[None], p[:, 1:2] + dy.ravel()[None]).mean(axis=1)
     group = weld_vertices(verts)[vid]
     chart = np.repeat(face_chart[seen], 3)

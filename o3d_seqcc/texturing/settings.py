@@ -29,10 +29,13 @@ OVERFLOWS = ("grow", "scale", "error")
 class VisibilityLike(Protocol):  # pragma: no cover - typing only
     """What the texturing stages read of a :class:`~o3d_seqcc.visibility.Visibility`."""
 
-    uv: np.ndarray
     usable: np.ndarray
     area: np.ndarray
     cos_angle: np.ndarray
+    n_views: int
+    n_faces: int
+
+    def face_uv(self, selection: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
