@@ -449,8 +449,10 @@ def correct_scene(
     Parameters
     ----------
     scene : Scene or path
-    reference, method, t_npm, mappings, seed
+    reference, method, t_npm, mappings
         As :func:`run`.
+    seed : int, default 0
+        Seed of any randomness in the correction method (runs are deterministic for a seed).
     graph_weight : {"paper", "log"}, default "paper"
         Edge weight formula of the colour-correction graph.
     metrics : bool, default True
