@@ -103,11 +103,13 @@ def write_view_state(view: View, path: str | os.PathLike, *, scene_diagonal: flo
     return atomic_write_bytes(Path(path), text.encode("utf-8"))
 
 
-def _start_xvfb(size: tuple[int, int], timeout: float) -> tuple[subprocess.Popen, str]:
+def _start_xvfb(size: tuple[int, int], log: Path, timeout: float) -> tuple[subprocess.Popen, str]:
+    """A private X server with GLX on the first free display; returns it and ``":N"``."""
     r, w = os.pipe()
-    proc = subprocess.Popen(["Xvfb", "-displayfd", str(w), "-screen", "0", f"{size[0]}x{size[1]}x24",
-                             "+extension", "GLX", "-nolisten", "tcp"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    with open(log, "wb") as err:
+        proc = subprocess.Popen(["Xvfb", "-displayfd", str(w), "-screen", "0", f"{size[0]}x{size[1]}x24",
+                                 "+extension", "GLX", "-nolisten", "tcp"],
+                                pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=err)
     os.close(w)
     text, deadline = b"", time.monotonic() + timeout
     try:
@@ -122,8 +124,8 @@ def _start_xvfb(size: tuple[int, int], timeout: float) -> tuple[subprocess.Popen
         os.close(r)
     number = text.decode().strip()
     if not number.isdigit():
-        proc.kill()
-        raise RuntimeError(f"Xvfb did not start within {timeout:.0f} s: {proc.stderr.read().decode()[-500:]}")
+        _stop(proc)
+        raise RuntimeError(f"Xvfb did not start within {timeout:.0f} s: {log.read_text(errors='replace')[-500:]}")
     return proc, f":{number}"
 
 
@@ -205,7 +207,7 @@ def screenshot_meshlab(
         os.chmod(home, 0o700)
         log_path = Path(home) / "meshlab.log"
         try:
-            xvfb, display = _start_xvfb(size, timeout=30)
+            xvfb, display = _start_xvfb(size, Path(home) / "xvfb.log", timeout=30)
             env = {**os.environ, "DISPLAY": display, "HOME": home, "XDG_CONFIG_HOME": home, "XDG_RUNTIME_DIR": home,
                    "QT_QPA_PLATFORM": "xcb"}
             env.pop("QT_PLUGIN_PATH", None)  # Debian's MeshLab uses the system Qt and its own plugins

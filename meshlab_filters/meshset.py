@@ -63,7 +63,8 @@ def meshset_scene(ms: Any, folder: str | Path) -> Scene:
     -------
     Scene
         Mesh in world coordinates (the layer's placement matrix applied), one view per raster,
-        named after the raster labels, images = the rasters' files.
+        named after the raster labels, images = the rasters' files. A current mesh with deleted
+        elements is compacted first (``Mesh.compact``, as MeshLab's filters do).
 
     Raises
     ------
