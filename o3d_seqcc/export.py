@@ -1,5 +1,7 @@
 """Export of a :class:`~o3d_seqcc.texturing.TexturedMesh`: OBJ + MTL + PNG, glTF 2.0 binary (GLB), PLY.
 
+MeshLab projects get a textured PLY in MeshLab's own layout (:func:`export_meshlab_ply`).
+
 UV conventions. ``TexturedMesh.uv`` has its origin at the bottom-left corner of the atlas with
 v up (the OBJ convention, see :mod:`o3d_seqcc.texturing.textured_mesh`).
 
@@ -33,7 +35,9 @@ from .imageops import sample_bilinear
 from .io.files import atomic_write_bytes
 from .meshops import vertex_normals
 
-__all__ = ["FORMATS", "encode_png", "export_glb", "export_obj", "export_ply", "export_textured_mesh"]
+__all__ = [
+    "FORMATS", "encode_png", "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -233,6 +237,24 @@ def export_glb(
     return path
 
 
+def _ply_vertices(textured: Any, colours: np.ndarray | None) -> tuple[str, bytes]:
+    """PLY header lines and binary block of the vertices: x y z nx ny nz [red green blue] (float32, uint8)."""
+    n = _normals(textured)
+    fields = [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
+    if colours is not None:
+        fields += [(k, "u1") for k in ("red", "green", "blue")]
+    va = np.empty(len(textured.vertices), dtype=np.dtype(fields))
+    for i, k in enumerate("xyz"):
+        va[k] = textured.vertices[:, i]
+        va["n" + k] = n[:, i]
+    if colours is not None:
+        c8 = np.clip(np.rint(colours), 0, 255).astype(np.uint8)
+        va["red"], va["green"], va["blue"] = c8[:, 0], c8[:, 1], c8[:, 2]
+    header = f"element vertex {len(va)}\n" + "".join(
+        f"property {'float' if t == '<f4' else 'uchar'} {k}\n" for k, t in fields)
+    return header, va.tobytes()
+
+
 def export_ply(textured: Any, path: str | os.PathLike) -> Path:
     """Write a binary PLY with per-vertex colours sampled from the atlas (bilinear).
 
@@ -242,28 +264,78 @@ def export_ply(textured: Any, path: str | os.PathLike) -> Path:
     _check(textured)
     path = Path(path)
     col = sample_bilinear(textured.texture, *textured.texel_xy().T)
-    n = _normals(textured)
-    vdt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
-                    ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    va = np.empty(len(textured.vertices), dtype=vdt)
-    for i, k in enumerate("xyz"):
-        va[k] = textured.vertices[:, i]
-        va["n" + k] = n[:, i]
-    c8 = np.clip(np.rint(col), 0, 255).astype(np.uint8)
-    va["red"], va["green"], va["blue"] = c8[:, 0], c8[:, 1], c8[:, 2]
+    vheader, vblock = _ply_vertices(textured, col)
     fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
     fa = np.empty(len(textured.faces), dtype=fdt)
     fa["n"] = 3
     fa["i"] = textured.faces
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment o3d_seqcc vertex colours from the texture atlas\n"
-        f"element vertex {len(va)}\nproperty float x\nproperty float y\nproperty float z\n"
-        "property float nx\nproperty float ny\nproperty float nz\n"
-        "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-        f"element face {len(fa)}\nproperty list uchar int vertex_indices\nend_header\n"
+        f"{vheader}element face {len(fa)}\nproperty list uchar int vertex_indices\nend_header\n"
     )
-    atomic_write_bytes(path, header.encode("ascii") + va.tobytes() + fa.tobytes())
+    atomic_write_bytes(path, header.encode("ascii") + vblock + fa.tobytes())
     logger.info("wrote %s", path)
+    return path
+
+
+def export_meshlab_ply(
+    textured: Any,
+    path: str | os.PathLike,
+    *,
+    texture: str | os.PathLike | None = None,
+    png_compression: int = 1,
+    png: bytes | None = None,
+) -> Path:
+    """Write MeshLab's own textured PLY: per-face texture coordinates and a ``TextureFile`` comment.
+
+    This is the layout MeshLab writes when it saves a textured mesh as PLY (``element face`` with
+    ``vertex_indices`` and a ``texcoord`` list of 6 floats per face, the texture named in a
+    ``comment TextureFile`` header line), and the textured format every MeshLab version reads:
+    MeshLab 2020.09, the version in Debian 12 and Ubuntu 22.04-24.04, aborts on any OBJ file
+    (an assertion in its OBJ importer, Debian bug 1054006). Texture coordinates keep the OBJ
+    convention (origin bottom-left, v up), as MeshLab's.
+
+    Parameters
+    ----------
+    textured : TexturedMesh
+        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2), ``texture`` (S, S, 3) uint8.
+    path : path-like
+        Destination ``.ply``.
+    texture : path-like, optional
+        An existing image file holding ``textured.texture`` (e.g. the OBJ's PNG) to refer to;
+        by default ``<stem>.png`` is written next to ``path``.
+    png_compression : int, default 1
+    png : bytes, optional
+        Already encoded texture (:func:`encode_png`), when ``texture`` is not given.
+
+    Returns
+    -------
+    pathlib.Path
+        The PLY path.
+    """
+    _check(textured)
+    path = Path(path)
+    if texture is None:
+        texture = path.with_suffix(".png")
+        atomic_write_bytes(texture, png if png is not None else encode_png(textured.texture, compression=png_compression))
+    elif not Path(texture).is_file():
+        raise InputError(f"texture: {texture} does not exist; write the texture first or pass texture=None")
+    tex_name = Path(os.path.relpath(Path(texture).resolve(), path.parent.resolve())).as_posix()
+    if any(c in tex_name for c in "\r\n"):
+        raise InputError(f"texture: the file name {tex_name!r} cannot go into a PLY header")
+    vheader, vblock = _ply_vertices(textured, None)
+    fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("t", "<f4", (6,))])
+    fa = np.empty(len(textured.faces), dtype=fdt)
+    fa["n"], fa["m"] = 3, 6
+    fa["i"] = textured.faces
+    fa["t"] = np.asarray(textured.uv, dtype=np.float64)[textured.faces].reshape(-1, 6)
+    header = (
+        f"ply\nformat binary_little_endian 1.0\ncomment o3d_seqcc textured mesh\ncomment TextureFile {tex_name}\n"
+        f"{vheader}element face {len(fa)}\nproperty list uchar int vertex_indices\n"
+        "property list uchar float texcoord\nend_header\n"
+    )
+    atomic_write_bytes(path, header.encode("utf-8") + vblock + fa.tobytes())
+    logger.info("wrote %s (texture %s)", path, tex_name)
     return path
 
 

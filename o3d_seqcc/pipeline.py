@@ -29,7 +29,7 @@ import numpy as np
 
 from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError, warn
-from .export import FORMATS, export_textured_mesh
+from .export import FORMATS, export_meshlab_ply, export_textured_mesh
 from .io.files import atomic_write_bytes, write_image, write_json
 from .io.load import load_scene, save_scene
 from .io.meshlab import save_mlp
@@ -212,10 +212,13 @@ class RunResult:
                 rasters = [write_image(stage / "images" / f"{v.name}.png", img)
                            for v, img in zip(self.scene.views, self.images)]
                 written["images"] = stage / "images"
-            layer = next((written[f] for f in ("obj", "glb", "ply") if f in written), None)
+            # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
+            layer = stage / "mesh_meshlab.ply"
             project = _meshlab_project(self.scene, stage, mesh=layer, images=rasters)
             if project is not None:
                 written["meshlab_project"] = project
+                written["meshlab_mesh"] = export_meshlab_ply(
+                    self.textured, layer, texture=stage / "mesh.png" if "obj" in written else None)
             written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
             self.timings["export"] = time.perf_counter() - t
             write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1]))
@@ -446,8 +449,10 @@ def correct_scene(
     Parameters
     ----------
     scene : Scene or path
-    reference, method, t_npm, mappings, seed
+    reference, method, t_npm, mappings
         As :func:`run`.
+    seed : int, default 0
+        Seed of any randomness in the correction method (runs are deterministic for a seed).
     graph_weight : {"paper", "log"}, default "paper"
         Edge weight formula of the colour-correction graph.
     metrics : bool, default True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,7 +22,8 @@ def _run(script: str, *args: str, cwd: Path, env: dict | None = None) -> subproc
 
 def test_every_example_says_what_it_shows_and_how_to_run_it():
     scripts = sorted(EXAMPLES.glob("*.py"))
-    assert {"open3d_fountain.py", "game_engine_glb.py"} <= {p.name for p in scripts}
+    assert {"open3d_fountain.py", "game_engine_glb.py", "meshlab_project.py",
+            "meshlab_screenshot.py"} <= {p.name for p in scripts}
     for p in scripts:
         doc = p.read_text().split('"""')[1]
         assert "What it shows" in doc and "How to run" in doc, p.name
@@ -41,3 +43,16 @@ def test_game_engine_glb_example(tmp_path):
 
     if find_validator() is not None:
         assert "0 errors, 0 warnings" in r.stdout
+
+
+def test_meshlab_project_example(tmp_path):
+    r = _run("meshlab_project.py", "--texture", "--out", "o", cwd=tmp_path)
+    assert "corrected 4 rasters toward" in r.stdout and "seqcc_color_correct_rasters" in r.stdout
+    assert (tmp_path / "o" / "corrected.mlp").is_file() and "textured" in r.stdout
+
+
+@pytest.mark.skipif(shutil.which("meshlab") is None or shutil.which("xvfb-run") is None,
+                    reason="the MeshLab application (Debian package meshlab, with xvfb) is not installed")
+def test_meshlab_screenshot_example(tmp_path):
+    r = _run("meshlab_screenshot.py", "--out", "o", "--png", "shot.png", cwd=tmp_path)
+    assert (tmp_path / "shot.png").stat().st_size > 10_000 and "loaded in" in r.stdout

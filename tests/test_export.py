@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.export: OBJ+MTL+PNG, GLB (glTF 2.0, Khronos validator), PLY."""
+"""Tests of o3d_seqcc.export: OBJ+MTL+PNG, GLB (glTF 2.0, Khronos validator), PLY, MeshLab's textured PLY."""
 
 from __future__ import annotations
 
@@ -9,9 +9,10 @@ import pytest
 
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.gltf_validator import find_validator, validate_glb
-from o3d_seqcc.export import export_glb, export_obj, export_ply, export_textured_mesh, glb_bytes
+from o3d_seqcc.export import export_glb, export_meshlab_ply, export_obj, export_ply, export_textured_mesh, glb_bytes
 from o3d_seqcc.texturing import TexturedMesh
 
+import pymeshlab
 import trimesh
 
 
@@ -145,6 +146,31 @@ def test_ply_vertex_colours(tmp_path, textured):
     for k in range(6):
         x, y = textured.texel_xy()[k].round().astype(int)
         np.testing.assert_array_equal(cols[k], textured.texture[y, x])
+
+
+def test_textured_ply_reads_in_meshlab_with_our_uv(tmp_path, rng):
+    """``export_meshlab_ply``: MeshLab reads our texture coordinates and texture, and colours each
+    vertex from the texel we put under it (v up, as OBJ)."""
+    S = 16
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [3, 4, 5]], dtype=np.int64)
+    texel = np.array([[1, 1], [6, 1], [6, 6], [9, 9], [14, 14], [9, 14]])
+    uv = np.stack([(texel[:, 0] + 0.5) / S, 1.0 - (texel[:, 1] + 0.5) / S], axis=1)
+    tex = rng.integers(0, 256, size=(S, S, 3), dtype=np.uint8)
+    tm = TexturedMesh(vertices=v, faces=f, uv=uv, normals=np.tile([0.0, 0, 1], (6, 1)), texture=tex,
+                      face_view=np.array([0, 1]), vertex_index=np.arange(6), face_chart=np.array([0, 1]), stats={})
+    path = export_meshlab_ply(tm, tmp_path / "m.ply")
+    assert (tmp_path / "m.png").is_file() and b"comment TextureFile m.png\n" in path.read_bytes()[:300]
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    m = ms.current_mesh()
+    assert list(m.textures()) == ["m.png"] and m.has_wedge_tex_coord()
+    np.testing.assert_allclose(m.wedge_tex_coord_matrix(), uv[f].reshape(-1, 2), atol=1e-6)
+    ms.transfer_texture_to_color_per_vertex(sourcemesh=0, targetmesh=0)
+    got = np.rint(ms.current_mesh().vertex_color_matrix()[:, :3] * 255)
+    np.testing.assert_array_equal(got, tex[texel[:, 1], texel[:, 0]])
+    with pytest.raises(InputError, match="does not exist"):
+        export_meshlab_ply(tm, tmp_path / "n.ply", texture=tmp_path / "missing.png")
 
 
 def test_export_textured_mesh_formats(tmp_path, textured):

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from o3d_seqcc.io.meshlab import CENTER_SHIFT, load_mlp, project_meshlab, save_mlp, vcg_camera_attributes
+from o3d_seqcc.io.meshlab import CENTER_SHIFT, MeshLayer, load_mlp, project_meshlab, save_mlp, vcg_camera_attributes
 from o3d_seqcc.io.files import write_image
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Scene, View
@@ -98,6 +98,25 @@ def test_rigid_placement_folded_into_cameras(tmp_path: Path):
     for a, b in zip(scene.views, back.views):
         # MeshLab shows the mesh at M x: the loaded camera sees file coordinates x the same way
         np.testing.assert_allclose(project_ours(b, pts), project_ours(a, placed), atol=1e-6)
+
+
+def test_mesh_layers_with_placement_and_visibility(tmp_path: Path):
+    scene = random_scene(tmp_path, n=2, seed=7)
+    M = np.eye(4)
+    M[:3, :3] = random_rotation(np.random.default_rng(3))
+    M[:3, 3] = [0.125, -2.0, 0.3]
+    (tmp_path / "other.ply").write_text("ply\n")
+    layers = [MeshLayer(tmp_path / "mesh.ply", label="room", matrix=M), MeshLayer(tmp_path / "other.ply", visible=False)]
+    path = save_mlp(scene, tmp_path / "layers.mlp", layers=layers)
+    text = path.read_text()
+    assert text.count("<MLMesh ") == 2 and 'label="room"' in text and 'label="other.ply"' in text
+    assert 'visible="0"' in text and "0 0 0 1 \n" in text
+    back = load_mlp(path)  # the first layer; its placement folded into the cameras
+    assert back.mesh.resolve() == (tmp_path / "mesh.ply").resolve()
+    for a, b in zip(scene.views, back.views):
+        np.testing.assert_allclose(b.extrinsic, a.extrinsic @ M, atol=1e-12)
+    with pytest.raises(InputError, match="either mesh= or layers="):
+        save_mlp(scene, tmp_path / "x.mlp", mesh=tmp_path / "mesh.ply", layers=layers)
 
 
 def test_load_mlp_bad_input(tmp_path: Path):

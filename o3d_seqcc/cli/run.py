@@ -3,8 +3,9 @@
 Sequential pairwise colour correction followed by per-face image selection, atlas baking, seam
 leveling and GLB/OBJ export. Writes OUT/mesh.glb, OUT/mesh.obj (+ .mtl, .png), OUT/selection.npy,
 OUT/selection.png (the selection coloured by image), optionally the corrected images
-(--save-images), and OUT/report.json (correction summary, selection statistics, seam metric,
-timings).
+(--save-images), OUT/report.json (correction summary, selection statistics, seam metric,
+timings) and OUT/project.mlp, which MeshLab opens: OUT/mesh_meshlab.ply (the textured mesh as
+MeshLab's own textured PLY) as a layer and the rasters (the corrected ones with --save-images).
 """
 
 from __future__ import annotations

@@ -32,6 +32,7 @@ from __future__ import annotations
 import logging
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
@@ -45,6 +46,7 @@ __all__ = [
     "CENTER_SHIFT",
     "DEFAULT_PIXEL_SIZE_MM",
     "FLIP_YZ",
+    "MeshLayer",
     "load_mlp",
     "project_meshlab",
     "save_mlp",
@@ -64,6 +66,33 @@ DEFAULT_PIXEL_SIZE_MM = 0.0369161
 
 def _fmt(values: Sequence[float]) -> str:
     return " ".join(repr(float(x)) for x in values)
+
+
+@dataclass(frozen=True)
+class MeshLayer:
+    """A mesh layer of a MeshLab project (``MeshGroup/MLMesh``).
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        Mesh file.
+    label : str, default ""
+        Layer name shown by MeshLab; default the file name.
+    matrix : (4, 4) float64, default identity
+        Placement of the layer (``MLMatrix44``): MeshLab shows the mesh at ``matrix @ x``.
+    visible : bool, default True
+    """
+
+    path: Path
+    label: str = ""
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    visible: bool = True
+
+
+def _matrix_text(m: np.ndarray) -> str:
+    """``MLMatrix44`` text: one row a line, shortest exact decimals (the identity reads ``1 0 0 0``)."""
+    rows = np.asarray(m, dtype=np.float64).reshape(4, 4)
+    return "\n" + "".join("%s \n" % " ".join("%.17g" % x for x in row) for row in rows)
 
 
 def vcg_camera_attributes(
@@ -204,6 +233,7 @@ def save_mlp(
     *,
     mesh: str | os.PathLike | None = None,
     images: Sequence[str | os.PathLike] | None = None,
+    layers: Sequence[MeshLayer] | None = None,
     pixel_size_mm: float = DEFAULT_PIXEL_SIZE_MM,
     center_shift: tuple[float, float] = CENTER_SHIFT,
 ) -> Path:
@@ -218,6 +248,9 @@ def save_mlp(
         Mesh file to reference instead of ``scene.mesh``.
     images : sequence of path-like, optional
         One image per view to reference instead of the views' own (e.g. corrected images).
+    layers : sequence of MeshLayer, optional
+        Mesh layers (file, label, placement, visibility) to list instead of the one mesh; the
+        cameras stay in world coordinates, as MeshLab keeps them.
     pixel_size_mm : float, default 0.0369161
     center_shift : (float, float), default CENTER_SHIFT
         See :func:`vcg_camera_attributes`.
@@ -229,18 +262,23 @@ def save_mlp(
     path = Path(path)
     root = path.parent
     root.mkdir(parents=True, exist_ok=True)
-    if mesh is None and not isinstance(scene.mesh, Path):
-        raise InputError("the scene's mesh is in memory: give the mesh file of the project (mesh=)")
-    mesh_path = Path(mesh) if mesh is not None else scene.mesh
+    if layers is not None and mesh is not None:
+        raise InputError("save_mlp: pass either mesh= or layers=, not both")
+    if layers is None:
+        if mesh is None and not isinstance(scene.mesh, Path):
+            raise InputError("the scene's mesh is in memory: give the mesh file of the project (mesh=)")
+        layers = [MeshLayer(Path(mesh) if mesh is not None else scene.mesh)]
     if images is not None and len(images) != len(scene.views):
         raise InputError(f"images: {len(images)} given for {len(scene.views)} views; give one image per view")
     if images is None and any(v.image is None for v in scene.views):
         raise InputError("the scene's images are in memory: give the image files of the rasters (images=)")
     proj = ET.Element("MeshLabProject")
     group = ET.SubElement(proj, "MeshGroup")
-    m = ET.SubElement(group, "MLMesh", label=mesh_path.name, filename=_rel(mesh_path, root), visible="1")
-    mat = ET.SubElement(m, "MLMatrix44")
-    mat.text = "\n" + "".join("%s \n" % " ".join("1" if i == j else "0" for j in range(4)) for i in range(4))
+    for layer in layers:
+        path_l = Path(layer.path)
+        m = ET.SubElement(group, "MLMesh", label=layer.label or path_l.name, filename=_rel(path_l, root),
+                          visible="1" if layer.visible else "0")
+        ET.SubElement(m, "MLMatrix44").text = _matrix_text(layer.matrix)
     rasters = ET.SubElement(proj, "RasterGroup")
     for k, v in enumerate(scene.views):
         img = Path(images[k]) if images is not None else v.image

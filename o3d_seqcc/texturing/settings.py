@@ -60,11 +60,13 @@ class TextureSettings:
         When the charts do not fit: double the atlas side (up to ``max_atlas_size``), shrink
         ``texel_scale``, or raise.
     max_atlas_size : int, default 16384
+        Largest atlas side ``"grow"`` may reach.
     fill_background : bool, default True
         Pull-push fill of the texels outside every chart.
     leveling : bool, default True
         Global seam leveling (Waechter et al. 2014).
     leveling_smoothness : float, default :data:`LEVELING_SMOOTHNESS` (0.03)
+        Smoothness of the global seam leveling's colour offsets inside the charts.
     local_leveling : bool, default True
         Local seam leveling in a band along chart borders.
     local_band : int, default 8
