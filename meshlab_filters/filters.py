@@ -232,8 +232,8 @@ def _registry() -> dict[str, MeshLabFilter]:
     enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS)}
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
-        "atlas_size": "Atlas size", "padding": "Chart gutter", "texel_scale": "Texels per pixel",
-        "overflow": "When the atlas is full", "max_atlas_size": "Largest atlas size",
+        "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
+        "overflow": "When the atlas is full", "power_of_two": "Power-of-two atlas", "merge_charts": "Merge tiny charts",
         "fill_background": "Fill the background", "leveling": "Global seam leveling",
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",

@@ -26,6 +26,7 @@ from .metrics import image_delta_e
 from .pipeline import RunResult, run
 from .datasets import fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
+from .texturing import TextureSettings
 
 __all__ = ["DemoResult", "run_demo"]
 
@@ -84,6 +85,8 @@ def run_demo(
     dataset: str = "synthetic", data_root: str | os.PathLike | None = None,
     t_npm: int = 400,
     overwrite: bool = False,
+    settings: TextureSettings | None = None,
+    save_options: dict[str, Any] | None = None,
     **scene_options: Any,
 ) -> DemoResult:
     """The whole job on a built-in scene, with what it did (and, on the synthetic room, its error to the truth).
@@ -103,6 +106,11 @@ def run_demo(
         Minimum pairwise mappings (vertex units) for a graph edge.
     overwrite : bool, default False
         Regenerate the synthetic scene.
+    settings : TextureSettings, optional
+        Texturing options (default: :class:`~o3d_seqcc.texturing.TextureSettings`).
+    save_options : dict, optional
+        Export options of :meth:`~o3d_seqcc.pipeline.RunResult.save` (``up_axis``,
+        ``texture_format``, ``jpeg_quality``, ``unlit``).
     **scene_options
         Synthetic only: options of :func:`~o3d_seqcc.synthetic.make_synthetic_scene` (``n_views``,
         ``width``, ``height``, ``seed``, ``photometric``, ``cell_size``, ``layout``,
@@ -142,16 +150,17 @@ def run_demo(
                        "image_size": f"{scene.views[0].width}x{scene.views[0].height}",
                        "mesh_vertices": int(len(mesh.vertices)), "mesh_faces": int(len(mesh.faces))}
     t = time.perf_counter()
-    res = run(scene, t_npm=t_npm, **run_options)
+    res = run(scene, t_npm=t_npm, settings=settings, **run_options)
     run_dir = out / "run"
-    res.save(run_dir, overwrite=True, save_images=True)
+    res.save(run_dir, overwrite=True, save_images=True, **(save_options or {}))
     timings["run"] = time.perf_counter() - t
     c = res.correction
     summary["run"] = {
         "reference": scene.names[c.reference], "unreachable": [scene.names[i] for i in c.unreachable],
         "selection": res.settings.selection, "transitions": res.selection_stats["transitions"],
         "faces": res.selection_stats["faces"], "unseen_faces": res.selection_stats["unseen_faces"],
-        "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "charts", "utilization")},
+        "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "pages", "texels_per_pixel", "charts", "coverage",
+                                                      "utilization")},
         "seams": None if res.seams is None else res.seams.to_dict(),
         "seams_original": None if res.seams_original is None else res.seams_original.to_dict(),
         "timings": {k: round(v, 4) for k, v in res.timings.items()},

@@ -1,4 +1,4 @@
-"""Export of a :class:`~o3d_seqcc.texturing.TexturedMesh`: OBJ + MTL + PNG, glTF 2.0 binary (GLB), PLY.
+"""Export of a :class:`~o3d_seqcc.texturing.TexturedMesh`: OBJ + MTL + textures, glTF 2.0 binary (GLB), PLY.
 
 MeshLab projects get a textured PLY in MeshLab's own layout (:func:`export_meshlab_ply`).
 
@@ -8,15 +8,22 @@ v up (the OBJ convention, see :mod:`o3d_seqcc.texturing.textured_mesh`).
 - OBJ/MTL: the same convention, so ``vt = (u, v)``.
 - glTF 2.0: origin top-left (the first pixel of the image), so ``TEXCOORD_0 = (u, 1 - v)``.
 
-Every file is written atomically (temporary file in the destination folder, then rename), and
-for OBJ the texture and material are written before the ``.obj`` that refers to them.
+An atlas of several pages (``TexturedMesh.pages``) is written as one texture file per page: one
+material and one primitive per page in the GLB (the primitives share one vertex buffer), one
+``usemtl`` per page in the OBJ, ``TextureFile`` comments and a per-face ``texnumber`` in MeshLab's
+PLY. Textures are PNG (lossless), JPEG (``quality``) or WebP (``quality``; in the GLB through the
+``EXT_texture_webp`` extension, required). ``transform`` (a 3 x 3 rotation, e.g. from
+:func:`o3d_seqcc.orientation.up_axis_transform`) is applied to positions and normals.
 
-The GLB holds one mesh with one primitive (POSITION, NORMAL, TEXCOORD_0, uint32 indices), one
-material (``baseColorTexture`` = the embedded PNG, ``metallicFactor`` 0, ``roughnessFactor`` 1,
-optionally ``KHR_materials_unlit``), a sampler with linear mip-mapped filtering and
-clamp-to-edge wrapping; every bufferView starts on a 4-byte boundary and both chunks are padded
-as the specification requires (JSON with spaces, BIN with zeros). It passes the Khronos
-glTF-Validator without errors (see ``tests/test_export.py``).
+Every file is written atomically (temporary file in the destination folder, then rename), and
+for OBJ the textures and material are written before the ``.obj`` that refers to them.
+
+The GLB holds one mesh with one primitive per page (POSITION, NORMAL, TEXCOORD_0, uint32
+indices), one material per page (``baseColorTexture`` = the embedded image, ``metallicFactor`` 0,
+``roughnessFactor`` 1, optionally ``KHR_materials_unlit``), a sampler with linear mip-mapped
+filtering and clamp-to-edge wrapping; every bufferView starts on a 4-byte boundary and both
+chunks are padded as the specification requires (JSON with spaces, BIN with zeros). It passes
+the Khronos glTF-Validator without errors or warnings (see ``tests/test_export.py``).
 """
 
 from __future__ import annotations
@@ -36,13 +43,16 @@ from .io.files import atomic_write_bytes
 from .meshops import vertex_normals
 
 __all__ = [
-    "FORMATS", "encode_png", "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh",
+    "FORMATS", "TEXTURE_FORMATS", "encode_png", "encode_texture", "export_glb", "export_meshlab_ply", "export_obj",
+    "export_ply", "export_textured_mesh", "texture_file_names",
 ]
 
 logger = logging.getLogger(__name__)
 
 #: formats known to :func:`export_textured_mesh`
 FORMATS = ("glb", "obj", "ply")
+#: texture image formats: name -> (file extension, MIME type)
+TEXTURE_FORMATS = {"png": ("png", "image/png"), "jpg": ("jpg", "image/jpeg"), "webp": ("webp", "image/webp")}
 
 
 def _check(textured: Any) -> None:
@@ -58,6 +68,18 @@ def _check(textured: Any) -> None:
         raise InputError("export: face indices outside the vertex array")
     if tex.ndim != 3 or tex.shape[2] != 3 or tex.dtype != np.uint8:
         raise InputError(f"export: texture must be (H, W, 3) uint8, got {tex.shape} {tex.dtype}")
+    pages = int(getattr(textured, "pages", 1))
+    if pages < 1 or tex.shape[0] % pages:
+        raise InputError(f"export: a texture of {tex.shape[0]} rows cannot hold {pages} pages")
+
+
+def _check_format(texture_format: str, quality: int) -> str:
+    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
+    if fmt not in TEXTURE_FORMATS:
+        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+    if isinstance(quality, bool) or int(quality) != quality or not 1 <= int(quality) <= 100:
+        raise InputError(f"texture quality must be an integer in 1..100, got {quality!r}")
+    return fmt
 
 
 def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
@@ -70,9 +92,76 @@ def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
     return buf.tobytes()
 
 
+def encode_texture(image: np.ndarray, texture_format: str = "png", *, quality: int = 90,
+                   png_compression: int = 1) -> bytes:
+    """Bytes of an (H, W, 3) uint8 RGB image as PNG, JPEG or WebP (OpenCV encoders).
+
+    Parameters
+    ----------
+    texture_format : {"png", "jpg", "webp"}
+    quality : int, default 90
+        JPEG / WebP quality (1-100); PNG is lossless.
+    png_compression : int, default 1
+        zlib level of a PNG (0-9).
+    """
+    import cv2
+
+    fmt = _check_format(texture_format, quality)
+    if fmt == "png":
+        return encode_png(image, compression=png_compression)
+    flag = cv2.IMWRITE_JPEG_QUALITY if fmt == "jpg" else cv2.IMWRITE_WEBP_QUALITY
+    ok, buf = cv2.imencode(f".{fmt}", np.ascontiguousarray(image[..., ::-1]), [flag, int(quality)])
+    if not ok:  # pragma: no cover
+        raise OSError(f"OpenCV could not encode the texture as {fmt}")
+    return buf.tobytes()
+
+
+def _encoded_pages(textured: Any, texture_format: str, quality: int, png_compression: int,
+                   encoded: list[bytes] | None) -> list[bytes]:
+    if encoded is not None:
+        return list(encoded)
+    return [encode_texture(p, texture_format, quality=quality, png_compression=png_compression)
+            for p in _pages(textured)]
+
+
+def _pages(textured: Any) -> list[np.ndarray]:
+    tex = textured.texture
+    n = int(getattr(textured, "pages", 1))
+    h = tex.shape[0] // n
+    return [tex[p * h:(p + 1) * h] for p in range(n)]
+
+
+def _face_page(textured: Any) -> np.ndarray:
+    fp = getattr(textured, "face_page", None)
+    return fp() if callable(fp) else np.zeros(len(textured.faces), dtype=np.int64)
+
+
+def _page_uv(textured: Any) -> np.ndarray:
+    pu = getattr(textured, "page_uv", None)
+    return np.asarray(pu() if callable(pu) else textured.uv, dtype=np.float64)
+
+
 def _normals(textured: Any) -> np.ndarray:
     """(M, 3) unit normals: the mesh's where usable, else area-weighted face normals."""
     return vertex_normals(textured.vertices, textured.faces, getattr(textured, "normals", None))
+
+
+def _geometry(textured: Any, transform: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and unit normals with ``transform`` (3 x 3) applied."""
+    v = np.asarray(textured.vertices, dtype=np.float64)
+    n = _normals(textured)
+    if transform is not None:
+        R = np.asarray(transform, dtype=np.float64)
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            raise InputError(f"export: transform must be a 3 x 3 rotation, got {R.tolist()}")
+        v, n = v @ R.T, n @ R.T
+    return v, n
+
+
+def texture_file_names(stem: str, texture_format: str, pages: int) -> list[str]:
+    """The texture files :func:`export_obj` writes next to ``<stem>.obj``: ``<stem>.png``, or ``<stem>_<page>.png``."""
+    ext = TEXTURE_FORMATS[_check_format(texture_format, 90)][0]
+    return [f"{stem}.{ext}"] if pages == 1 else [f"{stem}_{p}.{ext}" for p in range(pages)]
 
 
 def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
@@ -82,20 +171,32 @@ def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
     return (row * len(a)) % tuple(a.ravel().tolist())
 
 
-def export_obj(textured: Any, path: str | os.PathLike, *, png_compression: int = 1, png: bytes | None = None) -> Path:
-    """Write ``path`` (.obj) with ``<stem>.mtl`` and ``<stem>.png`` next to it.
+def export_obj(
+    textured: Any, path: str | os.PathLike, *, png_compression: int = 1, png: bytes | None = None,
+    texture_format: str = "png", quality: int = 90, transform: np.ndarray | None = None,
+    encoded: list[bytes] | None = None,
+) -> Path:
+    """Write ``path`` (.obj) with ``<stem>.mtl`` and the texture(s) next to it.
 
     Parameters
     ----------
     textured : TexturedMesh
         ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2) bottom-left origin, ``texture``
-        (S, S, 3) uint8, optionally ``normals`` (M, 3).
+        (S, S, 3) uint8 (pages stacked vertically when ``pages`` > 1), optionally ``normals``.
     path : path-like
         Destination ``.obj``.
     png_compression : int, default 1
-        zlib level of the PNG (0-9; 1 is fast and close in size).
+        zlib level of a PNG (0-9; 1 is fast and close in size).
     png : bytes, optional
-        Already encoded texture (:func:`encode_png`), to encode it once for several formats.
+        Already encoded single-page PNG texture (:func:`encode_png`).
+    texture_format : {"png", "jpg", "webp"}, default "png"
+        ``<stem>.png`` (``<stem>_<page>.png`` for several pages), or JPEG / WebP.
+    quality : int, default 90
+        JPEG / WebP quality.
+    transform : (3, 3) float, optional
+        Rotation applied to positions and normals.
+    encoded : list of bytes, optional
+        Already encoded textures, one per page, in ``texture_format``.
 
     Returns
     -------
@@ -103,33 +204,37 @@ def export_obj(textured: Any, path: str | os.PathLike, *, png_compression: int =
         The OBJ path.
     """
     _check(textured)
+    fmt = _check_format(texture_format, quality)
     path = Path(path)
     stem = path.stem
-    png_name, mtl_name = f"{stem}.png", f"{stem}.mtl"
-    if png is None:
-        png = encode_png(textured.texture, compression=png_compression)
-    atomic_write_bytes(path.with_name(png_name), png)
-    mtl = (
-        "# o3d_seqcc texture atlas\n"
-        "newmtl material_0\n"
+    if png is not None and encoded is None and fmt == "png":
+        encoded = [png]
+    images = _encoded_pages(textured, fmt, quality, png_compression, encoded)
+    names = texture_file_names(stem, fmt, len(images))
+    mtl_name = f"{stem}.mtl"
+    for name, data in zip(names, images):
+        atomic_write_bytes(path.with_name(name), data)
+    mtl = "# o3d_seqcc texture atlas\n" + "".join(
+        f"newmtl material_{p}\n"
         "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
-        f"d 1.0\nillum 1\nmap_Kd {png_name}\n"
-    )
+        f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
     atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
-    vt = np.asarray(textured.uv, dtype=np.float64)
+    verts, normals = _geometry(textured, transform)
+    vt = _page_uv(textured)
     f1 = np.asarray(textured.faces, dtype=np.int64) + 1
-    fidx = np.repeat(f1, 3, axis=1)  # a/a/a b/b/b c/c/c
+    face_page = _face_page(textured)
     parts = [
         "# o3d_seqcc textured mesh\n",
         f"mtllib {mtl_name}\n",
-        _fmt_rows("v", np.asarray(textured.vertices, dtype=np.float64), "%.9g"),
+        _fmt_rows("v", verts, "%.9g"),
         _fmt_rows("vt", vt, "%.7f"),
-        _fmt_rows("vn", _normals(textured), "%.5f"),
-        "usemtl material_0\n",
-        (("f" + " %d/%d/%d" * 3 + "\n") * len(fidx)) % tuple(fidx.ravel().tolist()),
+        _fmt_rows("vn", normals, "%.5f"),
     ]
+    for p in range(len(names)):  # faces grouped by page, one material each
+        fidx = np.repeat(f1[face_page == p], 3, axis=1)  # a/a/a b/b/b c/c/c
+        parts += [f"usemtl material_{p}\n", (("f" + " %d/%d/%d" * 3 + "\n") * len(fidx)) % tuple(fidx.ravel().tolist())]
     atomic_write_bytes(path, "".join(parts).encode("ascii"))
-    logger.info("wrote %s (+ %s, %s)", path, mtl_name, png_name)
+    logger.info("wrote %s (+ %s, %s)", path, mtl_name, ", ".join(names))
     return path
 
 
@@ -137,17 +242,26 @@ def _pad4(b: bytes, fill: bytes = b"\x00") -> bytes:
     return b + fill * ((-len(b)) % 4)
 
 
-def glb_bytes(textured: Any, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None) -> bytes:
+def glb_bytes(
+    textured: Any, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None,
+    texture_format: str = "png", quality: int = 90, transform: np.ndarray | None = None,
+    encoded: list[bytes] | None = None,
+) -> bytes:
     """The GLB file content of a textured mesh (see :func:`export_glb`)."""
     _check(textured)
-    pos = np.ascontiguousarray(textured.vertices, dtype=np.float32)
-    nrm = np.ascontiguousarray(_normals(textured), dtype=np.float32)
+    fmt = _check_format(texture_format, quality)
+    if png is not None and encoded is None and fmt == "png":
+        encoded = [png]
+    images_data = _encoded_pages(textured, fmt, quality, png_compression, encoded)
+    verts, normals = _geometry(textured, transform)
+    pos = np.ascontiguousarray(verts, dtype=np.float32)
+    nrm = np.ascontiguousarray(normals, dtype=np.float32)
     # float32 rounding can leave |n| a hair off 1; renormalise in float32
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    uv = np.ascontiguousarray(np.stack([textured.uv[:, 0], 1.0 - textured.uv[:, 1]], axis=1), dtype=np.float32)
-    idx = np.ascontiguousarray(textured.faces, dtype=np.uint32).reshape(-1)
-    if png is None:
-        png = encode_png(textured.texture, compression=png_compression)
+    puv = _page_uv(textured)
+    uv = np.ascontiguousarray(np.stack([puv[:, 0], 1.0 - puv[:, 1]], axis=1), dtype=np.float32)
+    faces = np.asarray(textured.faces)
+    face_page = _face_page(textured)
     blobs: list[bytes] = []
     views: list[dict] = []
     offset = 0
@@ -163,43 +277,56 @@ def glb_bytes(textured: Any, *, unlit: bool = False, png_compression: int = 1, p
         offset += len(padded)
         return len(views) - 1
 
-    v_pos = add_view(pos.tobytes(), 34962)
-    v_nrm = add_view(nrm.tobytes(), 34962)
-    v_uv = add_view(uv.tobytes(), 34962)
-    v_idx = add_view(idx.tobytes(), 34963)
-    v_png = add_view(png, None)
     n = len(pos)
-    accessors = [
-        {"bufferView": v_pos, "componentType": 5126, "count": n, "type": "VEC3",
+    accessors: list[dict] = [
+        {"bufferView": add_view(pos.tobytes(), 34962), "componentType": 5126, "count": n, "type": "VEC3",
          "min": pos.min(axis=0).astype(float).tolist(), "max": pos.max(axis=0).astype(float).tolist()},
-        {"bufferView": v_nrm, "componentType": 5126, "count": n, "type": "VEC3"},
-        {"bufferView": v_uv, "componentType": 5126, "count": n, "type": "VEC2"},
-        {"bufferView": v_idx, "componentType": 5125, "count": int(idx.size), "type": "SCALAR"},
+        {"bufferView": add_view(nrm.tobytes(), 34962), "componentType": 5126, "count": n, "type": "VEC3"},
+        {"bufferView": add_view(uv.tobytes(), 34962), "componentType": 5126, "count": n, "type": "VEC2"},
     ]
-    material: dict[str, Any] = {
-        "name": "atlas",
-        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0, "roughnessFactor": 1.0},
-        "doubleSided": False,
-    }
+    mime = TEXTURE_FORMATS[fmt][1]
+    primitives, materials, textures, images = [], [], [], []
+    for p, data in enumerate(images_data):
+        idx = np.ascontiguousarray(faces[face_page == p], dtype=np.uint32).reshape(-1)
+        if idx.size == 0:
+            continue
+        accessors.append({"bufferView": add_view(idx.tobytes(), 34963), "componentType": 5125,
+                          "count": int(idx.size), "type": "SCALAR"})
+        images.append({"bufferView": add_view(data, None), "mimeType": mime})
+        if fmt == "webp":
+            textures.append({"sampler": 0, "extensions": {"EXT_texture_webp": {"source": len(images) - 1}}})
+        else:
+            textures.append({"sampler": 0, "source": len(images) - 1})
+        material: dict[str, Any] = {
+            "name": "atlas" if len(images_data) == 1 else f"atlas_{p}",
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": len(textures) - 1}, "metallicFactor": 0.0,
+                                     "roughnessFactor": 1.0},
+            "doubleSided": False,
+        }
+        if unlit:
+            material["extensions"] = {"KHR_materials_unlit": {}}
+        materials.append(material)
+        primitives.append({"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": len(accessors) - 1,
+                           "material": len(materials) - 1, "mode": 4})
     gltf: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": "o3d_seqcc"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "textured_mesh"}],
-        "meshes": [{"name": "textured_mesh", "primitives": [
-            {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0, "mode": 4}
-        ]}],
-        "materials": [material],
-        "textures": [{"sampler": 0, "source": 0}],
+        "meshes": [{"name": "textured_mesh", "primitives": primitives}],
+        "materials": materials,
+        "textures": textures,
         "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}],
-        "images": [{"bufferView": v_png, "mimeType": "image/png"}],
+        "images": images,
         "accessors": accessors,
         "bufferViews": views,
         "buffers": [{"byteLength": offset}],
     }
-    if unlit:
-        material["extensions"] = {"KHR_materials_unlit": {}}
-        gltf["extensionsUsed"] = ["KHR_materials_unlit"]
+    used = (["KHR_materials_unlit"] if unlit else []) + (["EXT_texture_webp"] if fmt == "webp" else [])
+    if used:
+        gltf["extensionsUsed"] = used
+    if fmt == "webp":
+        gltf["extensionsRequired"] = ["EXT_texture_webp"]
     js = _pad4(json.dumps(gltf, separators=(",", ":")).encode("utf-8"), b" ")
     binc = b"".join(blobs)
     total = 12 + 8 + len(js) + 8 + len(binc)
@@ -211,7 +338,9 @@ def glb_bytes(textured: Any, *, unlit: bool = False, png_compression: int = 1, p
 
 
 def export_glb(
-    textured: Any, path: str | os.PathLike, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None
+    textured: Any, path: str | os.PathLike, *, unlit: bool = False, png_compression: int = 1, png: bytes | None = None,
+    texture_format: str = "png", quality: int = 90, transform: np.ndarray | None = None,
+    encoded: list[bytes] | None = None,
 ) -> Path:
     """Write a glTF 2.0 binary (.glb) with the atlas embedded as ``baseColorTexture``.
 
@@ -225,27 +354,39 @@ def export_glb(
         the material is otherwise metallic 0 / roughness 1.
     png_compression : int, default 1
     png : bytes, optional
-        Already encoded texture (:func:`encode_png`).
+        Already encoded single-page PNG texture (:func:`encode_png`).
+    texture_format : {"png", "jpg", "webp"}, default "png"
+        WebP is embedded through ``EXT_texture_webp`` (listed as required).
+    quality : int, default 90
+        JPEG / WebP quality.
+    transform : (3, 3) float, optional
+        Rotation applied to positions and normals (glTF is Y-up:
+        :func:`o3d_seqcc.orientation.up_axis_transform`).
+    encoded : list of bytes, optional
+        Already encoded textures, one per page, in ``texture_format``.
 
     Returns
     -------
     pathlib.Path
     """
     path = Path(path)
-    atomic_write_bytes(path, glb_bytes(textured, unlit=unlit, png_compression=png_compression, png=png))
+    atomic_write_bytes(path, glb_bytes(textured, unlit=unlit, png_compression=png_compression, png=png,
+                                       texture_format=texture_format, quality=quality, transform=transform,
+                                       encoded=encoded))
     logger.info("wrote %s", path)
     return path
 
 
-def _ply_vertices(textured: Any, colours: np.ndarray | None) -> tuple[str, bytes]:
+def _ply_vertices(textured: Any, colours: np.ndarray | None,
+                  transform: np.ndarray | None = None) -> tuple[str, bytes]:
     """PLY header lines and binary block of the vertices: x y z nx ny nz [red green blue] (float32, uint8)."""
-    n = _normals(textured)
+    verts, n = _geometry(textured, transform)
     fields = [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
     if colours is not None:
         fields += [(k, "u1") for k in ("red", "green", "blue")]
-    va = np.empty(len(textured.vertices), dtype=np.dtype(fields))
+    va = np.empty(len(verts), dtype=np.dtype(fields))
     for i, k in enumerate("xyz"):
-        va[k] = textured.vertices[:, i]
+        va[k] = verts[:, i]
         va["n" + k] = n[:, i]
     if colours is not None:
         c8 = np.clip(np.rint(colours), 0, 255).astype(np.uint8)
@@ -255,16 +396,17 @@ def _ply_vertices(textured: Any, colours: np.ndarray | None) -> tuple[str, bytes
     return header, va.tobytes()
 
 
-def export_ply(textured: Any, path: str | os.PathLike) -> Path:
+def export_ply(textured: Any, path: str | os.PathLike, *, transform: np.ndarray | None = None) -> Path:
     """Write a binary PLY with per-vertex colours sampled from the atlas (bilinear).
 
     Vertices are the textured mesh's (duplicated along chart borders), so colours stay exact at
-    every vertex; detail inside a face is lost (vertex colours are interpolated).
+    every vertex; detail inside a face is lost (vertex colours are interpolated). ``transform``
+    (3 x 3) rotates positions and normals.
     """
     _check(textured)
     path = Path(path)
     col = sample_bilinear(textured.texture, *textured.texel_xy().T)
-    vheader, vblock = _ply_vertices(textured, col)
+    vheader, vblock = _ply_vertices(textured, col, transform)
     fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,))])
     fa = np.empty(len(textured.faces), dtype=fdt)
     fa["n"] = 3
@@ -282,31 +424,34 @@ def export_meshlab_ply(
     textured: Any,
     path: str | os.PathLike,
     *,
-    texture: str | os.PathLike | None = None,
+    texture: str | os.PathLike | list | None = None,
     png_compression: int = 1,
     png: bytes | None = None,
 ) -> Path:
-    """Write MeshLab's own textured PLY: per-face texture coordinates and a ``TextureFile`` comment.
+    """Write MeshLab's own textured PLY: per-face texture coordinates and ``TextureFile`` comments.
 
     This is the layout MeshLab writes when it saves a textured mesh as PLY (``element face`` with
     ``vertex_indices`` and a ``texcoord`` list of 6 floats per face, the texture named in a
-    ``comment TextureFile`` header line), and the textured format every MeshLab version reads:
-    MeshLab 2020.09, the version in Debian 12 and Ubuntu 22.04-24.04, aborts on any OBJ file
-    (an assertion in its OBJ importer, Debian bug 1054006). Texture coordinates keep the OBJ
-    convention (origin bottom-left, v up), as MeshLab's.
+    ``comment TextureFile`` header line; with several atlas pages one such line per page and an
+    ``int texnumber`` per face), and the textured format every MeshLab version reads: MeshLab
+    2020.09, the version in Debian 12 and Ubuntu 22.04-24.04, aborts on any OBJ file (an
+    assertion in its OBJ importer, Debian bug 1054006). Texture coordinates keep the OBJ
+    convention (origin bottom-left, v up), as MeshLab's. The mesh stays in the scene's frame (no
+    up-axis transform: a MeshLab project's rasters must keep matching it).
 
     Parameters
     ----------
     textured : TexturedMesh
-        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2), ``texture`` (S, S, 3) uint8.
+        ``vertices`` (M, 3), ``faces`` (F, 3), ``uv`` (M, 2), ``texture`` (S, S, 3) uint8
+        (pages stacked vertically when ``pages`` > 1).
     path : path-like
         Destination ``.ply``.
-    texture : path-like, optional
-        An existing image file holding ``textured.texture`` (e.g. the OBJ's PNG) to refer to;
-        by default ``<stem>.png`` is written next to ``path``.
+    texture : path-like or list of path-like, optional
+        Existing image file(s) holding the texture (one per page, e.g. the OBJ's) to refer to;
+        by default ``<stem>.png`` (``<stem>_<page>.png``) is written next to ``path``.
     png_compression : int, default 1
     png : bytes, optional
-        Already encoded texture (:func:`encode_png`), when ``texture`` is not given.
+        Already encoded single-page PNG texture (:func:`encode_png`), when ``texture`` is not given.
 
     Returns
     -------
@@ -315,27 +460,41 @@ def export_meshlab_ply(
     """
     _check(textured)
     path = Path(path)
+    pages = int(getattr(textured, "pages", 1))
     if texture is None:
-        texture = path.with_suffix(".png")
-        atomic_write_bytes(texture, png if png is not None else encode_png(textured.texture, compression=png_compression))
-    elif not Path(texture).is_file():
-        raise InputError(f"texture: {texture} does not exist; write the texture first or pass texture=None")
-    tex_name = Path(os.path.relpath(Path(texture).resolve(), path.parent.resolve())).as_posix()
-    if any(c in tex_name for c in "\r\n"):
-        raise InputError(f"texture: the file name {tex_name!r} cannot go into a PLY header")
+        names = texture_file_names(path.stem, "png", pages)
+        data = [png] if png is not None and pages == 1 else _encoded_pages(textured, "png", 90, png_compression, None)
+        files = [path.with_name(n) for n in names]
+        for f, b in zip(files, data):
+            atomic_write_bytes(f, b)
+    else:
+        files = [Path(t) for t in (texture if isinstance(texture, (list, tuple)) else [texture])]
+        if len(files) != pages:
+            raise InputError(f"texture: {len(files)} file(s) given for {pages} atlas page(s)")
+        missing = [str(f) for f in files if not f.is_file()]
+        if missing:
+            raise InputError(f"texture: {missing[0]} does not exist; write the texture first or pass texture=None")
+    tex_names = [Path(os.path.relpath(f.resolve(), path.parent.resolve())).as_posix() for f in files]
+    if any(c in n for n in tex_names for c in "\r\n"):
+        raise InputError(f"texture: the file names {tex_names!r} cannot go into a PLY header")
     vheader, vblock = _ply_vertices(textured, None)
-    fdt = np.dtype([("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("t", "<f4", (6,))])
-    fa = np.empty(len(textured.faces), dtype=fdt)
+    fields = [("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("t", "<f4", (6,))]
+    if pages > 1:
+        fields.append(("k", "<i4"))
+    fa = np.empty(len(textured.faces), dtype=np.dtype(fields))
     fa["n"], fa["m"] = 3, 6
     fa["i"] = textured.faces
-    fa["t"] = np.asarray(textured.uv, dtype=np.float64)[textured.faces].reshape(-1, 6)
+    fa["t"] = _page_uv(textured)[textured.faces].reshape(-1, 6)
+    if pages > 1:
+        fa["k"] = _face_page(textured)
     header = (
-        f"ply\nformat binary_little_endian 1.0\ncomment o3d_seqcc textured mesh\ncomment TextureFile {tex_name}\n"
-        f"{vheader}element face {len(fa)}\nproperty list uchar int vertex_indices\n"
-        "property list uchar float texcoord\nend_header\n"
+        "ply\nformat binary_little_endian 1.0\ncomment o3d_seqcc textured mesh\n"
+        + "".join(f"comment TextureFile {n}\n" for n in tex_names)
+        + f"{vheader}element face {len(fa)}\nproperty list uchar int vertex_indices\n"
+        "property list uchar float texcoord\n" + ("property int texnumber\n" if pages > 1 else "") + "end_header\n"
     )
     atomic_write_bytes(path, header.encode("utf-8") + vblock + fa.tobytes())
-    logger.info("wrote %s (texture %s)", path, tex_name)
+    logger.info("wrote %s (texture %s)", path, ", ".join(tex_names))
     return path
 
 
@@ -349,10 +508,13 @@ def export_textured_mesh(
     formats: Iterable[str] = ("glb", "obj"),
     stem: str = "mesh",
     unlit: bool = False,
+    texture_format: str = "png",
+    quality: int = 90,
+    transform: np.ndarray | None = None,
 ) -> dict[str, Path]:
-    """Write ``out_dir/<stem>.glb``, ``<stem>.obj`` (+ .mtl, .png), ``<stem>_colors.ply`` as asked.
+    """Write ``out_dir/<stem>.glb``, ``<stem>.obj`` (+ .mtl, textures), ``<stem>_colors.ply`` as asked.
 
-    The PNG is encoded once for GLB and OBJ.
+    The textures are encoded once for GLB and OBJ.
 
     Parameters
     ----------
@@ -360,6 +522,12 @@ def export_textured_mesh(
     stem : str, default "mesh"
     unlit : bool, default False
         GLB material with ``KHR_materials_unlit``.
+    texture_format : {"png", "jpg", "webp"}, default "png"
+    quality : int, default 90
+        JPEG / WebP quality.
+    transform : (3, 3) float, optional
+        Rotation applied to the positions and normals of every file (e.g. to make the scene
+        Y-up: :func:`o3d_seqcc.orientation.up_axis_transform`).
 
     Returns
     -------
@@ -370,12 +538,15 @@ def export_textured_mesh(
     bad = [f for f in fmts if f not in _WRITERS]
     if bad or not fmts:
         raise InputError(f"unknown export format(s) {bad or fmts}; valid: {', '.join(FORMATS)}")
+    fmt = _check_format(texture_format, quality)
     out_dir = Path(out_dir)
     out: dict[str, Path] = {}
-    png = encode_png(textured.texture) if {"glb", "obj"} & set(fmts) else None
+    encoded = _encoded_pages(textured, fmt, quality, 1, None) if {"glb", "obj"} & set(fmts) else None
     for f in dict.fromkeys(fmts):
         name, fn = _WRITERS[f]
-        kw: dict[str, Any] = {"png": png} if f in ("glb", "obj") else {}
+        kw: dict[str, Any] = {"transform": transform}
+        if f in ("glb", "obj"):
+            kw.update(encoded=encoded, texture_format=fmt, quality=quality)
         if f == "glb" and unlit:
             kw["unlit"] = True
         out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)

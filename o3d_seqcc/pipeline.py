@@ -29,7 +29,7 @@ import numpy as np
 
 from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError, warn
-from .export import FORMATS, export_meshlab_ply, export_textured_mesh
+from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
 from .io.files import atomic_write_bytes, write_image, write_json
 from .io.load import load_scene, save_scene
 from .io.meshlab import save_mlp
@@ -37,6 +37,7 @@ from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import evaluate
+from .orientation import up_axis_transform
 from .render import write_selection_picture
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric
@@ -129,8 +130,9 @@ class RunResult:
     source: str = ""
     images_from: str = "scene"
 
-    def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None) -> dict[str, Any]:
-        """The ``report.json`` content (JSON types)."""
+    def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
+               export: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The ``report.json`` content (JSON types); ``export``: the export options :meth:`save` used."""
         s = self.settings
         names = self.scene.names
         rep: dict[str, Any] = {"command": self.command, "scene": self.source, "images": self.images_from}
@@ -148,6 +150,8 @@ class RunResult:
         rep["selection"] = {"method": s.selection, "seed": s.seed, **self.selection_stats,
                             **({"picture_view": picture_view} if picture_view else {})}
         rep["atlas"] = {k: v for k, v in self.textured.stats.items() if not k.startswith("time_")}
+        if export is not None:
+            rep["export"] = export
         rep["seams"] = None if self.seams is None else self.seams.to_dict()
         rep["files"] = dict(files or {})
         if self.seams_original is not None:
@@ -165,6 +169,9 @@ class RunResult:
         save_images: bool = False,
         selection_view: str | int | None = None,
         unlit: bool = False,
+        up_axis: str = "y",
+        texture_format: str = "png",
+        jpeg_quality: int = 90,
     ) -> dict[str, str]:
         """Write the textured mesh, the selection and ``report.json`` as the folder ``out``, all at once.
 
@@ -184,13 +191,35 @@ class RunResult:
             default the view seeing the most faces; ``"none"`` skips the picture.
         unlit : bool, default False
             GLB material with ``KHR_materials_unlit``.
+        up_axis : {"y", "z", "none"}, default "y"
+            Up axis of the GLB, OBJ and PLY (glTF is Y-up): the scene's up direction, estimated
+            from its cameras, is rotated onto it and the rotation baked into the vertices
+            (:func:`o3d_seqcc.orientation.up_axis_transform`, recorded in the report's
+            ``export``); ``"none"`` keeps the scene's frame. The MeshLab layer always keeps it
+            (the project's rasters must match it).
+        texture_format : {"png", "jpg", "webp"}, default "png"
+            Texture images of the GLB and OBJ (WebP in the GLB through ``EXT_texture_webp``).
+        jpeg_quality : int, default 90
+            JPEG / WebP quality (1-100).
 
         Returns
         -------
         dict
             Kind -> written path (also in the report's ``files``).
+
+        Raises
+        ------
+        InputError
+            Unknown format, up axis or texture format, a quality outside 1..100 (before anything
+            is written).
         """
         fmts = parse_formats(formats)
+        if str(texture_format).lower() not in TEXTURE_FORMATS:
+            raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+        if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
+            raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
+        tfmt = str(texture_format).lower()
+        rotation, orientation = up_axis_transform(self.scene, up_axis)
         view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
         if view is not None:
             self.scene.index(view)
@@ -200,8 +229,9 @@ class RunResult:
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
                                                   stage / "selection.png", view)
-            written = {k: Path(v) for k, v in export_textured_mesh(self.textured, stage, formats=fmts,
-                                                                    unlit=unlit).items()}
+            written = {k: Path(v) for k, v in export_textured_mesh(
+                self.textured, stage, formats=fmts, unlit=unlit, texture_format=tfmt, quality=int(jpeg_quality),
+                transform=None if up_axis == "none" else rotation).items()}
             buf = io.BytesIO()
             np.save(buf, self.selection)
             atomic_write_bytes(stage / "selection.npy", buf.getvalue())
@@ -217,11 +247,16 @@ class RunResult:
             project = _meshlab_project(self.scene, stage, mesh=layer, images=rasters)
             if project is not None:
                 written["meshlab_project"] = project
+                reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
                 written["meshlab_mesh"] = export_meshlab_ply(
-                    self.textured, layer, texture=stage / "mesh.png" if "obj" in written else None)
+                    self.textured, layer, texture=[stage / n for n in texture_file_names(
+                        "mesh", tfmt, self.textured.pages)] if reuse else None)
             written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
             self.timings["export"] = time.perf_counter() - t
-            write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1]))
+            export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
+                      "orientation": {**orientation, "applies_to": [f for f in fmts]}}
+            write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1],
+                                                          export=export))
         return written_out
 
 
@@ -384,7 +419,7 @@ def run(
     sm0 = None
     if compare_original:
         t = time.perf_counter()
-        s0 = s.updated(atlas_size=tm.atlas_size, texel_scale=tm.stats["texel_scale"], overflow="scale")
+        s0 = s.updated(atlas_size=tm.atlas_size, texels_per_pixel=tm.stats["texels_per_pixel"])
         sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s0))
         _timed(timings, "compare_original", t)
     _timed(timings, "total", t_all)

@@ -9,20 +9,24 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ..correction import available_methods
-from ..export import FORMATS
+from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output
 from ..mappings import MODES
+from ..orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import FALLBACKS, OVERFLOWS
 
 __all__ = [
+    "add_atlas_arguments",
     "add_correction_arguments",
+    "add_export_arguments",
     "add_scene_arguments",
     "add_texture_arguments",
     "library_default",
     "prepare_out_dir",
     "print_run_summary",
+    "save_options_from_args",
     "scene_from_args",
     "texture_settings_from_args",
 ]
@@ -57,24 +61,22 @@ def add_correction_arguments(p: argparse.ArgumentParser) -> None:
                    "the paper's)")
 
 
-def add_texture_arguments(p: argparse.ArgumentParser) -> None:
-    """Options of :class:`~o3d_seqcc.texturing.TextureSettings` and of the outputs (``texture`` and ``run``)."""
+def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -> None:
+    """Options of :class:`~o3d_seqcc.texturing.TextureSettings`, of the export, and (``outputs``) of the
+    output folder (``texture`` and ``run``; ``demo`` without the output-folder options)."""
     d = _DEFAULTS
-    p.add_argument("--out", required=True, help="output folder (refused if it exists, unless --overwrite)")
-    p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
-    p.add_argument("--format", default="glb,obj", help=f"comma-separated export formats among {', '.join(FORMATS)} "
-                   "(default glb,obj)")
+    if outputs:
+        p.add_argument("--out", required=True, help="output folder (refused if it exists, unless --overwrite)")
+        p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
+        p.add_argument("--format", default="glb,obj", help=f"comma-separated export formats among {', '.join(FORMATS)} "
+                       "(default glb,obj)")
     p.add_argument("--selection", default=d.selection, choices=sorted(SELECTION_METHODS),
                    help="per-face image selection: mrf (default: largest areas with few image transitions), "
                    "largest-area or random (the paper's two)")
     p.add_argument("--smoothness", type=float, default=d.smoothness,
                    help=f"mrf: Potts weight per interior edge (default {d.smoothness:g})")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of random selection / mrf order (default 0)")
-    p.add_argument("--atlas-size", type=int, default=d.atlas_size, help=f"atlas side in texels (default {d.atlas_size})")
-    p.add_argument("--texel-scale", type=float, default=d.texel_scale, help="atlas texels per image pixel (default 1)")
-    p.add_argument("--padding", type=int, default=d.padding, help=f"gutter texels around every chart (default {d.padding})")
-    p.add_argument("--overflow", choices=OVERFLOWS, default=d.overflow,
-                   help="when the charts do not fit the atlas: grow it (default), shrink the texels, or fail")
+    add_atlas_arguments(p)
     p.add_argument("--no-leveling", dest="leveling", action="store_false",
                    help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "
                    "steps at chart seams; on by default)")
@@ -91,8 +93,53 @@ def add_texture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--selection-view", default=None,
                    help="view (name or index) from which OUT/selection.png is rendered (default: the view that sees "
                    "the most faces); 'none' to skip the picture")
+    add_export_arguments(p)
+    if outputs:
+        p.add_argument("--no-seams", dest="seams", action="store_false", help="skip the seam metric in report.json")
+
+
+def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
+    """The atlas budget and layout options of :class:`~o3d_seqcc.texturing.TextureSettings` (``texture``, ``run``, ``demo``)."""
+    d = _DEFAULTS
+    p.add_argument("--atlas-size", type=int, default=d.atlas_size,
+                   help=f"largest atlas side in texels, a budget (default {d.atlas_size}): the atlas is the smallest "
+                   "power of two up to it that holds the charts at --texels-per-pixel")
+    p.add_argument("--texels-per-pixel", default=d.texels_per_pixel, metavar="auto|T",
+                   help="texel density, atlas texels per photo pixel (default auto: at least the photos' resolution, "
+                   "raised to fill the atlas, at most 2)")
+    p.add_argument("--atlas-overflow", dest="overflow", choices=OVERFLOWS, default=d.overflow,
+                   help="when the charts do not fit --atlas-size at that density: scale the density down (default, "
+                   "a warning gives the factor) or write several atlas pages (one material each)")
+    p.add_argument("--no-power-of-two", dest="power_of_two", action="store_false",
+                   help="atlas sides need not be powers of two (multiples of 4, as small as the charts allow)")
+    p.add_argument("--padding", type=int, default=d.padding,
+                   help=f"texels of gutter (the photo around the chart) between charts, mip-safe to level 2 at the "
+                   f"default {d.padding}")
+    p.add_argument("--merge-charts", type=int, default=d.merge_charts,
+                   help=f"charts of at most this many faces join a neighbouring chart's parametrisation where its view "
+                   f"sees them (default {d.merge_charts}; 0: off)")
+
+
+def add_export_arguments(p: argparse.ArgumentParser) -> None:
+    """Up axis, texture format and quality, unlit material (defaults: :meth:`o3d_seqcc.pipeline.RunResult.save`'s)."""
+    from ..pipeline import RunResult
+
+    d = library_default(RunResult.save)
+    p.add_argument("--up-axis", choices=UP_AXES, default=d["up_axis"],
+                   help=f"up axis of the GLB/OBJ/PLY (default {d['up_axis']}: glTF is Y-up): the scene's up direction, "
+                   "estimated from the cameras, is rotated onto it (recorded in report.json; the MeshLab project "
+                   "keeps the scene's frame); none keeps the scene's frame")
+    p.add_argument("--texture-format", choices=tuple(TEXTURE_FORMATS), default=d["texture_format"],
+                   help=f"texture images (default {d['texture_format']}; webp in the GLB needs EXT_texture_webp)")
+    p.add_argument("--jpeg-quality", type=int, default=d["jpeg_quality"],
+                   help=f"JPEG / WebP quality 1-100 (default {d['jpeg_quality']})")
     p.add_argument("--unlit", action="store_true", help="GLB material with KHR_materials_unlit")
-    p.add_argument("--no-seams", dest="seams", action="store_false", help="skip the seam metric in report.json")
+
+
+def save_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The export options of :meth:`~o3d_seqcc.pipeline.RunResult.save` from the parsed arguments."""
+    return {"up_axis": args.up_axis, "texture_format": args.texture_format, "jpeg_quality": args.jpeg_quality,
+            "unlit": args.unlit}
 
 
 def texture_settings_from_args(args: argparse.Namespace) -> TextureSettings:
@@ -117,8 +164,11 @@ def print_run_summary(res, out: Path) -> None:
     if res.correction is not None:
         c = res.correction
         print(f"corrected {len(names)} views with {c.method} toward {names[c.reference]} ({len(c.unreachable)} unreachable)")
+    st = tm.stats
+    pages = f"{tm.pages} pages of " if tm.pages > 1 else ""
     print(f"textured {s['faces']} faces ({s['unseen_faces']} unseen, {s['transitions']} image transitions, "
-          f"{tm.stats['charts']} charts, atlas {tm.atlas_size}^2) in {res.timings['total']:.2f} s -> {out}")
+          f"{st['charts']} charts, atlas {pages}{tm.atlas_size}^2 at {st.get('texels_per_pixel', 1.0):.2f} texels/pixel, "
+          f"{100 * st.get('coverage', 0.0):.0f}% covered) in {res.timings['total']:.2f} s -> {out}")
     if res.seams is not None:
         print(f"seams: mean {res.seams.mean:.2f}, p99 {res.seams.p99:.2f}, >5: {res.seams.frac_above_5:.3f}")
     print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items()))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from ..demo import DATASETS, DEMO_SCENE, run_demo
+from .common import add_atlas_arguments, add_export_arguments, save_options_from_args, texture_settings_from_args
 from .synthetic import add_synthetic_arguments, scene_options
 
 
@@ -24,7 +25,8 @@ def _print_summary(res) -> None:
         _print_photometric(s["summary"])
     run_ = s["run"]
     print(f"run: reference {run_['reference']}, {run_['faces'] - run_['unseen_faces']} of {run_['faces']} faces "
-          f"textured from the photos, atlas {run_['atlas']['atlas_size']}^2 with {run_['atlas']['charts']} charts; "
+          f"textured from the photos, atlas {run_['atlas']['atlas_size']}^2 with {run_['atlas']['charts']} charts "
+          f"({100 * run_['atlas']['coverage']:.0f}% covered); "
           f"outputs in {res.out / 'run'}: {', '.join(run_['outputs'])}")
     seams, seams0 = run_["seams"], run_["seams_original"]
     if seams:
@@ -57,7 +59,8 @@ def _print_photometric(summ: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     options = scene_options(args) if args.dataset == "synthetic" else {}
     res = run_demo(args.out, dataset=args.dataset, data_root=args.data_root, t_npm=args.t_npm,
-                   overwrite=args.overwrite, **options)
+                   overwrite=args.overwrite, settings=texture_settings_from_args(args),
+                   save_options=save_options_from_args(args), **options)
     _print_summary(res)
     return 0
 
@@ -72,3 +75,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the synthetic room (default, scored against its ground truth) or the real Fountain set")
     p.add_argument("--data-root", help="fountain: a local copy of the set (default: Open3D's download)")
     add_synthetic_arguments(p, defaults=DEMO_SCENE)
+    add_atlas_arguments(p)
+    add_export_arguments(p)

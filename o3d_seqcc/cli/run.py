@@ -15,7 +15,7 @@ from dataclasses import replace
 
 from .. import pipeline
 from .common import add_correction_arguments, add_scene_arguments, add_texture_arguments, prepare_out_dir, \
-    print_run_summary, scene_from_args, texture_settings_from_args
+    print_run_summary, save_options_from_args, scene_from_args, texture_settings_from_args
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
                        settings=settings, seams=args.seams, compare_original=args.compare_original)
     res = replace(res, source=args.scene)
     res.save(out, overwrite=args.overwrite, formats=args.format, save_images=args.save_images,
-             selection_view=args.selection_view, unlit=args.unlit)
+             selection_view=args.selection_view, **save_options_from_args(args))
     print_run_summary(res, out)
     return 0
 

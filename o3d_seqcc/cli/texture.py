@@ -14,7 +14,7 @@ from dataclasses import replace
 from .. import pipeline
 from ..io.files import read_view_images
 from .common import add_scene_arguments, add_texture_arguments, prepare_out_dir, scene_from_args, \
-    print_run_summary, texture_settings_from_args
+    print_run_summary, save_options_from_args, texture_settings_from_args
 
 
 def run(args: argparse.Namespace) -> int:
@@ -25,7 +25,8 @@ def run(args: argparse.Namespace) -> int:
     images = read_view_images(scene, args.images) if args.images else None
     res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams)
     res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
-    res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view, unlit=args.unlit)
+    res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view,
+             **save_options_from_args(args))
     print_run_summary(res, out)
     return 0
 

@@ -4,8 +4,11 @@
   defaults every entry point uses;
 - :mod:`~o3d_seqcc.texturing.selection`: per-face view selection (:func:`select_views`:
   ``"mrf"``, ``"largest-area"``, ``"random"``);
-- :mod:`~o3d_seqcc.texturing.atlas`: charts cut from the selected photos, packed and baked
-  (:func:`bake_texture`);
+- :mod:`~o3d_seqcc.texturing.charts`: charts (image footprints of same-view regions, unseen
+  faces welded in) and their UVs;
+- :mod:`~o3d_seqcc.texturing.packing`: xatlas packing under an atlas-size budget;
+- :mod:`~o3d_seqcc.texturing.bake`: rasterisation, sampling, gutters, pull-push fill;
+- :mod:`~o3d_seqcc.texturing.atlas`: the stages together (:func:`bake_texture`);
 - :mod:`~o3d_seqcc.texturing.fallback`: colours of the faces seen by no view;
 - :mod:`~o3d_seqcc.texturing.leveling`: global and local seam leveling;
 - :mod:`~o3d_seqcc.texturing.textured_mesh`: :class:`TexturedMesh`, the one textured-mesh type

@@ -1,16 +1,28 @@
-"""Texture-atlas baking: charts cut from the selected photos, packed, leveled (paper 3.8).
+"""Texture-atlas baking: charts, xatlas packing, sampling bake, seam leveling (paper 3.8, issue 13).
 
-:func:`bake_texture` builds a texture atlas whose charts are the image-space footprints of
-connected same-view face regions ("the paper crops each face's projection from its selected
-image"): a chart's UVs are its vertices' pixel coordinates in its view, so a chart is a
-rectangle cut out of one (corrected) image at the image's own resolution and never mixes
-images. The chart rectangles (footprint bounding box plus ``padding`` pixels of real image
-content around it) are packed with a vectorised shelf packer, and the bake is an exact pixel
-copy: with ``texel_scale=1`` a texel *is* a source pixel, so a renderer's bilinear texture lookup
-equals bilinear sampling of the selected image at the projected point; other scales resample
-the images once (area averaging down, bilinear up). Faces seen by no view get texel blocks
-holding their fallback colours (:mod:`~o3d_seqcc.texturing.fallback`); seam leveling
-(:mod:`~o3d_seqcc.texturing.leveling`) then removes the colour steps at chart borders.
+:func:`bake_texture` turns a per-face view selection into a textured mesh, in stages:
+
+1. **charts** (:mod:`~o3d_seqcc.texturing.charts`): connected same-view regions, whose UVs are
+   their vertices' pixel coordinates in the view (a face's texture is its image-space
+   footprint, as the paper crops each face's projection from its selected photo); unseen faces
+   welded into a neighbouring chart or into one shared fallback region; tiny charts merged
+   into a neighbour's parametrisation;
+2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas packs the charts (rotated, at
+   ``padding`` texels from each other) into the smallest power-of-two atlas within the
+   ``atlas_size`` budget at the photos' resolution or above; when even the budget cannot hold
+   them, the density is scaled down (logged with the factor) or several pages are written;
+3. **bake by sampling** (:mod:`~o3d_seqcc.texturing.bake`): every texel inside a face samples
+   the face's own view at the same barycentric point of its projection; gutter texels continue
+   the nearest face's map (real photo content around every chart, so bilinear filtering and
+   mip levels 1-2 read no foreign colour); faces seen by no view get their fallback colours
+   (:mod:`~o3d_seqcc.texturing.fallback`);
+4. **seam leveling** (:mod:`~o3d_seqcc.texturing.leveling`): the global leveling's per-corner
+   offsets are added to every face's texels, then the local leveling blends what is left along
+   chart borders; the background is filled by pull-push.
+
+Each view's image is read once (``images[v]`` in one loop over the views, which gathers
+everything the bake needs from it), and the visibility only through ``face_uv`` and, for
+merge candidates, ``usable`` / ``area`` at single (view, face) pairs.
 
 Within a triangle UVs are interpolated affinely while the camera projection is projective: as
 in the paper and mvs-texturing, the texture of a face is its image-space projection, which is
@@ -22,7 +34,6 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
@@ -31,109 +42,17 @@ from ..errors import InputError
 from ..imageops import img_as_uint8
 from ..meshops import face_adjacency, vertex_normals, weld_vertices
 from ..progress import steps
-from .fallback import fallback_blocks
-from .leveling import apply_corner_offsets, leveling_corner_offsets, local_seam_leveling
+from .bake import barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, sample_image
+from .charts import build_charts
+from .fallback import fallback_corner_colors
+from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
+from .packing import pack_charts
 from .settings import TextureSettings, VisibilityLike
 from .textured_mesh import TexturedMesh
 
-__all__ = ["bake_texture", "push_pull_fill", "shelf_pack"]
+__all__ = ["bake_texture", "push_pull_fill"]
 
 logger = logging.getLogger(__name__)
-
-
-def shelf_pack(w: np.ndarray, h: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Shelf packing of rectangles into a strip of ``width``; returns x, y and total height.
-
-    Rectangles are sorted by height (then width, then index, deterministic), filled left to
-    right in shelves; one Python iteration per shelf, vectorised within a shelf.
-    """
-    n = len(w)
-    x = np.zeros(n, dtype=np.int64)
-    y = np.zeros(n, dtype=np.int64)
-    if n == 0:
-        return x, y, 0
-    order = np.lexsort((np.arange(n), -w, -h))
-    ws, hs = w[order], h[order]
-    cw = np.cumsum(ws)
-    k, top = 0, 0
-    while k < n:
-        base = cw[k - 1] if k else 0
-        j = int(np.searchsorted(cw, base + width, side="right"))
-        j = max(j, k + 1)  # a rectangle wider than the strip still gets its own shelf
-        idx = order[k:j]
-        x[idx] = cw[k:j] - ws[k:j] - base
-        y[idx] = top
-        top += int(hs[k])
-        k = j
-    return x, y, top
-
-
-def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Fill texels outside ``mask`` with smooth colours from the masked ones (pull-push).
-
-    Pull: area-averaged pyramid of colour x coverage and coverage. Push: from the coarsest
-    level up, ``filled = c + (1 - w) * upsampled`` (``c`` is the coverage-weighted colour mean,
-    ``w`` the coverage), and at full resolution only the empty texels are replaced.
-
-    Parameters
-    ----------
-    img : (H, W, 3) uint8
-    mask : (H, W) bool
-        Texels to keep.
-
-    Returns
-    -------
-    (H, W, 3) uint8
-        A new image.
-    """
-    import cv2
-
-    m = mask.astype(np.float32)
-    c = img.astype(np.float32)
-    c *= m[..., None]
-    levels = []
-    while min(m.shape) > 1:
-        hh, ww = (m.shape[0] + 1) // 2, (m.shape[1] + 1) // 2
-        c = cv2.resize(c, (ww, hh), interpolation=cv2.INTER_AREA)
-        m = cv2.resize(m, (ww, hh), interpolation=cv2.INTER_AREA)
-        levels.append((c, m))
-    c, m = levels[-1]
-    filled = c / np.maximum(m, 1e-12)[..., None]
-    for c, m in reversed(levels[:-1]):
-        up = cv2.resize(filled, (m.shape[1], m.shape[0]), interpolation=cv2.INTER_LINEAR)
-        filled = c + up * (1.0 - np.clip(m, 0.0, 1.0))[..., None]
-    up = cv2.resize(filled, (mask.shape[1], mask.shape[0]), interpolation=cv2.INTER_LINEAR)
-    out = img.copy()
-    empty = ~mask
-    out[empty] = np.clip(np.rint(up[empty]), 0, 255).astype(np.uint8)
-    return out
-
-
-@dataclass
-class _Charts:
-    """Charts of a selection: seen components first, then fallback blocks."""
-
-    face_chart: np.ndarray  # (F,) int64
-    chart_view: np.ndarray  # (C,) int64, n_views = fallback block
-    n_seen: int
-    blocks: np.ndarray  # (B, blk, blk, 3) uint8
-    block_xy: np.ndarray  # (3, 2) corner texels inside a block
-    corner_offsets: np.ndarray | None  # (F, 3, 3) global leveling offsets
-    leveling: dict | None
-
-
-@dataclass
-class _Layout:
-    """Where every chart rectangle sits: in its (scaled) source image and in the atlas."""
-
-    size: int
-    scale: float
-    grew: bool
-    fac: np.ndarray  # (V, 2) scaled / original image size
-    x0: np.ndarray  # (C, 2) top-left of the rectangle in its scaled source
-    wh: np.ndarray  # (C, 2) rectangle size
-    px: np.ndarray  # (C,) atlas position
-    py: np.ndarray
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
@@ -164,161 +83,22 @@ def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, 
     return verts, faces, labels, fuv
 
 
-def _make_charts(images, fuv, verts, faces, labels, adjacency, s: TextureSettings) -> _Charts:
-    """Charts = connected components of same-view faces; leveling offsets; fallback blocks."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    seen = labels >= 0
-    same = (labels[adjacency[:, 0]] == labels[adjacency[:, 1]]) & (labels[adjacency[:, 0]] >= 0)
-    e = adjacency[same]
-    _, comp = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(faces),) * 2),
-                                   directed=False)
-    corner_off = lev_stats = None
-    if s.leveling:
-        t = time.perf_counter()
-        corner_off, lev_stats = leveling_corner_offsets(images, fuv, verts, faces, labels, comp,
-                                                        smoothness=float(s.leveling_smoothness))
-        lev_stats["time_solve_s"] = time.perf_counter() - t
-    blocks, fb_of_face, fb_xy = fallback_blocks(images, fuv, verts, faces, labels, adjacency, fallback=s.fallback,
-                                                pad=min(int(s.padding), 1), corner_offsets=corner_off)
-    n_unseen = int(np.count_nonzero(~seen))
-    if n_unseen:
-        logger.info("bake_texture: %d faces seen by no view get a %s fallback colour (%d blocks)", n_unseen,
-                    s.fallback, len(blocks))
-    seen_comp, chart_seen = np.unique(comp[seen], return_inverse=True)
-    face_chart = np.empty(len(faces), dtype=np.int64)
-    face_chart[seen] = chart_seen.reshape(-1)
-    face_chart[~seen] = len(seen_comp) + fb_of_face[~seen]
-    chart_view = np.full(len(seen_comp) + len(blocks), len(images), dtype=np.int64)  # n_views = fallback colours
-    chart_view[face_chart[seen]] = labels[seen]
-    return _Charts(face_chart, chart_view, len(seen_comp), blocks, fb_xy, corner_off, lev_stats)
+def _groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stable order of ``keys`` and the start / end of each run of equal keys in it: (order, values, bounds)."""
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, dtype=np.int64)
+    return order, ks[cut], np.r_[cut, len(ks)]
 
 
-def _layout(images, fuv, labels, ch: _Charts, s: TextureSettings) -> _Layout:
-    """Chart rectangles in their scaled sources and their atlas positions (retrying on overflow)."""
-    seen = labels >= 0
-    fs = np.flatnonzero(seen)
-    n_charts = len(ch.chart_view)
-    blk = ch.blocks.shape[1]
-    padding = int(s.padding)
-    size, scale, grew = int(s.atlas_size), float(s.texel_scale), False
-    img_wh = np.array([[im.shape[1], im.shape[0]] for im in images], dtype=np.float64)
-    for _attempt in range(64):
-        fac = np.maximum(1, np.rint(img_wh * scale)) / img_wh  # exact per-image resize factors
-        suv = (fuv[fs] + 0.5) * fac[labels[fs]][:, None, :] - 0.5
-        lo = np.full((n_charts, 2), np.inf)
-        hi = np.full((n_charts, 2), -np.inf)
-        np.minimum.at(lo, ch.face_chart[fs], suv.min(axis=1))
-        np.maximum.at(hi, ch.face_chart[fs], suv.max(axis=1))
-        x0 = np.zeros((n_charts, 2), dtype=np.int64)
-        x1 = np.zeros((n_charts, 2), dtype=np.int64)
-        x0[:ch.n_seen] = np.floor(lo[:ch.n_seen]).astype(np.int64) - padding
-        x1[:ch.n_seen] = np.ceil(hi[:ch.n_seen]).astype(np.int64) + padding
-        x0[ch.n_seen:], x1[ch.n_seen:] = 0, blk - 1  # fallback blocks: blk x blk
-        wh = x1 - x0 + 1
-        px, py, height = shelf_pack(wh[:, 0], wh[:, 1], size)
-        if wh[:, 0].max() <= size and height <= size:
-            return _Layout(size, scale, grew, fac, x0, wh, px, py)
-        need_area = float((wh[:, 0] * wh[:, 1]).sum())
-        if s.overflow == "error":
-            raise InputError(
-                f"the charts do not fit a {size}x{size} atlas at texel_scale {scale:g} (they need about "
-                f"{int(np.ceil(np.sqrt(need_area)))}^2 texels, widest chart {int(wh[:, 0].max())}); use a larger "
-                "atlas_size (--atlas-size), a smaller texel_scale, or overflow='grow'/'scale'"
-            )
-        if s.overflow == "grow":
-            if size * 2 > s.max_atlas_size:
-                raise InputError(
-                    f"the charts do not fit a {size}x{size} atlas at texel_scale {scale:g} and growing it would exceed "
-                    f"max_atlas_size={s.max_atlas_size}; use overflow='scale' or a smaller texel_scale"
-                )
-            size, grew = size * 2, True
-            logger.warning("bake_texture: charts do not fit, atlas grown to %dx%d", size, size)
-        else:
-            scale *= float(np.clip(min(np.sqrt(size * size / need_area) * 0.9, size / wh[:, 0].max()), 0.3, 0.97))
-            if scale < 1e-3:
-                break
-            logger.info("bake_texture: charts do not fit, texel_scale reduced to %.3f", scale)
-    raise InputError(
-        f"could not pack {n_charts} charts into a {size}x{size} atlas even with texel_scale {scale:.2g}: their "
-        f"gutters alone ({2 * padding + 1}^2 texels per chart) need more room; use a larger atlas_size or a "
-        "smaller padding"
-    )
+def _interp(b: np.ndarray, corner: np.ndarray) -> np.ndarray:
+    """Barycentric interpolation: (n, 3) weights x (n, 3, c) corner values -> (n, c)."""
+    return b[:, 0:1] * corner[:, 0] + b[:, 1:2] * corner[:, 1] + b[:, 2:3] * corner[:, 2]
 
 
-def _gather(images, ch: _Charts, lay: _Layout, padding: int, want_region: bool):
-    """Copy every chart rectangle from its padded (scaled) source into the atlas, texel for texel."""
-    import cv2
-
-    size = lay.size
-    margin = int(padding) + 2
-    blk = ch.blocks.shape[1]
-    srcs = []
-    for im, f in zip(images, lay.fac):
-        ww, hh = int(round(im.shape[1] * f[0])), int(round(im.shape[0] * f[1]))
-        if (ww, hh) != (im.shape[1], im.shape[0]):
-            im = cv2.resize(im, (ww, hh), interpolation=cv2.INTER_AREA if lay.scale < 1 else cv2.INTER_LINEAR)
-        srcs.append(cv2.copyMakeBorder(im, margin, margin, margin, margin, cv2.BORDER_REPLICATE))
-    # fallback block k is at x = k * blk of one row of blocks
-    fb_img = ch.blocks.transpose(1, 0, 2, 3).reshape(blk, -1, 3) if len(ch.blocks) else np.zeros((1, 1, 3), np.uint8)
-    srcs.append(cv2.copyMakeBorder(fb_img, margin, margin, margin, margin, cv2.BORDER_REPLICATE))
-    sh = np.array([s.shape[0] for s in srcs], dtype=np.int64)
-    sw = np.array([s.shape[1] for s in srcs], dtype=np.int64)
-    soff = np.r_[0, np.cumsum(sh * sw)[:-1]]
-    flat = np.concatenate([s.reshape(-1, 3) for s in srcs], axis=0)
-    n_charts = len(ch.chart_view)
-    sx0 = lay.x0.copy()
-    sx0[ch.n_seen:, 0] = np.arange(len(ch.blocks)) * blk
-    sx0[ch.n_seen:, 1] = 0
-    sx0 += margin
-    sx1 = sx0 + lay.wh - 1
-    cv_ = ch.chart_view
-    out_of = (sx0[:, 0] < 0) | (sx0[:, 1] < 0) | (sx1[:, 0] >= sw[cv_]) | (sx1[:, 1] >= sh[cv_])
-    if out_of.any():
-        bad = np.flatnonzero(np.isin(ch.face_chart, np.flatnonzero(out_of)))
-        raise InputError(
-            f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to views in which they project outside the "
-            "image: select only usable views (select_views does)"
-        )
-    area_c = lay.wh[:, 0] * lay.wh[:, 1]
-    start = np.r_[0, np.cumsum(area_c)[:-1]]
-    cid = np.repeat(np.arange(n_charts), area_c)
-    local = np.arange(int(area_c.sum()), dtype=np.int64) - start[cid]
-    ly, lx = np.divmod(local, lay.wh[cid, 0])
-    del local
-    src_idx = (soff[cv_] + sx0[:, 1] * sw[cv_] + sx0[:, 0])[cid] + ly * sw[cv_][cid] + lx
-    dst_idx = (lay.py * size + lay.px)[cid] + ly * size + lx
-    del lx, ly
-    tex = np.zeros((size * size, 3), dtype=np.uint8)
-    tex[dst_idx] = flat[src_idx]
-    covered = np.zeros(size * size, dtype=bool)
-    covered[dst_idx] = True
-    region = None
-    if want_region:  # chart id of every texel of a seen chart's rectangle (fallback blocks are not leveled)
-        region = np.full(size * size, -1, dtype=np.int32)
-        region[dst_idx] = cid.astype(np.int32)
-        region[region >= ch.n_seen] = -1
-        region = region.reshape(size, size)
-    return tex.reshape(size, size, 3), covered.reshape(size, size), region
-
-
-def _output_vertices(fuv, faces, ch: _Charts, lay: _Layout, n_vertices: int):
-    """Vertices duplicated per chart: new faces, original vertex ids, texel coordinates."""
-    keys, inv = np.unique((ch.face_chart[:, None] * n_vertices + faces).reshape(-1), return_inverse=True)
-    new_faces = inv.reshape(-1, 3).astype(np.int64)
-    v_chart, v_orig = keys // n_vertices, keys % n_vertices
-    txy = np.empty((len(keys), 2))
-    pos = np.stack([lay.px, lay.py], axis=1)
-    seen_faces = np.flatnonzero(ch.face_chart < ch.n_seen)
-    corners = new_faces[seen_faces].reshape(-1)  # every corner of a seen face: its view's projection of the vertex
-    cview = np.repeat(ch.chart_view[ch.face_chart[seen_faces]], 3)
-    suv = (fuv[seen_faces].reshape(-1, 2) + 0.5) * lay.fac[cview] - 0.5
-    txy[corners] = suv - lay.x0[v_chart[corners]] + pos[v_chart[corners]]
-    fbf = np.flatnonzero(ch.face_chart >= ch.n_seen)
-    for j in range(3):  # fallback faces: their corners' texels in their blocks
-        txy[new_faces[fbf, j]] = pos[ch.face_chart[fbf]] + ch.block_xy[j]
-    return new_faces, v_orig.astype(np.int64), txy
+def _clip_bary(b: np.ndarray) -> np.ndarray:
+    b = np.clip(b, 0.0, None)
+    return b / np.maximum(b.sum(axis=1, keepdims=True), 1e-12)
 
 
 def bake_texture(
@@ -339,14 +119,15 @@ def bake_texture(
         ``vertices`` (N, 3), ``faces`` (F, 3), ``vertex_normals`` (N, 3).
     views_images : sequence of (H_v, W_v, 3) arrays
         One image per view (typically the colour-corrected ones), uint8, uint16 or float in
-        [0, 1]; the atlas is uint8.
+        [0, 1]; the atlas is uint8. ``views_images[v]`` is read once per view.
     visibility : Visibility
         ``face_uv(selection)``: the pixel coordinates of every face's corners in its view.
     selection : (F,) int array
         From :func:`~o3d_seqcc.texturing.select_views`; -1 = unseen face (fallback colour).
     settings : TextureSettings, optional
         Atlas, leveling and fallback options; default :class:`TextureSettings` (the command
-        line's defaults: 2048 atlas, 4 texels of padding, global and local seam leveling on).
+        line's defaults: at most 2048 x 2048, the photos' resolution or above, 4 texels of
+        padding, global and local seam leveling on).
     adjacency : (E, 2) int array, optional
         Face adjacency (:func:`o3d_seqcc.meshops.face_adjacency`), computed when omitted.
     **options
@@ -356,77 +137,166 @@ def bake_texture(
     Returns
     -------
     TexturedMesh
-        UVs in the OBJ convention (origin bottom-left). ``stats``: ``atlas_size``,
-        ``requested_atlas_size``, ``grew``, ``texel_scale``, ``charts``, ``fallback_charts``,
-        ``fallback``, ``unseen_faces``, ``vertices_out``, ``utilization`` (fraction of atlas
-        texels inside a chart rectangle), ``packer``, ``leveling`` / ``local_leveling`` (None or
-        their statistics: seam pairs or edges, offsets, steps before / after, timings), timings.
+        UVs in the OBJ convention (origin bottom-left); with several pages, ``texture`` holds
+        them stacked vertically (``pages``). ``stats``: ``atlas_size`` (page side),
+        ``requested_atlas_size``, ``pages``, ``texels_per_pixel``, ``density_scale`` (< 1 when
+        the budget lowered the density), ``coverage`` (triangle texels / atlas texels),
+        ``utilization`` (texels written: faces and their gutters / atlas texels), ``charts``
+        (image charts), ``fallback_charts``, ``absorbed_faces``, ``merged_tiny_charts``,
+        ``unseen_faces``, ``vertices_in``, ``vertices_out``, ``packer``, ``pack_log``,
+        ``leveling`` / ``local_leveling`` (None or their statistics), timings ``time_*_s``.
 
     Raises
     ------
     InputError
         Selection / visibility / image shapes that do not match, a face assigned to a view where
-        its vertices are not projected (NaN), charts that do not fit with ``overflow="error"`` or
-        beyond ``max_atlas_size``, or a selection where no face is seen.
+        its vertices are not projected (NaN) or project outside the image, or a selection where
+        no face is seen.
     """
     s = (settings or TextureSettings()).updated(**options) if options else (settings or TextureSettings())
     with steps("bake", 6) as step:
         return _bake(mesh, views_images, visibility, selection, s, adjacency, step)
 
 
+def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
+    """One pass over the views: texel colours of every face from its view, and its corners' colours."""
+    F = len(labels)
+    col = np.zeros((len(face), 3), dtype=np.float32)
+    corner_mean = np.full((F, 3, 3), np.nan)
+    corner_point = np.full((F, 3, 3), np.nan)
+    t_order, t_views, t_bounds = _groups(labels[face])
+    f_order, f_views, f_bounds = _groups(labels)
+    t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
+    for i, v in enumerate(f_views):
+        if v < 0:
+            continue
+        img = img_as_uint8(views_images[v], where=f"image of view {v}")
+        fs = f_order[f_bounds[i]:f_bounds[i + 1]]
+        p = fuv[fs]
+        h, w = img.shape[:2]
+        out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
+        if out.any():
+            bad = fs[out.any(axis=1)]
+            raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which they "
+                             "project outside the image: select only usable views (select_views does)")
+        m, pt = corner_colors(img, p.reshape(-1, 2))
+        corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
+        if int(v) in t_pos:
+            a, b = t_pos[int(v)]
+            ts = t_order[a:b]
+            src = _interp(bary[ts], fuv[face[ts]])
+            col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
+        del img
+    return col, corner_mean, corner_point
+
+
 def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:
     t0 = time.perf_counter()
     step("charts")
     verts, faces, labels, fuv = _check(mesh, views_images, visibility, selection)
-    images = [img_as_uint8(im, where=f"image of view {i}") for i, im in enumerate(views_images)]
     adjacency = face_adjacency(faces, verts) if adjacency is None else np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
-    ch = _make_charts(images, fuv, verts, faces, labels, adjacency, s)
+    normals = vertex_normals(verts, faces, getattr(mesh, "vertex_normals", None))
+    wpos = weld_vertices(verts)
+    wf = wpos[faces]
+    cs = build_charts(verts, faces, normals, labels, fuv, visibility, adjacency, wpos=wpos,
+                      merge_faces=int(s.merge_charts))
+    t_charts = time.perf_counter()
     step("pack")
-    lay = _layout(images, fuv, labels, ch, s)
+    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=int(s.atlas_size), texels_per_pixel=s.texels_per_pixel,
+                     overflow=s.overflow, padding=int(s.padding), power_of_two=bool(s.power_of_two))
+    S, P = pk.size, pk.pages
+    H = P * S
+    ctxy = pk.txy.copy()
+    ctxy[:, 1] += pk.page * S  # pages stacked vertically
     t_pack = time.perf_counter()
-    step("copy texels")
-    tex, covered, region = _gather(images, ch, lay, int(s.padding), s.leveling or s.local_leveling)
-    t_bake = time.perf_counter()
-    new_faces, v_orig, txy = _output_vertices(fuv, faces, ch, lay, len(verts))
+    step("rasterize")
     seen = labels >= 0
-    lev_stats = ch.leveling
+    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    eidx, eface = edge_texels(ctxy, cs.faces, tidx, H, S)  # slivers own the texels under their edges
+    o = np.argsort(np.r_[tidx, eidx], kind="stable")
+    cidx, cface = np.r_[tidx, eidx][o], np.r_[tface, eface][o]
+    gidx, gface = gutter_texels(cidx, cface, H, S, reach=float(s.padding) + 1.0 if s.padding > 0 else 0.0)
+    xidx = np.r_[eidx, gidx]
+    xface = np.r_[eface, gface]
+    gy, gx = np.divmod(xidx, S)
+    idx = np.r_[tidx, xidx]
+    face = np.r_[tface, xface]
+    bary = np.concatenate([tbary, barycentric(ctxy, cs.faces, xface, gx.astype(np.float64),
+                                              gy.astype(np.float64)).astype(np.float32)])
+    del tidx, tface, tbary, gx, gy, eidx, eface, cidx, cface, xidx, xface
+    t_raster = time.perf_counter()
+    step("sample")
+    col, corner_mean, corner_point = _per_view_pass(views_images, labels, fuv, face, bary, pk.texels_per_pixel)
+    t_sample = time.perf_counter()
     step("seam leveling")
+    lev_stats = corner_off = None
     if s.leveling:
-        fs = np.flatnonzero(seen)
-        tex, st = apply_corner_offsets(tex, region, txy, new_faces[fs], ch.corner_offsets[fs], ch.face_chart[fs],
-                                       fill_iters=2)
-        lev_stats.update(st, smoothness=float(s.leveling_smoothness))
-        logger.info("bake_texture: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f, %.2f s",
+        corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, cs.level_chart,
+                                                     smoothness=float(s.leveling_smoothness))
+        lev_stats["smoothness"] = float(s.leveling_smoothness)
+        logger.info("bake_texture: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f",
                     lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
-                    lev_stats["seam_step_after"], lev_stats["time_solve_s"] + lev_stats["time_apply_s"])
-    local_stats = None
+                    lev_stats["seam_step_after"])
+    cb = _clip_bary(bary)
+    st = seen[face]
+    if corner_off is not None:
+        col[st] += _interp(cb[st], corner_off.astype(np.float32)[face[st]])
+    n_unseen = int(np.count_nonzero(~seen))
+    if n_unseen:
+        cc = corner_point if corner_off is None else corner_point + corner_off
+        fb = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)
+        col[~st] = _interp(cb[~st], fb.astype(np.float32)[face[~st]])
+        logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
+    del cb, bary
+    canvas = np.zeros((H * S, 3), dtype=np.uint8)
+    canvas[idx] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+    del col
+    written = np.zeros(H * S, dtype=bool)
+    written[idx] = True
+    t_level = time.perf_counter()
     step("local seam leveling")
+    local_stats = None
+    tex = canvas.reshape(H, S, 3)
     if s.local_leveling and int(s.padding) < 1:
         logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(s.padding))
     elif s.local_leveling:
-        tex, local_stats = local_seam_leveling(tex, region, txy, new_faces, ch.face_chart, labels, adjacency,
-                                               weld_vertices(verts)[faces], band=int(s.local_band))
+        region = np.full(H * S, -1, dtype=np.int32)
+        rc = cs.face_chart[face]
+        region[idx] = np.where(rc < cs.n_image, rc, -1)  # image charts (with absorbed faces), not the fallback region
+        tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
+                                               adjacency, wf, band=int(s.local_band))
         logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
                     local_stats["seam_edges"], local_stats["mean_abs_diff"], local_stats["texels_changed"],
                     local_stats["time_s"])
+    t_local = time.perf_counter()
     step("gutters")
-    if s.fill_background and not covered.all():
-        tex = push_pull_fill(tex, covered)
+    if s.fill_background and not written.all():
+        w2 = written.reshape(H, S)
+        tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
     t_end = time.perf_counter()
-    size = lay.size
+    p2 = pk.txy[cs.faces]
+    tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])
+                       - (p2[:, 2, 0] - p2[:, 0, 0]) * (p2[:, 1, 1] - p2[:, 0, 1]))
     stats = {
-        "atlas_size": size, "requested_atlas_size": int(s.atlas_size), "grew": lay.grew, "texel_scale": lay.scale,
-        "charts": int(ch.n_seen), "fallback_charts": int(len(ch.blocks)), "fallback": s.fallback,
-        "unseen_faces": int(np.count_nonzero(~seen)), "vertices_out": int(len(v_orig)),
-        "utilization": float(covered.mean()), "packer": "shelf", "leveling": lev_stats, "local_leveling": local_stats,
-        "time_pack_s": t_pack - t0, "time_bake_s": t_bake - t_pack, "time_total_s": t_end - t0,
+        "atlas_size": S, "requested_atlas_size": int(s.atlas_size), "pages": P,
+        "texels_per_pixel": pk.texels_per_pixel, "density_scale": pk.scale, "padding": int(s.padding),
+        "coverage": float(tri.sum() / (P * S * S)), "utilization": float(len(idx) / (P * S * S)),
+        "charts": int(cs.n_image), "fallback_charts": int(cs.stats["fallback_charts"]),
+        "absorbed_faces": int(cs.stats["absorbed_faces"]), "merged_tiny_charts": int(cs.stats["merged_tiny_charts"]),
+        "fallback": s.fallback, "unseen_faces": n_unseen, "vertices_in": int(len(verts)),
+        "vertices_out": int(len(cs.vertex_index)), "packer": "xatlas", "pack_log": list(pk.log),
+        "xatlas_utilization": pk.utilization, "leveling": lev_stats, "local_leveling": local_stats,
+        "time_charts_s": t_charts - t0, "time_pack_s": t_pack - t_charts, "time_raster_s": t_raster - t_pack,
+        "time_sample_s": t_sample - t_raster, "time_leveling_s": t_level - t_sample, "time_local_s": t_local - t_level,
+        "time_fill_s": t_end - t_local, "time_total_s": t_end - t0,
     }
-    logger.info("bake_texture: %d charts, %dx%d atlas (scale %.3g, %.0f%% used) in %.2f s",
-                ch.n_seen, size, size, lay.scale, 100 * stats["utilization"], stats["time_total_s"])
-    normals = vertex_normals(verts, faces, getattr(mesh, "vertex_normals", None))[v_orig]
+    logger.info("bake_texture: %d charts, %d page(s) of %dx%d at %.3g texels/pixel, coverage %.0f%%, %d -> %d vertices "
+                "in %.2f s", cs.n_image, P, S, S, pk.texels_per_pixel, 100 * stats["coverage"], len(verts),
+                len(cs.vertex_index), stats["time_total_s"])
+    v_orig = cs.vertex_index
     return TexturedMesh(
-        vertices=verts[v_orig], faces=new_faces,
-        uv=np.stack([(txy[:, 0] + 0.5) / size, 1.0 - (txy[:, 1] + 0.5) / size], axis=1),
-        texture=tex, normals=normals, face_view=np.where(seen, labels, -1), vertex_index=v_orig,
-        face_chart=ch.face_chart, stats=stats,
+        vertices=verts[v_orig], faces=cs.faces,
+        uv=np.stack([(pk.txy[:, 0] + 0.5) / S, 1.0 - (ctxy[:, 1] + 0.5) / H], axis=1),
+        texture=np.ascontiguousarray(tex), normals=normals[v_orig], face_view=np.where(seen, labels, -1),
+        vertex_index=v_orig, face_chart=cs.face_chart, pages=P, stats=stats,
     )

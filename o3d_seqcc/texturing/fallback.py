@@ -1,21 +1,18 @@
-"""Colours of the faces seen by no view (they still need texels in the atlas).
+"""Colours of the faces seen by no view (their texels still need colours).
 
 ``"smooth"`` (default): per-vertex colours interpolated over the face (Gouraud), a vertex taking
 the mean colour of the seen faces around it (their selected images at its projection, plus the
 seam-leveling offsets), propagated along mesh edges to vertices with no seen face around them,
-grey (128, 128, 128) where nothing reaches; each face gets a small block of texels holding the
-affine colour ramp (exact under bilinear filtering). ``"flat"``: one colour per face, the mean
-of its seen neighbours (faces of the same colour share a block).
+grey (128, 128, 128) where nothing reaches. ``"flat"``: one colour per face, the mean of its seen
+neighbours (propagated face to face). The bake (:mod:`~o3d_seqcc.texturing.atlas`) paints the
+faces' texels with these corner colours, interpolated barycentrically.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..imageops import sample_bilinear
-from ..meshops import weld_vertices
-
-__all__ = ["FALLBACK_GREY", "fallback_blocks"]
+__all__ = ["FALLBACK_GREY", "fallback_corner_colors"]
 
 #: grey used for faces that no view sees and that touch no seen face (RGB, 0-255)
 FALLBACK_GREY = (128, 128, 128)
@@ -47,103 +44,50 @@ def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iter
     return col
 
 
-def _face_colors(
-    images: list[np.ndarray], fuv: np.ndarray, faces: np.ndarray, labels: np.ndarray, adjacency: np.ndarray, *,
-    offsets: np.ndarray | None = None, iters: int = 64,
+def fallback_corner_colors(
+    corner_col: np.ndarray, wf: np.ndarray, labels: np.ndarray, adjacency: np.ndarray, *,
+    fallback: str = "smooth", iters: int = 256,
 ) -> np.ndarray:
-    """(F, 3) colours (0-255): the selected image at the centroid projection for seen faces (plus
-    ``offsets`` (F, 3) when given), the mean of the neighbours for unseen ones."""
-    col = np.zeros((len(faces), 3))
-    known = labels >= 0
-    for v in np.unique(labels[known]):
-        sel = np.flatnonzero(labels == v)
-        c = fuv[sel].mean(axis=1)
-        img = images[v]
-        xi = np.clip(np.rint(c[:, 0]).astype(np.int64), 0, img.shape[1] - 1)
-        yi = np.clip(np.rint(c[:, 1]).astype(np.int64), 0, img.shape[0] - 1)
-        col[sel] = img[yi, xi]
-    if offsets is not None:
-        col[known] = np.clip(col[known] + offsets[known], 0.0, 255.0)
-    return _propagate(col, known, adjacency, iters=iters)
-
-
-def _corner_colors(
-    images: list[np.ndarray], fuv: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray, *,
-    corner_offsets: np.ndarray | None = None, iters: int = 256,
-) -> np.ndarray:
-    """(F, 3, 3) colour of every face corner (0-255): per welded vertex, the mean of the seen
-    faces' corners at it (selected image at its projection, plus ``corner_offsets``), propagated
-    along mesh edges to vertices with no seen face around them."""
-    wv = weld_vertices(verts)
-    n_w = int(wv.max()) + 1 if len(wv) else 0
-    seen = np.flatnonzero(labels >= 0)
-    col_c = np.zeros((len(seen), 3, 3))
-    for v in np.unique(labels[seen]):
-        sel = labels[seen] == v
-        p = fuv[seen[sel]]  # (n, 3, 2)
-        col_c[sel] = sample_bilinear(images[v], p[..., 0], p[..., 1])
-    if corner_offsets is not None:
-        col_c += corner_offsets[seen]
-    w_ids = wv[faces[seen]].reshape(-1)
-    cnt = np.bincount(w_ids, minlength=n_w).astype(np.float64)
-    col = np.stack([np.bincount(w_ids, weights=col_c.reshape(-1, 3)[:, c], minlength=n_w) for c in range(3)], axis=1)
-    known = cnt > 0
-    col[known] /= cnt[known, None]
-    e = wv[faces][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    col = _propagate(col, known, e[e[:, 0] != e[:, 1]], iters=iters)
-    return np.clip(col[wv[faces]], 0.0, 255.0)
-
-
-def fallback_blocks(
-    images: list[np.ndarray], fuv: np.ndarray, verts: np.ndarray, faces: np.ndarray, labels: np.ndarray,
-    adjacency: np.ndarray, *, fallback: str, pad: int, corner_offsets: np.ndarray | None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Texel blocks of the faces seen by no view.
+    """Colours of the corners of the faces seen by no view.
 
     Parameters
     ----------
-    images : list of (H, W, 3) uint8
-    fuv : (F, 3, 2) float
-        Projection of every face's corners in its selected view (NaN for unseen faces).
-    verts : (N, 3) float, faces : (F, 3) int, labels : (F,) int (-1 = unseen)
+    corner_col : (F, 3, 3) float
+        Colour (0-255 units) of every corner of every seen face: its view at the corner's
+        projection, plus the seam-leveling offset; rows of unseen faces are ignored.
+    wf : (F, 3) int
+        Welded vertex id of every face corner (:func:`o3d_seqcc.meshops.weld_vertices`).
+    labels : (F,) int
+        View of every face, -1 = unseen.
     adjacency : (E, 2) int
-        Face pairs sharing an edge.
+        Faces sharing an edge (``"flat"``).
     fallback : {"smooth", "flat"}
-    pad : int
-        Texels around the colour ramp of a block.
-    corner_offsets : (F, 3, 3) float or None
-        Seam-leveling offsets of the seen faces' corners.
+    iters : int
+        Propagation steps (mesh edges) away from the seen faces.
 
     Returns
     -------
-    blocks : (n_blocks, blk, blk, 3) uint8
-    block_of_face : (F,) int64
-        Block of every unseen face, -1 for seen faces.
-    corner_xy : (3, 2) float64
-        The texel of each face corner inside its block.
+    (F, 3, 3) float64
+        Corner colours in 0-255 (those of the seen faces are the input's, clipped).
     """
-    unseen = np.flatnonzero(labels < 0)
-    block_of_face = np.full(len(faces), -1, dtype=np.int64)
+    seen = labels >= 0
+    out = np.clip(np.nan_to_num(np.asarray(corner_col, dtype=np.float64)), 0.0, 255.0)
+    if seen.all():
+        return out
     if fallback == "flat":
-        blk = 2 * pad + 1
-        corner_xy = np.full((3, 2), float(pad))
-        if len(unseen) == 0:
-            return np.zeros((0, blk, blk, 3), np.uint8), block_of_face, corner_xy
-        cols = _face_colors(images, fuv, faces, labels, adjacency,
-                            offsets=None if corner_offsets is None else corner_offsets.mean(axis=1))
-        c8 = np.clip(np.rint(cols[unseen]), 0, 255).astype(np.uint8)
-        rgb, inv = np.unique(c8, axis=0, return_inverse=True)
-        block_of_face[unseen] = inv.reshape(-1)
-        return np.broadcast_to(rgb[:, None, None, :], (len(rgb), blk, blk, 3)).copy(), block_of_face, corner_xy
-    legs = 8  # corners at (pad, pad), (pad + 8, pad), (pad, pad + 8): a gentle ramp per texel
-    blk = legs + 2 * pad + 1
-    corner_xy = np.array([[pad, pad], [pad + legs, pad], [pad, pad + legs]], dtype=np.float64)
-    if len(unseen) == 0:
-        return np.zeros((0, blk, blk, 3), np.uint8), block_of_face, corner_xy
-    cc = _corner_colors(images, fuv, verts, faces, labels, corner_offsets=corner_offsets)[unseen]
-    t = (np.arange(blk, dtype=np.float64) - pad) / legs
-    tx, ty = t[None, :, None], t[:, None, None]  # block[y, x] = c0 + (c1 - c0) x + (c2 - c0) y
-    c0, c1, c2 = (cc[:, k][:, None, None, :] for k in range(3))
-    blocks = c0 + (c1 - c0) * tx[None] + (c2 - c0) * ty[None]
-    block_of_face[unseen] = np.arange(len(unseen))
-    return np.clip(np.rint(blocks), 0, 255).astype(np.uint8), block_of_face, corner_xy
+        col = np.where(seen[:, None], out.mean(axis=1), 0.0)
+        col = _propagate(col, seen, adjacency, iters=iters)
+        out[~seen] = np.clip(col[~seen], 0.0, 255.0)[:, None, :]
+        return out
+    wf = np.asarray(wf, dtype=np.int64)
+    n_w = int(wf.max()) + 1 if wf.size else 0
+    w_ids = wf[seen].reshape(-1)
+    cnt = np.bincount(w_ids, minlength=n_w).astype(np.float64)
+    c3 = out[seen].reshape(-1, 3)
+    col = np.stack([np.bincount(w_ids, weights=c3[:, c], minlength=n_w) for c in range(3)], axis=1)
+    known = cnt > 0
+    col[known] /= cnt[known, None]
+    e = wf[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    col = _propagate(col, known, e[e[:, 0] != e[:, 1]], iters=iters)
+    out[~seen] = np.clip(col[wf[~seen]], 0.0, 255.0)
+    return out

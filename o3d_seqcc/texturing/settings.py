@@ -14,7 +14,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["FALLBACKS", "LEVELING_SMOOTHNESS", "MRF_SMOOTHNESS", "OVERFLOWS", "TextureSettings", "VisibilityLike"]
+__all__ = ["FALLBACKS", "LEVELING_SMOOTHNESS", "MRF_SMOOTHNESS", "OVERFLOWS", "TextureSettings", "VisibilityLike",
+           "parse_texels_per_pixel"]
 
 #: default Potts weight of the ``"mrf"`` selection
 MRF_SMOOTHNESS = 4.0
@@ -22,8 +23,8 @@ MRF_SMOOTHNESS = 4.0
 LEVELING_SMOOTHNESS = 0.03
 #: colours of faces seen by no view
 FALLBACKS = ("smooth", "flat")
-#: what to do when the charts do not fit the atlas
-OVERFLOWS = ("grow", "scale", "error")
+#: what to do when the charts do not fit the atlas at the asked density
+OVERFLOWS = ("scale", "pages")
 
 
 class VisibilityLike(Protocol):  # pragma: no cover - typing only
@@ -51,16 +52,25 @@ class TextureSettings:
     seed : int, default 0
         Seed of ``"random"`` and of the ``"mrf"`` expansion order.
     atlas_size : int, default 2048
-        Side of the square atlas in texels.
+        Largest side of the (square) atlas in texels: a budget, never exceeded. The atlas is
+        the smallest power of two up to it that holds the charts (see ``texels_per_pixel``).
+    texels_per_pixel : float or "auto", default "auto"
+        Texel density, atlas texels per photo pixel. ``"auto"``: at least the photos' own
+        resolution (1), raised to fill the chosen atlas (at most 2: charts are packed densely).
+    overflow : {"scale", "pages"}, default "scale"
+        When the charts do not fit ``atlas_size`` at the asked density (1 for ``"auto"``):
+        lower the density (a warning gives the factor), or write several atlas pages of
+        ``atlas_size`` (one material each).
+    power_of_two : bool, default True
+        Atlas sides are powers of two (``False``: multiples of 4, as small as the charts allow).
     padding : int, default 4
-        Gutter texels of real image content around every chart.
-    texel_scale : float, default 1.0
-        Atlas texels per source pixel.
-    overflow : {"grow", "scale", "error"}, default "grow"
-        When the charts do not fit: double the atlas side (up to ``max_atlas_size``), shrink
-        ``texel_scale``, or raise.
-    max_atlas_size : int, default 16384
-        Largest atlas side ``"grow"`` may reach.
+        Texels around every chart that hold its gutter (the photo's content around the chart),
+        so that bilinear filtering and mip levels 1-2 do not bleed the next chart in; two
+        charts are at least ``2 * padding`` texels apart.
+    merge_charts : int, default 3
+        Charts of at most this many faces join a neighbouring chart's parametrisation where
+        that chart's view sees them (fewer charts, fewer seam vertices; each face still samples
+        its own view); 0 keeps every chart.
     fill_background : bool, default True
         Pull-push fill of the texels outside every chart.
     leveling : bool, default True
@@ -79,10 +89,11 @@ class TextureSettings:
     smoothness: float = MRF_SMOOTHNESS
     seed: int = 0
     atlas_size: int = 2048
+    texels_per_pixel: float | str = "auto"
+    overflow: str = "scale"
+    power_of_two: bool = True
     padding: int = 4
-    texel_scale: float = 1.0
-    overflow: str = "grow"
-    max_atlas_size: int = 16384
+    merge_charts: int = 3
     fill_background: bool = True
     leveling: bool = True
     leveling_smoothness: float = LEVELING_SMOOTHNESS
@@ -97,8 +108,11 @@ class TextureSettings:
             raise ValueError(f"unknown overflow {self.overflow!r}; valid: {', '.join(map(repr, OVERFLOWS))}")
         if isinstance(self.atlas_size, bool) or int(self.atlas_size) != self.atlas_size or int(self.atlas_size) < 8:
             raise InputError(f"atlas_size must be an integer >= 8, got {self.atlas_size}")
-        if not self.padding >= 0 or not self.texel_scale > 0:
-            raise InputError(f"padding must be >= 0 and texel_scale > 0, got {self.padding}, {self.texel_scale}")
+        object.__setattr__(self, "texels_per_pixel", parse_texels_per_pixel(self.texels_per_pixel))
+        if isinstance(self.padding, bool) or int(self.padding) != self.padding or not 0 <= self.padding <= 64:
+            raise InputError(f"padding must be an integer in 0..64, got {self.padding}")
+        if isinstance(self.merge_charts, bool) or int(self.merge_charts) != self.merge_charts or self.merge_charts < 0:
+            raise InputError(f"merge_charts must be an integer >= 0, got {self.merge_charts}")
         if self.local_leveling and (int(self.local_band) < 1 or int(self.local_band) != self.local_band):
             raise InputError(f"local_band must be an integer >= 1, got {self.local_band}")
         if not self.smoothness >= 0:
@@ -110,3 +124,25 @@ class TextureSettings:
         if bad:
             raise TypeError(f"unknown texture setting(s) {bad}; valid: {sorted(f.name for f in fields(self))}")
         return replace(self, **changes)
+
+
+def parse_texels_per_pixel(value: Any) -> float | str:
+    """``"auto"`` or a positive number (also given as a string, as on the command line).
+
+    Raises
+    ------
+    InputError
+        Anything else.
+    """
+    if isinstance(value, str):
+        v = value.strip().lower()
+        if v == "auto":
+            return "auto"
+        try:
+            value = float(v)
+        except ValueError:
+            raise InputError(f"texels_per_pixel must be 'auto' or a number > 0, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or not value > 0 \
+            or not np.isfinite(value):
+        raise InputError(f"texels_per_pixel must be 'auto' or a number > 0, got {value!r}")
+    return float(value)

@@ -7,7 +7,10 @@ top of the image) of a W x H texture is at ``((X + 0.5) / W, 1 - (Y + 0.5) / H)`
 top-left: :mod:`o3d_seqcc.export` writes ``(u, 1 - v)`` there.
 
 A :class:`TexturedMesh` holds either a texture atlas with per-vertex UVs (vertices duplicated
-along UV seams), or per-vertex colours. It converts to Open3D (:meth:`TexturedMesh.to_open3d`,
+along UV seams), or per-vertex colours. An atlas of several square pages is held as one image
+with the pages stacked vertically (``pages`` > 1; UVs refer to that image, so every reader of
+``texture`` and ``uv`` works unchanged); :meth:`TexturedMesh.page_textures` and
+:meth:`TexturedMesh.page_uv` give the pages and the page-local UVs the exporters write. It converts to Open3D (:meth:`TexturedMesh.to_open3d`,
 an ``o3d.t.geometry.TriangleMesh`` with the albedo in its material) and trimesh
 (:meth:`TexturedMesh.to_trimesh`), and :func:`load_textured_mesh` reads any textured OBJ / GLB /
 PLY (ours or another tool's) with trimesh.
@@ -54,7 +57,9 @@ class TexturedMesh:
     vertex_index : (M,) int64 or None
         Index of each vertex in the input mesh.
     face_chart : (F,) int64 or None
-        Chart of each face (charts never mix views).
+        Chart of each face (the faces of a chart share one parametrisation).
+    pages : int
+        Atlas pages stacked vertically in ``texture`` (each ``texture.shape[1]`` square).
     stats : dict
         Baking statistics (:func:`~o3d_seqcc.texturing.bake_texture`).
     """
@@ -68,6 +73,7 @@ class TexturedMesh:
     face_view: np.ndarray | None = None
     vertex_index: np.ndarray | None = None
     face_chart: np.ndarray | None = None
+    pages: int = 1
     stats: dict = field(default_factory=dict)
 
     @property
@@ -76,10 +82,36 @@ class TexturedMesh:
 
     @property
     def atlas_size(self) -> int:
-        """Side of the (square) texture in texels (its height for a non-square one)."""
+        """Side of the (square) texture, or of each page, in texels (the height of a non-square single page)."""
         if self.texture is None:
             raise InputError("this mesh has no texture")
-        return int(self.texture.shape[0])
+        return int(self.texture.shape[1] if self.pages > 1 else self.texture.shape[0])
+
+    def page_textures(self) -> list[np.ndarray]:
+        """The atlas pages, each (S, S, 3) (views into ``texture``)."""
+        if self.texture is None:
+            raise InputError("this mesh has no texture")
+        h = self.texture.shape[0] // max(int(self.pages), 1)
+        return [self.texture[p * h:(p + 1) * h] for p in range(max(int(self.pages), 1))]
+
+    def face_page(self) -> np.ndarray:
+        """(F,) int64: the page of every face (0 for a single page)."""
+        if self.pages <= 1 or not self.has_texture:
+            return np.zeros(len(self.faces), dtype=np.int64)
+        y = (1.0 - self.uv[self.faces].mean(axis=1)[:, 1]) * self.pages
+        return np.clip(np.floor(y).astype(np.int64), 0, self.pages - 1)
+
+    def page_uv(self) -> np.ndarray:
+        """(M, 2) float64: UVs in each vertex's own page (OBJ convention); equal to ``uv`` for one page.
+
+        A vertex belongs to the page of its faces (a chart never spans pages).
+        """
+        if self.pages <= 1:
+            return np.asarray(self.uv, dtype=np.float64)
+        vp = np.zeros(len(self.uv), dtype=np.int64)
+        vp[self.faces.reshape(-1)] = np.repeat(self.face_page(), 3)
+        v = 1.0 - ((1.0 - self.uv[:, 1]) * self.pages - vp)
+        return np.stack([self.uv[:, 0], v], axis=1)
 
     def texel_xy(self) -> np.ndarray:
         """(M, 2) float64 texel coordinates of the UVs: x right, y down, texel centres at integers."""

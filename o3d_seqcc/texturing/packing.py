@@ -1,0 +1,260 @@
+"""Chart packing with xatlas, under an atlas-size budget (issue 13).
+
+The charts (:mod:`~o3d_seqcc.texturing.charts`) are given to xatlas as a *UV mesh*
+(``xatlas.Atlas.add_uv_mesh`` with one material per chart, so that charts are kept as they are
+and never merged), whose parametric area is its UV area: every chart is scaled by exactly the
+texel density ``t`` (texels per source pixel), rotated (by 90 degrees and to its principal
+axis) and packed by xatlas (``PackOptions``: ``padding`` texels around every chart, the
+texels bilinear filtering reads included, ``resolution`` = the page size).
+
+Budget (:func:`pack_charts`): ``atlas_size`` N is a maximum. With ``texels_per_pixel="auto"``
+the page is the smallest power of two S <= N (or the smallest multiple of 4 with
+``power_of_two=False``) that holds the charts at one texel per source pixel, and the density
+is then raised to fill S (at most :data:`MAX_AUTO_DENSITY`); a number asks for that density.
+When even N cannot hold the charts at the asked density, ``overflow="scale"`` lowers the density
+(a warning gives the factor) and ``overflow="pages"`` keeps it and writes several N x N pages.
+Charts are never resized silently: a chart xatlas would have to shrink to fit a page lowers
+the density of the whole atlas instead (with a warning).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError, warn
+
+__all__ = ["MAX_AUTO_DENSITY", "Packing", "pack_charts"]
+
+logger = logging.getLogger(__name__)
+
+#: ``texels_per_pixel="auto"`` raises the density up to this to fill the chosen page
+MAX_AUTO_DENSITY = 2.0
+#: xatlas's marker of an unassigned vertex / chart
+_NONE = np.iinfo(np.uint32).max
+
+
+@dataclass
+class Packing:
+    """Where every output vertex lies in the atlas.
+
+    Attributes
+    ----------
+    txy : (M, 2) float64
+        Texel coordinates in the vertex's page (x right, y down, texel centres at integers).
+    page : (M,) int64
+        Page of every vertex.
+    size : int
+        Side of every (square) page in texels.
+    pages : int
+    texels_per_pixel : float
+        The density used: atlas texels per source pixel.
+    requested : float
+        The density asked for (1.0 for ``"auto"``: the photos' resolution).
+    scale : float
+        ``texels_per_pixel / requested`` when the budget forced the density down, else 1.0.
+    utilization : list of float
+        xatlas's share of every page taken by charts with their padding.
+    log : list of str
+        The packing attempts.
+    """
+
+    txy: np.ndarray
+    page: np.ndarray
+    size: int
+    pages: int
+    texels_per_pixel: float
+    requested: float
+    scale: float = 1.0
+    utilization: list = field(default_factory=list)
+    log: list = field(default_factory=list)
+
+
+class _Packer:
+    """xatlas calls on one UV mesh (kept across attempts)."""
+
+    def __init__(self, uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, padding: int) -> None:
+        self.uv = np.ascontiguousarray(uv, dtype=np.float32)
+        self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
+        self.chart = np.ascontiguousarray(chart, dtype=np.uint32).reshape(-1, 1)
+        self.padding = int(padding)
+        p = np.asarray(uv, dtype=np.float64)[np.asarray(faces)]
+        a2 = np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+        self.n_charts = int(np.asarray(chart).max()) + 1
+        self.chart_area = np.bincount(np.asarray(chart), weights=0.5 * a2, minlength=self.n_charts)
+        self.log: list[str] = []
+
+    def pack(self, t: float, resolution: int):
+        import xatlas
+
+        a = xatlas.Atlas()
+        a.add_uv_mesh(self.uv, self.faces, self.chart)
+        po = xatlas.PackOptions()
+        po.texels_per_unit = float(t)
+        po.resolution = int(resolution)
+        po.padding = self.padding
+        po.bilinear = True
+        po.blockAlign = False
+        po.rotate_charts = True
+        po.rotate_charts_to_axis = True
+        a.generate(xatlas.ChartOptions(), po)
+        return a
+
+    def shrunk(self, a, t: float) -> bool:
+        """Whether xatlas shrank a chart to fit a page (its packed area is below t^2 x its area)."""
+        _, ind, uv = a[0]
+        w = np.asarray([a.width, a.height], dtype=np.float64)
+        p = uv.astype(np.float64)[ind] * w
+        a2 = np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+        got = np.bincount(self.chart.reshape(-1)[: len(ind)], weights=0.5 * a2, minlength=self.n_charts)
+        want = self.chart_area * t * t
+        big = want > 4.0
+        return bool(np.any(got[big] < 0.97 * want[big]))
+
+    def attempt(self, t: float, size: int):
+        a = self.pack(t, size)
+        ok = a.atlas_count == 1 and not self.shrunk(a, t)
+        self.log.append(f"t={t:.4f} S={size}: {a.atlas_count} page(s){'' if ok or a.atlas_count > 1 else ', chart shrunk'}")
+        return a, ok
+
+
+def _sizes(atlas_size: int, power_of_two: bool, side: float) -> list[int]:
+    """Candidate page sides <= atlas_size, ascending (powers of two, or multiples of 4 from ``side`` up)."""
+    if power_of_two:
+        return [1 << k for k in range(3, 31) if (1 << k) <= atlas_size] or [int(atlas_size)]
+    out, s = [], max(8.0, float(side))
+    while s < atlas_size:
+        out.append(int(4 * math.ceil(s / 4)))
+        s *= 1.05
+    return sorted(set(x for x in out if x < atlas_size)) + [int(atlas_size)]
+
+
+def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
+    _, ind, uv = a[0]
+    page, _ = a.get_mesh_vertex_assignment(0)
+    page = page.astype(np.int64)
+    txy = uv.astype(np.float64) * [a.width, a.height] - 0.5
+    bad = page >= _NONE
+    if bad.any():  # vertices of faces xatlas ignored (zero UV area): put them on a placed vertex of their face
+        faces = pk.faces.astype(np.int64)
+        for j in range(3):  # 3 corner slots, vectorised over faces
+            fv = faces[:, j]
+            m = bad[fv]
+            if m.any():
+                o1, o2 = faces[m, (j + 1) % 3], faces[m, (j + 2) % 3]
+                other = np.where(~bad[o1], o1, o2)
+                txy[fv[m]] = txy[other]
+                page[fv[m]] = page[other]
+        page[page >= _NONE] = 0
+        txy[~np.isfinite(txy).all(axis=1)] = 0.0
+    return Packing(txy=txy, page=page, size=int(size), pages=int(a.atlas_count), texels_per_pixel=float(t),
+                   requested=float(requested), scale=float(t / requested) if t < requested * 0.999 else 1.0,
+                   utilization=[float(a.get_utilization(i)) for i in range(a.atlas_count)], log=pk.log)
+
+
+def pack_charts(
+    uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int, texels_per_pixel: float | str = "auto",
+    overflow: str = "scale", padding: int = 4, power_of_two: bool = True,
+) -> Packing:
+    """Pack charts into square pages of at most ``atlas_size`` (see the module docstring).
+
+    Parameters
+    ----------
+    uv : (M, 2) float
+        Chart coordinates in source pixels.
+    faces : (F, 3) int
+        Faces over ``uv``.
+    chart : (F,) int
+        Chart of every face (``0 .. C-1``); a chart is packed as one piece.
+    atlas_size : int
+        Largest page side N.
+    texels_per_pixel : float or "auto", default "auto"
+    overflow : {"scale", "pages"}, default "scale"
+    padding : int, default 4
+        Texels between a chart and its neighbours' padding (xatlas ``padding``; the gap
+        between two charts is twice this).
+    power_of_two : bool, default True
+        Page sides are powers of two.
+
+    Returns
+    -------
+    Packing
+
+    Raises
+    ------
+    InputError
+        A density that is not positive; with ``overflow="scale"``, charts whose gutters alone do
+        not fit the largest atlas.
+    """
+    auto = isinstance(texels_per_pixel, str)
+    req = 1.0 if auto else float(texels_per_pixel)
+    if not req > 0:
+        raise InputError(f"texels_per_pixel must be > 0 or 'auto', got {texels_per_pixel!r}")
+    N = int(atlas_size)
+    pk = _Packer(uv, faces, chart, padding)
+    tight = pk.pack(req, 0)  # the charts at the asked density, without a size limit
+    area_1 = tight.width * tight.height / (req * req)  # atlas texels they take per unit density^2
+    pk.log.append(f"t={req:g}: {tight.width}x{tight.height} without a size limit")
+    sizes = _sizes(N, power_of_two, math.sqrt(area_1) * req / 0.98)
+    N = sizes[-1]  # the largest page allowed (a power of two by default)
+
+    def fill(size: int) -> float:  # the density that fills a page of this side (estimate)
+        return math.sqrt(size * size / area_1) * 0.98
+
+    k = next((i for i, s_ in enumerate(sizes) if fill(s_) >= req), len(sizes) - 1)
+    t = min(fill(sizes[k]), MAX_AUTO_DENSITY) if auto else min(req, fill(sizes[k]))
+    if not power_of_two:
+        t = min(t, max(req, fill(sizes[k]) if k == 0 else req))
+    for _ in range(60):
+        if t < req * 0.999 and k == len(sizes) - 1 and overflow == "pages":
+            break
+        a, ok = pk.attempt(t, sizes[k])
+        if ok:
+            if t < req * 0.999:
+                msg = (f"the charts do not fit a {N}x{N} atlas at {req:g} texels per pixel: density scaled by "
+                       f"{t / req:.3f} to {t:.3g} texels per pixel (a larger atlas_size, or overflow='pages', "
+                       "keeps it)")
+                logger.warning(msg)
+                warn(msg)
+            logger.info("packing: %dx%d atlas at %.3g texels per pixel (%d attempts)", sizes[k], sizes[k], t,
+                        len(pk.log) - 1)
+            return _result(a, pk, t, req, sizes[k])
+        # the next try: several pages -> shrink by their total use, else a few percent
+        used = sum(a.get_utilization(i) for i in range(a.atlas_count))
+        shrink = float(np.clip(math.sqrt(0.95 / used), 0.5, 0.95)) if a.atlas_count > 1 and used > 0 else 0.95
+        if auto and t * shrink >= req:
+            t *= shrink
+        elif auto and t > req * 1.001:
+            t = req
+        elif k < len(sizes) - 1:
+            k += 1
+            t = min(fill(sizes[k]), MAX_AUTO_DENSITY) if auto else req
+            if not power_of_two:
+                t = min(t, req)
+        elif overflow == "pages":
+            break
+        else:
+            t *= shrink
+        if t < 1e-3:
+            break
+    if overflow != "pages":
+        raise InputError(
+            f"could not pack {pk.n_charts} charts into a {N}x{N} atlas even at {t:.2g} texels per pixel: their gutters "
+            f"({2 * int(padding)} texels between charts) alone need more room; use a larger atlas_size, a smaller "
+            "padding, or overflow='pages'")
+    # overflow="pages": the asked density in as many N x N pages as needed
+    t = req
+    for _ in range(60):
+        a = pk.pack(t, N)
+        if not pk.shrunk(a, t):
+            break
+        t *= 0.95
+    pk.log.append(f"t={t:.4f} S={N}: {a.atlas_count} page(s)")
+    if t < req * 0.999:
+        warn(f"the largest chart does not fit a {N}x{N} page at {req:g} texels per pixel: density scaled by "
+             f"{t / req:.3f} to {t:.3g}")
+    logger.info("packing: %d pages of %dx%d at %.3g texels per pixel", a.atlas_count, N, N, t)
+    return _result(a, pk, t, req, N)
