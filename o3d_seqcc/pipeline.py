@@ -37,14 +37,14 @@ from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import evaluate
-from .orientation import up_axis_transform
+from .orientation import UP_AXES, up_axis_transform
 from .render import write_selection_picture
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility import Visibility, compute_visibility
 
-__all__ = ["CorrectionRun", "RunResult", "correct_scene", "parse_formats", "run", "texture"]
+__all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
 
 logger = logging.getLogger(__name__)
 
@@ -60,6 +60,21 @@ def parse_formats(formats: str | Iterable[str]) -> list[str]:
     if bad or not out:
         raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
     return out
+
+
+def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
+    """Validate :meth:`RunResult.save`'s export options (the command line calls it before any work).
+
+    Returns the texture format's canonical name; raises InputError naming the bad option.
+    """
+    if str(up_axis).lower() not in UP_AXES:
+        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
+    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
+    if fmt not in TEXTURE_FORMATS:
+        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
+        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
+    return fmt
 
 
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
@@ -214,11 +229,7 @@ class RunResult:
             is written).
         """
         fmts = parse_formats(formats)
-        if str(texture_format).lower() not in TEXTURE_FORMATS:
-            raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
-        if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
-            raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
-        tfmt = str(texture_format).lower()
+        tfmt = check_export_options(up_axis=up_axis, texture_format=texture_format, jpeg_quality=jpeg_quality)
         rotation, orientation = up_axis_transform(self.scene, up_axis)
         view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
         if view is not None:

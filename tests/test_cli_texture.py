@@ -83,3 +83,49 @@ def test_run_corrects_and_textures(syn, tmp_path):
     for key in ("visibility", "correction", "selection", "bake", "export", "seams", "total"):
         assert key in rep["timings_s"], key
     assert rep["seams"]["mean"] >= 0 and rep["seams_original_images"]["mean"] >= 0
+
+
+def test_texture_engine_options(syn, tmp_path, capsys):
+    """Atlas budget, pages, up axis and texture format from the command line, recorded in report.json:
+    the GLB is Y-up (the room's cameras say z is up: positions rotated by the recorded rotation), the
+    MeshLab layer keeps the scene's frame and refers to the OBJ's JPEG pages."""
+    import trimesh
+
+    from o3d_seqcc.scene import load_mesh
+
+    scene_json = str(syn.root / "scene.json")
+    out = tmp_path / "engine"
+    assert main(["-q", "texture", scene_json, "--out", str(out), "--format", "glb,obj", "--no-seams",
+                 "--atlas-size", "128", "--atlas-overflow", "pages", "--padding", "2", "--texture-format", "jpg",
+                 "--jpeg-quality", "80", "--selection-view", "none"]) == 0
+    rep = _report(out)
+    atlas = rep["atlas"]
+    P = atlas["pages"]
+    assert P >= 2 and atlas["atlas_size"] == 128 and 0 < atlas["texels_per_pixel"] <= 1.0
+    assert {"coverage", "utilization", "density_scale", "charts", "vertices_out", "vertices_in"} <= set(atlas)
+    exp = rep["export"]
+    assert exp["texture_format"] == "jpg" and exp["jpeg_quality"] == 80
+    o = exp["orientation"]
+    assert o["up_axis"] == "y" and o["nearest_axis"] == "+z" and o["snapped"] and "glb" in o["applies_to"]
+    R = np.array(o["rotation"])
+    np.testing.assert_allclose(R @ [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], atol=1e-12)  # z up -> y up
+    assert all((out / f"mesh_{p}.jpg").is_file() for p in range(P)) and not (out / "mesh.png").exists()
+    head = (out / "mesh_meshlab.ply").read_bytes().split(b"end_header")[0].decode()
+    assert head.count("comment TextureFile mesh_") == P and ".jpg" in head
+    glb = trimesh.load(str(out / "mesh.glb"), force="mesh", process=False)
+    layer = load_mesh(out / "mesh_meshlab.ply")
+    # z became y (trimesh repeats the shared vertex buffer per page primitive: compare the bounds)
+    np.testing.assert_allclose(glb.bounds, np.stack(
+        [(layer.vertices @ R.T).min(0), (layer.vertices @ R.T).max(0)]), atol=1e-4)
+    np.testing.assert_allclose(glb.bounds[:, 1], [layer.vertices[:, 2].min(), layer.vertices[:, 2].max()], atol=1e-4)
+    # --up-axis none keeps the scene's frame; bad values are refused before any work
+    out2 = tmp_path / "none"
+    assert main(["-q", "texture", scene_json, "--out", str(out2), "--format", "glb", "--no-seams", "--up-axis", "none",
+                 "--selection-view", "none"]) == 0
+    assert _report(out2)["export"]["orientation"] == {"up_axis": "none", "rotation": np.eye(3).tolist(),
+                                                      "applies_to": ["glb"]}
+    capsys.readouterr()
+    assert main(["-q", "texture", scene_json, "--out", str(tmp_path / "q"), "--jpeg-quality", "0"]) == 2
+    assert "quality" in capsys.readouterr().err
+    assert main(["-q", "texture", scene_json, "--out", str(tmp_path / "t"), "--texels-per-pixel", "dense"]) == 2
+    assert "texels_per_pixel" in capsys.readouterr().err

@@ -137,7 +137,10 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def save_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    """The export options of :meth:`~o3d_seqcc.pipeline.RunResult.save` from the parsed arguments."""
+    """The export options of :meth:`~o3d_seqcc.pipeline.RunResult.save` from the parsed arguments (validated)."""
+    from ..pipeline import check_export_options
+
+    check_export_options(up_axis=args.up_axis, texture_format=args.texture_format, jpeg_quality=args.jpeg_quality)
     return {"up_axis": args.up_axis, "texture_format": args.texture_format, "jpeg_quality": args.jpeg_quality,
             "unlit": args.unlit}
 

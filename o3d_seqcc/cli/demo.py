@@ -58,9 +58,9 @@ def _print_photometric(summ: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     options = scene_options(args) if args.dataset == "synthetic" else {}
+    settings, save_options = texture_settings_from_args(args), save_options_from_args(args)
     res = run_demo(args.out, dataset=args.dataset, data_root=args.data_root, t_npm=args.t_npm,
-                   overwrite=args.overwrite, settings=texture_settings_from_args(args),
-                   save_options=save_options_from_args(args), **options)
+                   overwrite=args.overwrite, settings=settings, save_options=save_options, **options)
     _print_summary(res)
     return 0
 

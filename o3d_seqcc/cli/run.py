@@ -21,13 +21,14 @@ from .common import add_correction_arguments, add_scene_arguments, add_texture_a
 def run(args: argparse.Namespace) -> int:
     pipeline.parse_formats(args.format)
     settings = texture_settings_from_args(args)
+    save_options = save_options_from_args(args)
     scene = scene_from_args(args)
     out = prepare_out_dir(args, scene)
     res = pipeline.run(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
                        settings=settings, seams=args.seams, compare_original=args.compare_original)
     res = replace(res, source=args.scene)
     res.save(out, overwrite=args.overwrite, formats=args.format, save_images=args.save_images,
-             selection_view=args.selection_view, **save_options_from_args(args))
+             selection_view=args.selection_view, **save_options)
     print_run_summary(res, out)
     return 0
 

@@ -20,13 +20,14 @@ from .common import add_scene_arguments, add_texture_arguments, prepare_out_dir,
 def run(args: argparse.Namespace) -> int:
     pipeline.parse_formats(args.format)
     settings = texture_settings_from_args(args)
+    save_options = save_options_from_args(args)
     scene = scene_from_args(args)
     out = prepare_out_dir(args, scene)
     images = read_view_images(scene, args.images) if args.images else None
     res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams)
     res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
     res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view,
-             **save_options_from_args(args))
+             **save_options)
     print_run_summary(res, out)
     return 0
 

@@ -85,7 +85,7 @@ def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, 
 
 def _groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stable order of ``keys`` and the start / end of each run of equal keys in it: (order, values, bounds)."""
-    order = np.argsort(keys, kind="stable")
+    order = np.argsort(keys.astype(np.int32), kind="stable")
     ks = keys[order]
     cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, dtype=np.int64)
     return order, ks[cut], np.r_[cut, len(ks)]
@@ -165,6 +165,7 @@ def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
     corner_mean = np.full((F, 3, 3), np.nan)
     corner_point = np.full((F, 3, 3), np.nan)
     t_order, t_views, t_bounds = _groups(labels[face])
+    fuv32 = fuv.astype(np.float32)
     f_order, f_views, f_bounds = _groups(labels)
     t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
     for i, v in enumerate(f_views):
@@ -184,7 +185,7 @@ def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
         if int(v) in t_pos:
             a, b = t_pos[int(v)]
             ts = t_order[a:b]
-            src = _interp(bary[ts], fuv[face[ts]])
+            src = _interp(bary[ts], fuv32[face[ts]])
             col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
         del img
     return col, corner_mean, corner_point
@@ -221,6 +222,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     gy, gx = np.divmod(xidx, S)
     idx = np.r_[tidx, xidx]
     face = np.r_[tface, xface]
+    n_face = len(tidx)  # texels inside faces first, then under thin faces' edges and in gutters
     bary = np.concatenate([tbary, barycentric(ctxy, cs.faces, xface, gx.astype(np.float64),
                                               gy.astype(np.float64)).astype(np.float32)])
     del tidx, tface, tbary, gx, gy, eidx, eface, cidx, cface, xidx, xface
@@ -237,17 +239,19 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.info("bake_texture: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f",
                     lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
                     lev_stats["seam_step_after"])
-    cb = _clip_bary(bary)
-    st = seen[face]
+    # per face corner: the leveling offset (seen faces) or the fallback colour (unseen ones, sampled as 0)
+    add = np.zeros((len(faces), 3, 3), dtype=np.float32)
     if corner_off is not None:
-        col[st] += _interp(cb[st], corner_off.astype(np.float32)[face[st]])
+        add[seen] = corner_off[seen]
     n_unseen = int(np.count_nonzero(~seen))
     if n_unseen:
         cc = corner_point if corner_off is None else corner_point + corner_off
-        fb = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)
-        col[~st] = _interp(cb[~st], fb.astype(np.float32)[face[~st]])
+        add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
         logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
-    del cb, bary
+    if corner_off is not None or n_unseen:
+        bary[n_face:] = _clip_bary(bary[n_face:])  # gutter texels: the nearest point of the face
+        col += _interp(bary, add[face])
+    del bary, add
     canvas = np.zeros((H * S, 3), dtype=np.uint8)
     canvas[idx] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
     del col

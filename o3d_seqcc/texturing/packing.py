@@ -87,7 +87,7 @@ class _Packer:
         self.chart_area = np.bincount(np.asarray(chart), weights=0.5 * a2, minlength=self.n_charts)
         self.log: list[str] = []
 
-    def pack(self, t: float, resolution: int):
+    def pack(self, t: float, resolution: int, padding: int | None = None):
         import xatlas
 
         a = xatlas.Atlas()
@@ -95,7 +95,7 @@ class _Packer:
         po = xatlas.PackOptions()
         po.texels_per_unit = float(t)
         po.resolution = int(resolution)
-        po.padding = self.padding
+        po.padding = self.padding if padding is None else int(padding)
         po.bilinear = True
         po.blockAlign = False
         po.rotate_charts = True
