@@ -284,7 +284,11 @@ def peers(key, args, scene, corrected, size, d, n_in, rows, notes, pictures) -> 
         except RuntimeError as e:
             notes.append(f"{key}: MeshLab failed: {e}")
     if not args.no_open3d:
-        r = run_open3d(scene, d / "open3d", images=corrected, texture_size=size, overwrite=True)
+        try:
+            r = run_open3d(scene, d / "open3d", images=corrected, texture_size=size, overwrite=True)
+        except RuntimeError as e:  # compute_uvatlas refuses some meshes (e.g. the 300k one: non-manifold)
+            notes.append(f"{key}: Open3D failed: {str(e).strip()[-160:]}")
+            return
         m, img = measure(r.mesh, scene, corrected[VIEW], n_in)
         rows.append({"method": "open3d", "mesh": key, "bake_s": r.seconds, "pages": 1, "glb_bytes": None, **m})
         pictures[key]["open3d"] = img
