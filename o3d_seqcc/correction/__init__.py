@@ -7,6 +7,10 @@ per-view transforms it returns. The methods, one module per family:
 
 - :mod:`~o3d_seqcc.correction.seqcc`: ``"seqcc"`` (default, the paper's #7, contrast-keeping
   CMF fit) and ``"seqcc-joint"`` (the paper's literal joint-histogram regression);
+- :mod:`~o3d_seqcc.correction.seqcc_global`: ``"seqcc-global"`` (``seqcc``'s sequential
+  estimate refined jointly over every graph edge, curves continued over the whole value range;
+  its steps in :mod:`~o3d_seqcc.correction.edge_summaries` and
+  :mod:`~o3d_seqcc.correction.joint_curves`);
 - :mod:`~o3d_seqcc.correction.pairwise`: ``"none"``, ``"reinhard"``, ``"root-polynomial"``,
   ``"vandermonde"`` (#1-#4, per path edge);
 - :mod:`~o3d_seqcc.correction.global_methods`: ``"gain-compensation"``,
@@ -28,7 +32,7 @@ from ..errors import InputError, warn
 from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
 from ..imageops import img_as_dtype, img_as_float
 from ..scene import resolve_view
-from . import global_methods, pairwise, seqcc  # noqa: F401  (register their methods)
+from . import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
 from .base import (
     METHODS,
     CorrectionContext,

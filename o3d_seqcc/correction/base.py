@@ -2,8 +2,8 @@
 
 A correction method is ``fn(ctx: CorrectionContext, **options) -> list[Transform]`` (one
 transform per view) registered under a name with :func:`register_method`; the method modules
-(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.pairwise`,
-:mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
+(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.seqcc_global`,
+:mod:`~o3d_seqcc.correction.pairwise`, :mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
 :mod:`o3d_seqcc.correction` imports all of them explicitly. Views without a path to the
 reference keep an :class:`IdentityTransform`.
 """
