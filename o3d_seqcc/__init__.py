@@ -66,11 +66,13 @@ _LAZY: dict[str, str] = {
     "LutTransform": "correction",
     "FunctionTransform": "correction",
     "IdentityTransform": "correction",
-    # evaluation (4.2)
+    # evaluation (4.2) and semi-real ground truth
     "evaluate": "metrics",
     "Evaluation": "metrics",
     "evaluate_method": "evaluation",
     "MethodEvaluation": "evaluation",
+    "make_semireal": "semireal",
+    "evaluate_semireal": "semireal",
     # texturing, export, seams, renders (3.8)
     "SELECTION_METHODS": "texturing",
     "TextureSettings": "texturing",
@@ -100,7 +102,7 @@ _LAZY: dict[str, str] = {
 _SUBMODULES = frozenset({
     "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
     "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "scene", "seams",
-    "synthetic", "texturing", "visibility",
+    "semireal", "synthetic", "texturing", "visibility",
 })
 
 __all__ = [
