@@ -58,6 +58,7 @@ _LAZY: dict[str, str] = {
     "fit_cmf": "cmf",
     "CMF_METHODS": "cmf",
     "correct": "correction",
+    "DEFAULT_METHOD": "correction",
     "available_methods": "correction",
     "register_method": "correction",
     "METHODS": "correction",

@@ -27,7 +27,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
+from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError, warn
 from .export import FORMATS, export_meshlab_ply, export_textured_mesh
 from .io.files import atomic_write_bytes, write_image, write_json
@@ -314,7 +314,7 @@ def run(
     scene: Scene | str | os.PathLike,
     *,
     reference: str | int = "auto",
-    method: str = "seqcc",
+    method: str = DEFAULT_METHOD,
     t_npm: int = 400,
     mappings: str = "vertices",
     mesh: str | os.PathLike | None = None,
@@ -330,8 +330,8 @@ def run(
         A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
     reference : str or int, default "auto"
         Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
-    method : str, default "seqcc"
-        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`).
+    method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
+        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
     t_npm : int, default 400
         Minimum pairwise mappings (vertex units) for a graph edge.
     mappings : {"vertices", "dense"}, default "vertices"
@@ -438,7 +438,7 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = "seqcc", t_npm: int = 400, mappings: str = "vertices",
+    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int = 400, mappings: str = "vertices",
     graph_weight: str = "paper",
     seed: int = 0,
     metrics: bool = True,

@@ -91,7 +91,7 @@ def test_seqcc_recovers_the_reference_colours(problem):
     scene, images, mappings, truth = problem
     before = [_mae(images[v], truth) for v in (1, 2, 3)]
     with pytest.warns(UserWarning, match="v4"):
-        res = correct(scene, images=images, mappings=mappings, reference="v0")
+        res = correct(scene, images=images, mappings=mappings, reference="v0", method="seqcc")
     assert res.reference == 0 and res.method == "seqcc"
     assert res.paths == {0: [0], 1: [1, 0], 2: [2, 1, 0], 3: [3, 2, 1, 0]}
     assert res.unreachable == [4]
@@ -110,7 +110,7 @@ def test_seqcc_recovers_the_reference_colours(problem):
 @pytest.mark.filterwarnings("ignore:1 view")
 def test_sequential_composition_equals_one_by_one(problem):
     scene, images, mappings, _ = problem
-    res = correct(scene, images=images, mappings=mappings, reference=0, outlier_k=None)  # one fit per edge
+    res = correct(scene, images=images, mappings=mappings, reference=0, method="seqcc", outlier_k=None)  # one fit per edge
     fl = [to_float(im) for im in images]
     img = fl[3].copy()
     for t, s in ((3, 2), (2, 1), (1, 0)):
@@ -262,7 +262,7 @@ def test_seqcc_does_not_wash_out_misregistered_views(rng):
         for i in range(3)
     )
     scene = Scene(Path("/nonexistent/mesh.ply"), views)
-    res = correct(scene, images=images, mappings=mappings, reference=0)
+    res = correct(scene, images=images, mappings=mappings, reference=0, method="seqcc")
     assert res.paths[2] == [2, 1, 0]
     truth = images[0].astype(np.float64)
     for v in (1, 2):

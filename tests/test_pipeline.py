@@ -56,7 +56,7 @@ def test_library_defaults_are_the_command_line_defaults(small_scene):
     for f in fields(TextureSettings):  # every CLI texture option reads its default from TextureSettings
         if hasattr(args, f.name):
             assert getattr(args, f.name) == getattr(d, f.name), f.name
-    assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc", 400, "vertices")
+    assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc-global", 400, "vertices")
 
 
 def test_texture_only_and_textured_mesh_conversions(small_scene, tmp_path):

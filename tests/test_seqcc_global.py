@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import skimage.data
 
-from o3d_seqcc.correction import METHODS, CorrectionContext, available_methods, correct
+from o3d_seqcc.correction import DEFAULT_METHOD, METHODS, CorrectionContext, available_methods, correct
 from o3d_seqcc.correction.edge_summaries import EdgeObservations, _FlatImages, edge_observations, edge_quantiles
 from o3d_seqcc.correction.joint_curves import linear_start, refine_curves
 from o3d_seqcc.correction.seqcc_global import sequential_start
@@ -73,8 +73,8 @@ def _lower_half(albedo: np.ndarray) -> np.ndarray:
     return lum <= np.median(lum)
 
 
-def test_registered_and_listed():
-    assert "seqcc-global" in available_methods()
+def test_registered_listed_and_the_default():
+    assert "seqcc-global" in available_methods() and DEFAULT_METHOD == "seqcc-global"
     assert "seqcc-global" in METHODS and "seqcc" in METHODS and "seqcc-joint" in METHODS
 
 

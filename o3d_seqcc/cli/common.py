@@ -8,7 +8,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable
 
-from ..correction import available_methods
+from ..correction import DEFAULT_METHOD, available_methods
 from ..export import FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output
@@ -49,8 +49,9 @@ def scene_from_args(args: argparse.Namespace):
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:
     """Reference, method, t_npm and mapping mode (``correct`` and ``run``)."""
     p.add_argument("--reference", default="auto", help="reference view name (or index), or 'auto' (default)")
-    p.add_argument("--method", default="seqcc", choices=available_methods(), metavar="METHOD",
-                   help=f"colour-correction method: {', '.join(available_methods())} (default seqcc)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=available_methods(), metavar="METHOD",
+                   help=f"colour-correction method: {', '.join(available_methods())} (default {DEFAULT_METHOD}; "
+                   "seqcc is the paper's)")
     p.add_argument("--t-npm", type=int, default=400, help="minimum pairwise mappings (vertex units) for a graph edge "
                    "(default 400)")
     p.add_argument("--mappings", choices=MODES, default="vertices", help="pairwise mappings mode (default vertices, "

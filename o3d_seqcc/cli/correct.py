@@ -1,6 +1,7 @@
-"""Colour-correct every view toward a reference (sequential pairwise correction by default).
+"""Colour-correct every view toward a reference (joint refinement over all graph edges by default).
 
-Sequential pairwise colour correction (Dal'Col et al. 2023) or one of the Table 1 baselines.
+Sequential pairwise colour correction (Dal'Col et al. 2023) refined jointly over every graph edge
+(seqcc-global, the default), the paper's sequential method (seqcc) or one of the Table 1 baselines.
 Writes, as a whole (staged, then swapped in: OUT is never half-written):
 
   OUT/images/<view>.png   corrected images (16-bit PNG when the input was 16-bit)

@@ -23,6 +23,7 @@ from ..errors import InputError
 from ..imageops import img_as_dtype, sample_colors
 
 __all__ = [
+    "DEFAULT_METHOD",
     "METHODS",
     "CorrectionContext",
     "CorrectionResult",
@@ -43,6 +44,9 @@ logger = logging.getLogger(__name__)
 
 #: name -> ``fn(ctx, **options) -> list[Transform]``
 METHODS: dict[str, Callable] = {}
+#: method of :func:`o3d_seqcc.correction.correct` (and every entry point) when none is given: the
+#: measured best (README, ``benchmarks/table2.py``); ``"seqcc"`` is the paper's
+DEFAULT_METHOD = "seqcc-global"
 
 
 def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:

@@ -1,6 +1,6 @@
 """Sequential pairwise colour correction, the paper's method (Table 1 #7) and its literal variant.
 
-``"seqcc"`` (default)
+``"seqcc"`` (the paper's; the default is ``"seqcc-global"``, :mod:`~o3d_seqcc.correction.seqcc_global`)
     For every edge (target t -> source s) on a path: per-channel JIH of the colours at the
     pair's mappings (:mod:`o3d_seqcc.jih`) and a CMF fitted on it (:func:`o3d_seqcc.cmf.fit_cmf`,
     CSVR by default, fitted on the JIH's matched marginal quantiles with a contrast guard, so

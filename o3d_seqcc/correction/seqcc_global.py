@@ -1,4 +1,4 @@
-"""``seqcc-global``: the sequential correction refined jointly over every graph edge.
+"""``seqcc-global``: the sequential correction refined jointly over every graph edge (the default method).
 
 The paper's sequential correction (``method="seqcc"``) fits one colour mapping function per
 edge of each view's Dijkstra path to the reference and composes them: every edge's error is
@@ -133,7 +133,7 @@ def method_seqcc_global(
 ) -> list:
     """``seqcc`` refined jointly over every graph edge, curves extended over the whole range.
 
-    Registered as ``method="seqcc-global"``.
+    Registered as ``method="seqcc-global"`` (the default of :func:`o3d_seqcc.correction.correct`).
     Steps (module docstring): :func:`~o3d_seqcc.correction.edge_summaries.edge_observations` on
     every edge of the reference's component; the sequential estimate along the paper's paths
     (:func:`sequential_start`); the least-squares estimate over all edges that starts from it
