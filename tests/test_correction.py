@@ -182,6 +182,23 @@ def test_every_registered_method_runs_without_nan(problem):
             assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
 
 
+@pytest.mark.filterwarnings("ignore:1 view")
+def test_seqcc_joint_is_seqcc_with_the_literal_fit(problem):
+    """seqcc-joint takes seqcc's options (listed when one is wrong) with no outlier pass by default."""
+    import inspect
+
+    scene, images, mappings, _ = problem
+    kw = dict(images=images, mappings=mappings, reference=0)
+    joint = correct(scene, method="seqcc-joint", **kw)
+    literal = correct(scene, method="seqcc", outlier_k=None, cmf_options={"pairing": "joint", "contrast_guard": None}, **kw)
+    for a, b in zip(joint.images, literal.images):
+        np.testing.assert_array_equal(a, b)
+    opts = inspect.signature(METHODS["seqcc-joint"]).parameters
+    assert list(opts) == list(inspect.signature(METHODS["seqcc"]).parameters) and opts["outlier_k"].default is None
+    with pytest.raises(TypeError, match=r"bogus.*valid: \['bits', 'cmf', 'cmf_options', 'jih_blur', 'n_jobs', 'outlier_k'\]"):
+        correct(scene, method="seqcc-joint", bogus=1, **kw)
+
+
 def test_bad_input_messages(problem):
     scene, images, mappings, _ = problem
     with pytest.raises(InputError, match="v3"):
