@@ -219,13 +219,7 @@ def output_folder(
     """
     inputs = list(inputs)
     target = check_output(out, overwrite=overwrite, inputs=inputs)
-    lock_path = target.parent / f".{target.name}.o3d_seqcc.lock"
-    lock = _acquire(lock_path, target, out)
-    try:
-        lock.seek(0)
-        lock.truncate()
-        lock.write(str(os.getpid()))
-        lock.flush()
+    with _locked(target, out):
         _recover(target)
         check_output(out, overwrite=overwrite, inputs=inputs)  # again, under the lock
         stage = _sibling(target, os.getpid(), "staging")
@@ -248,6 +242,19 @@ def output_folder(
         except BaseException:
             shutil.rmtree(stage, ignore_errors=True)
             raise
+
+
+@contextmanager
+def _locked(target: Path, out) -> Iterator[None]:
+    """Hold the lock of the output folder ``target`` (``.<name>.o3d_seqcc.lock`` beside it, with our PID)."""
+    lock_path = target.parent / f".{target.name}.o3d_seqcc.lock"
+    lock = _acquire(lock_path, target, out)
+    try:
+        lock.seek(0)
+        lock.truncate()
+        lock.write(str(os.getpid()))
+        lock.flush()
+        yield
     finally:
         try:
             lock_path.unlink()
@@ -279,18 +286,11 @@ def add_output_file(out: str | os.PathLike, name: str, data: bytes) -> Path:
         raise InputError(f"{given} is not an o3d-seqcc output folder (no {MANIFEST}); give the --out folder of a run")
     if Path(name).is_absolute() or ".." in Path(name).parts or name == MANIFEST:
         raise ValueError(f"add_output_file: {name!r} must be a plain relative path inside the folder")
-    lock_path = target.parent / f".{target.name}.o3d_seqcc.lock"
-    lock = _acquire(lock_path, target, given)
-    try:
-        path = atomic_write_bytes(target / name, data)
-        command = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("command", "")
-        atomic_write_bytes(target / MANIFEST, _manifest(command, sorted(own | {Path(name).as_posix()})))
-        return path
-    except OSError as e:
-        raise _disk_error(e, target) from None
-    finally:
+    with _locked(target, given):
         try:
-            lock_path.unlink()
-        except OSError:
-            pass
-        lock.close()
+            path = atomic_write_bytes(target / name, data)
+            command = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("command", "")
+            atomic_write_bytes(target / MANIFEST, _manifest(command, sorted(own | {Path(name).as_posix()})))
+        except OSError as e:
+            raise _disk_error(e, target) from None
+    return path
