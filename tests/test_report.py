@@ -60,7 +60,7 @@ def test_the_report_shows_this_run(run_dir, scene):
     rep = json.loads((run_dir / "report.json").read_text())
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     sec = _sections(page)
-    assert list(sec) == ["graph", "jih", "steps", "views", "table2", "selection", "renders", "seams", "timings",
+    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "selection", "renders", "seams", "timings",
                          "settings"]
     names, ref = scene.scene.names, rep["correction"]["reference"]
     paths = rep["correction"]["paths"]
@@ -145,7 +145,7 @@ def test_correct_writes_a_report_with_the_full_table(scene, tmp_path):
     job.save(tmp_path / "c")
     page = (tmp_path / "c" / "report.html").read_text(encoding="utf-8")
     sec = _sections(page)
-    assert list(sec) == ["graph", "jih", "steps", "views", "table2", "timings", "settings"]
+    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "timings", "settings"]
     rep = json.loads((tmp_path / "c" / "report.json").read_text())
     assert "max_per_pair" not in rep["metrics"]["before"]  # correct scores every mapping
     cells = dict(re.findall(r'<td data-key="([a-z0-9_.]+)">([^<]*)</td>', sec["table2"]))

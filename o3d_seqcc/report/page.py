@@ -31,7 +31,7 @@ logger = logging.getLogger(__name__)
 #: bit depth of the JIH drawn (2**bits bins per axis)
 JIH_BITS = 7
 #: mappings per edge drawn in a JIH (evenly spaced)
-JIH_MAX_MAPPINGS = 3000
+JIH_MAX_MAPPINGS = 2000
 #: width in pixels of the selection picture (the folder's selection.png is reused when the view is as wide)
 SELECTION_WIDTH = 640
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
@@ -385,7 +385,7 @@ nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
 .cards{display:flex;flex-wrap:wrap;gap:10px;margin:10px 0}.card{background:#fff;border:1px solid #ddd;
 border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
 figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}
-.grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(150px,1fr))}
+.grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
 .grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}.grid figure,.row figure{margin:0;background:#fff;
 border:2px solid #e4e4e4;padding:3px}.grid figure img{width:100%}.grid figure img+img{margin-top:3px}
 .grid figcaption,.row figcaption{font-size:11px;word-break:break-all}figure.ref{border-color:#d62728}
@@ -402,7 +402,11 @@ margin-right:5px;vertical-align:middle;border:1px solid #999}details{margin:6px 
 
 
 def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]]:
-    """(id, title, body) of every section the data allow, in the paper's order; each timed at DEBUG."""
+    """(id, title, body) of every section the data allow; each timed at DEBUG.
+
+    What the correction did first (Figure 10, Table 2), then how (Figures 4-8), then the texturing
+    (Figures 9, 12-13, seams), then timings and settings.
+    """
     c = inp.correction
     out: list[tuple[str, str, str]] = []
 
@@ -413,6 +417,11 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
 
     before = [thumbnail(im, width) for im in inp.photos] if inp.photos is not None else None
     after = [thumbnail(im, width) for im in inp.corrected] if inp.corrected is not None and before else None
+    if before is not None:
+        add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
+            [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
+    if c is not None:
+        add("table2", "Image-based metrics (Table 2)", _table2_section, inp, f["metrics"])
     if c is not None and after is not None:
         change = [float(np.abs(x.astype(np.int16) - y).mean()) for x, y in zip(before, after)]
         cands = [v for v, p in sorted(c.paths.items()) if len(p) > 1]
@@ -432,11 +441,6 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
             if path:
                 add("steps", "Sequential pairwise correction of one path (Figure 8)", _steps_section, inp, path,
                     thumbs, 3 * width // 2)
-    if before is not None:
-        add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
-            [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
-    if c is not None:
-        add("table2", "Image-based metrics (Table 2)", _table2_section, inp, f["metrics"])
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None:
         a, b = _render_views(inp)
         add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
