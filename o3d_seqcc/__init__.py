@@ -97,13 +97,15 @@ _LAZY: dict[str, str] = {
     # the whole job
     "RunResult": "pipeline",
     "run_demo": "demo",
+    "html_report": "report",
+    "regenerate_report": "report",
 }
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
     "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
-    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "scene", "seams",
-    "semireal", "synthetic", "texturing", "visibility",
+    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "report",
+    "scene", "seams", "semireal", "synthetic", "texturing", "visibility",
 })
 
 __all__ = [

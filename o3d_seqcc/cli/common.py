@@ -22,6 +22,7 @@ __all__ = [
     "add_texture_arguments",
     "library_default",
     "prepare_out_dir",
+    "print_report_path",
     "print_run_summary",
     "scene_from_args",
     "texture_settings_from_args",
@@ -123,3 +124,11 @@ def print_run_summary(res, out: Path) -> None:
     if res.seams is not None:
         print(f"seams: mean {res.seams.mean:.2f}, p99 {res.seams.p99:.2f}, >5: {res.seams.frac_above_5:.3f}")
     print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items()))
+    print_report_path(out)
+
+
+def print_report_path(out: Path) -> None:
+    """Print the path of the HTML report of an output folder (the last line of run, texture, correct)."""
+    report = Path(out) / "report.html"
+    if report.is_file():
+        print(f"report: {report}")

@@ -17,7 +17,7 @@ import argparse
 
 from ..graph import WEIGHTS
 from ..pipeline import correct_scene
-from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, scene_from_args
+from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, print_report_path, scene_from_args
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         b, a = job.report["metrics"]["before"], job.report["metrics"]["after"]
         print(f"mean PSNR {b['psnr']['mean']:.2f} -> {a['psnr']['mean']:.2f} dB, "
               f"mean CIEDE2000 {b['ciede2000']['mean']:.2f} -> {a['ciede2000']['mean']:.2f}")
+    print_report_path(out)
     return 0
 
 

@@ -232,7 +232,10 @@ def correct(
             out.append(img_as_dtype(tr.apply(fimg), img.dtype))
     timings["apply"] = time.perf_counter() - t0
     timings["total"] = float(sum(timings.values()))
+    settings = {"t_npm": int(t_npm), "seed": int(seed), "interpolation": interpolation, "graph_weight": graph_weight,
+                "options": dict(options)}
     return CorrectionResult(
         images=out, transforms=transforms, reference=ref, paths=paths, unreachable=unreachable,
         graph_edges=graph_edges(graph), timings=timings, method=method, t_npm=t_eff,
+        edge_luts=dict(sorted(ctx.edge_luts.items())), settings=settings,
     )

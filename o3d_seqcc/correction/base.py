@@ -195,6 +195,9 @@ class CorrectionContext:
         Lookup-table length suited to the input bit depth (256 for 8-bit, 4096 for 16-bit/float).
     interpolation : str
         Colour sampling at mappings ("bilinear" or "nearest").
+    edge_luts : dict[(int, int), (3, L) array]
+        Filled by :func:`lut_per_path`: the lookup table of every directed path edge
+        ``(target, source)``, before composition (what the report plots, paper Figure 7).
     """
 
     images: list
@@ -206,6 +209,7 @@ class CorrectionContext:
     paths: dict = field(default_factory=dict)
     lut_size: int = 256
     interpolation: str = "bilinear"
+    edge_luts: dict = field(default_factory=dict)
     _cache: dict = field(default_factory=dict, repr=False)
 
     def colors(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -258,6 +262,14 @@ class CorrectionResult:
     method : str
     t_npm : int
         Edge threshold used, in the units of the mappings (see :func:`o3d_seqcc.graph.scale_t_npm`).
+    edge_luts : dict[(int, int), (3, L) float64]
+        Per directed path edge ``(target, source)``: the colour mapping function fitted on it
+        (R, G, B lookup tables over L evenly spaced inputs), for the methods that compose lookup
+        tables along the paths (``seqcc``, ``seqcc-joint``, ``vandermonde``); empty otherwise.
+    settings : dict
+        The arguments of :func:`~o3d_seqcc.correction.correct` that, with the same images and
+        mappings, give this result again: ``t_npm`` (as given, vertex units), ``seed``,
+        ``interpolation``, ``graph_weight`` and ``options`` (the method's).
     """
 
     images: list
@@ -269,6 +281,8 @@ class CorrectionResult:
     timings: dict
     method: str
     t_npm: int = 400
+    edge_luts: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
 
 
 def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, n_jobs: int | None = None) -> list[list | None]:
@@ -298,14 +312,22 @@ def lut_per_path(
     extrapolate: bool = False,
     n_jobs: int | None = None,
 ) -> list:
-    """Compose per-edge (3, L) tables along every path into one table per view."""
+    """Compose per-edge (3, L) tables along every path into one table per view.
+
+    The per-edge tables are also kept in ``ctx.edge_luts`` (``(target, source) -> (3, L)``).
+    """
+    steps = path_steps(ctx, edge_lut, n_jobs=n_jobs)
+    for v, luts in enumerate(steps):
+        p = ctx.paths.get(v) if luts else None
+        for t, s, lut in zip(p[:-1], p[1:], luts) if p else ():
+            ctx.edge_luts.setdefault((int(t), int(s)), np.asarray(lut, dtype=np.float64))
     return [
         IdentityTransform()
         if luts is None
         else LutTransform(
             np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])
         )
-        for luts in path_steps(ctx, edge_lut, n_jobs=n_jobs)
+        for luts in steps
     ]
 
 
