@@ -5,16 +5,18 @@
 #   ./dev.sh test    install everything (once) and run the test suite
 #   ./dev.sh setup   only install
 #
-# Installs: the system libraries Open3D and pymeshlab need and the MeshLab application (apt, when
-# root or with sudo), a virtual environment in .venv with the package and its test extra, and the
-# Khronos glTF validator (npm) into .cache/node. Re-running is cheap: each step is skipped when done.
+# Installs: the system libraries Open3D and pymeshlab need, the MeshLab application and Debian's
+# chromium (the HTML report's rendering test) (apt, when root or with sudo), a virtual environment
+# in .venv with the package and its test extra, and the Khronos glTF validator (npm) into
+# .cache/node. Re-running is cheap: each step is skipped when done.
 set -euo pipefail
 cd "$(dirname "$0")"
 ROOT=$(pwd)
 VENV=${VENV:-$ROOT/.venv}
 APT_PACKAGES=(libusb-1.0-0 libgomp1 libgl1 libegl1 xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
               libvulkan1 mesa-vulkan-drivers  # Open3D's offscreen renderer (lavapipe)
-              meshlab xdotool imagemagick)    # MeshLab opening our output (tests/test_meshlab_app.py)
+              meshlab xdotool imagemagick     # MeshLab opening our output (tests/test_meshlab_app.py)
+              chromium)                       # the HTML report's rendering test (tests/test_report.py)
 
 log() { printf '\033[1m[dev.sh]\033[0m %s\n' "$*" >&2; }
 

@@ -58,6 +58,7 @@ _LAZY: dict[str, str] = {
     "fit_cmf": "cmf",
     "CMF_METHODS": "cmf",
     "correct": "correction",
+    "DEFAULT_METHOD": "correction",
     "available_methods": "correction",
     "register_method": "correction",
     "METHODS": "correction",
@@ -66,11 +67,13 @@ _LAZY: dict[str, str] = {
     "LutTransform": "correction",
     "FunctionTransform": "correction",
     "IdentityTransform": "correction",
-    # evaluation (4.2)
+    # evaluation (4.2) and semi-real ground truth
     "evaluate": "metrics",
     "Evaluation": "metrics",
     "evaluate_method": "evaluation",
     "MethodEvaluation": "evaluation",
+    "make_semireal": "semireal",
+    "evaluate_semireal": "semireal",
     # texturing, export, seams, renders (3.8)
     "SELECTION_METHODS": "texturing",
     "TextureSettings": "texturing",
@@ -94,13 +97,15 @@ _LAZY: dict[str, str] = {
     # the whole job
     "RunResult": "pipeline",
     "run_demo": "demo",
+    "html_report": "report",
+    "regenerate_report": "report",
 }
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
     "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
-    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "scene", "seams",
-    "synthetic", "texturing", "visibility",
+    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "report",
+    "scene", "seams", "semireal", "synthetic", "texturing", "visibility",
 })
 
 __all__ = [

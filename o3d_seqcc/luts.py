@@ -3,14 +3,15 @@
 A LUT is an (L,) float array over L evenly spaced inputs in [0, 1]; values between are
 interpolated linearly (:func:`apply_lut`). Colour mapping functions (:mod:`o3d_seqcc.cmf`) are
 tabulated as LUTs and composed along a view's correction path (:func:`compose_luts`), so an
-image is transformed once, in floating point.
+image is transformed once, in floating point. A table trusted only over part of its inputs is
+continued beyond it as power laws (:func:`extend_curve`) or straight lines (:func:`extend_line`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["apply_lut", "compose_luts", "interp_extrapolate"]
+__all__ = ["apply_lut", "compose_luts", "extend_curve", "extend_line", "interp_extrapolate"]
 
 
 def interp_extrapolate(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
@@ -75,3 +76,84 @@ def compose_luts(luts: list[np.ndarray], *, n_out: int | None = None, extrapolat
         else:
             out = apply_lut(np.clip(lut, 0.0, 1.0), out)
     return np.clip(out, 0.0, 1.0)
+
+
+def extend_curve(
+    lut: np.ndarray, lo: float, hi: float, *, stretch: float = 0.5, beta_range: tuple[float, float] = (0.33, 3.0)
+) -> np.ndarray:
+    """Continue a curve beyond its observed input range ``[lo, hi]`` as power laws.
+
+    Above ``hi``: ``f(x) = f(hi) (x / hi)^beta_hi``; below ``lo``: ``f(x) = f(lo) (x / lo)^beta_lo``
+    (which runs to black, ``f(0) = 0``). Each ``beta`` is the least-squares slope of
+    ``log f`` on ``log x`` over the ``stretch`` of the observed range next to that end, clipped to
+    ``beta_range``. A change of exposure, white balance and gamma is a power law per channel,
+    so this continuation is exact for it, where a straight line or a clamp is not; fitted over a
+    long stretch, the slope is not at the mercy of the noise of the last few observations.
+
+    Parameters
+    ----------
+    lut : (L,) float array
+        Curve on ``np.linspace(0, 1, L)``; trusted on ``[lo, hi]``.
+    lo, hi : float
+        Observed input range, ``0 <= lo < hi <= 1`` (NaN: returned unchanged).
+    stretch : float, default 0.5
+        Share of ``hi - lo`` next to each end over which its slope is fitted.
+    beta_range : (float, float), default (0.33, 3.0)
+
+    Returns
+    -------
+    numpy.ndarray
+        (L,) float64, monotone non-decreasing, not clipped.
+    """
+    lut = np.asarray(lut, dtype=np.float64)
+    out = lut.copy()
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return out
+    L = lut.size
+    grid = np.linspace(0.0, 1.0, L)
+    d = max(float(stretch) * (hi - lo), 2.0 / (L - 1))
+    eps = 1e-4
+    b0, b1 = (float(b) for b in beta_range)
+
+    def loglog_slope(x0: float, x1: float) -> float:
+        xs = np.linspace(max(x0, eps), x1, 32)
+        fs = np.interp(xs, grid, lut)
+        ok = fs > eps
+        if ok.sum() < 2 or np.ptp(np.log(xs[ok])) <= 0:
+            return 1.0
+        return float(np.clip(np.polyfit(np.log(xs[ok]), np.log(fs[ok]), 1)[0], b0, b1))
+
+    if hi < 1.0:
+        up = grid > hi
+        out[up] = max(float(np.interp(hi, grid, lut)), eps) * (grid[up] / hi) ** loglog_slope(max(hi - d, lo), hi)
+    if lo > 0.0:
+        dn = grid < lo
+        out[dn] = max(float(np.interp(lo, grid, lut)), 0.0) * (grid[dn] / lo) ** loglog_slope(lo, min(lo + d, hi))
+    return np.maximum.accumulate(out)
+
+
+def extend_line(lut: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Continue a curve beyond its observed input range ``[lo, hi]`` with its end slopes.
+
+    The straight-line counterpart of :func:`extend_curve` (for comparison with power laws).
+
+    Parameters
+    ----------
+    lut : (L,) float array
+        Curve on ``np.linspace(0, 1, L)``; trusted on ``[lo, hi]``.
+    lo, hi : float
+        Observed input range (NaN, or fewer than two table entries inside: returned unchanged).
+
+    Returns
+    -------
+    numpy.ndarray
+        (L,) float64, monotone non-decreasing, not clipped.
+    """
+    lut = np.asarray(lut, dtype=np.float64)
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return lut.copy()
+    grid = np.linspace(0.0, 1.0, len(lut))
+    inside = (grid >= lo) & (grid <= hi)
+    if inside.sum() < 2:
+        return lut.copy()
+    return np.maximum.accumulate(interp_extrapolate(grid, grid[inside], lut[inside]))

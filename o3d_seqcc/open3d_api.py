@@ -38,6 +38,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import pipeline
+from .correction import DEFAULT_METHOD
 from .errors import InputError
 from .imageops import img_as_dtype
 from .meshops import vertex_normals
@@ -216,7 +217,7 @@ def correct_images(
     *,
     depths: Sequence[Any] | None = None,
     reference: str | int = "auto",
-    method: str = "seqcc",
+    method: str = DEFAULT_METHOD,
     t_npm: int = 400,
     mappings: str = "vertices",
     depth_scale: float = 1000.0,
@@ -230,8 +231,8 @@ def correct_images(
         Open3D objects or arrays (see the module docstring).
     reference : str or int, default "auto"
         Index of the reference image, or ``"auto"`` (the view with the smallest total path cost).
-    method : str, default "seqcc"
-        A colour-correction method (:data:`o3d_seqcc.correction.METHODS`).
+    method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
+        A colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
     t_npm : int, default 400
         Minimum pairwise mappings (vertex units) for a graph edge.
     mappings : {"vertices", "dense"}, default "vertices"
@@ -263,7 +264,7 @@ def texture_mesh(
     selection: str = "mrf",
     atlas_size: int = 2048,
     reference: str | int = "auto",
-    method: str = "seqcc",
+    method: str = DEFAULT_METHOD,
     t_npm: int = 400,
     depth_scale: float = 1000.0,
     return_result: bool = False,

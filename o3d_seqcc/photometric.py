@@ -2,7 +2,10 @@
 
 ``y = (1 - s) * x' + s * smoothstep(x')`` with ``x' = clip(x * gain * wb[c], 0, 1) ** gamma[c]`` and
 ``smoothstep(x) = x^2 (3 - 2x)``, channel by channel (:func:`apply_photometric`);
-:func:`sample_photometric` draws camera-like parameters, :func:`identity_photometric` is the
+:func:`sample_photometric` draws camera-like parameters (most draws moderate),
+:func:`sample_camera_change` draws them uniformly over whole ranges (:data:`HARD_CHANGE_RANGES`:
+the synthetic ``photometric="camera-hard"`` mode; :data:`CAMERA_CHANGE_RANGES`: the semi-real
+protocol's hidden change, :mod:`o3d_seqcc.semireal`), :func:`identity_photometric` is the
 identity.
 """
 
@@ -12,9 +15,25 @@ from typing import Any
 
 import numpy as np
 
+from .errors import InputError
 from .imageops import img_as_float
 
-__all__ = ["apply_photometric", "identity_photometric", "sample_photometric"]
+__all__ = [
+    "CAMERA_CHANGE_RANGES",
+    "HARD_CHANGE_RANGES",
+    "apply_photometric",
+    "identity_photometric",
+    "sample_camera_change",
+    "sample_photometric",
+]
+
+#: Ranges of :func:`sample_camera_change` by default: the semi-real protocol's hidden change
+#: (:mod:`o3d_seqcc.semireal`): exposure factor, white balance +- share per channel, per-channel
+#: gamma, S-curve strength.
+CAMERA_CHANGE_RANGES: dict[str, Any] = {"exposure": (0.6, 1.6), "white_balance": 0.2, "gamma": (0.64, 1.51), "s_curve": (0.0, 0.6)}
+#: Ranges of ``photometric="camera-hard"``: the hard room of issue 12 (S-curves up to 0.6,
+#: exposure 0.65-1.42, per-channel gamma 0.67-1.43), every parameter drawn uniformly over them.
+HARD_CHANGE_RANGES: dict[str, Any] = {"exposure": (0.65, 1.42), "white_balance": 0.2, "gamma": (0.67, 1.43), "s_curve": (0.0, 0.6)}
 
 
 def identity_photometric() -> dict[str, Any]:
@@ -48,6 +67,57 @@ def sample_photometric(rng: np.random.Generator) -> dict[str, Any]:
     gamma = np.clip(g0 * np.exp(rng.normal(0.0, 0.06, size=3)), 0.65, 1.5)
     s = float(rng.uniform(0.0, 0.5))
     return {"gain": gain, "white_balance": wb.tolist(), "gamma": gamma.tolist(), "s_curve": s}
+
+
+def sample_camera_change(
+    rng: np.random.Generator,
+    *,
+    exposure: tuple[float, float] = CAMERA_CHANGE_RANGES["exposure"],
+    white_balance: float = CAMERA_CHANGE_RANGES["white_balance"],
+    gamma: tuple[float, float] = CAMERA_CHANGE_RANGES["gamma"],
+    s_curve: tuple[float, float] = CAMERA_CHANGE_RANGES["s_curve"],
+) -> dict[str, Any]:
+    """Draw a camera-like change uniformly over its whole range (no preference for the identity).
+
+    Harder than :func:`sample_photometric`: the exposure is log-uniform over ``exposure``, each
+    channel's white-balance factor uniform in ``[1 - white_balance, 1 + white_balance]``, each
+    channel's gamma independently log-uniform over ``gamma`` (so the colour cast changes with
+    brightness) and the S-curve strength uniform over ``s_curve``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    exposure : (float, float), default (0.6, 1.6)
+        Range of the exposure factor, ``0 < lo <= hi``.
+    white_balance : float, default 0.2
+        Largest relative change of a channel's white-balance factor, in [0, 1).
+    gamma : (float, float), default (0.64, 1.51)
+        Range of each channel's gamma, ``0 < lo <= hi``.
+    s_curve : (float, float), default (0, 0.6)
+        Range of the S-curve strength, ``0 <= lo <= hi <= 1``.
+
+    Returns
+    -------
+    dict
+        ``gain``, ``white_balance`` (3), ``gamma`` (3), ``s_curve``: parameters of
+        :func:`apply_photometric`.
+
+    Raises
+    ------
+    InputError
+        A range out of bounds or reversed.
+    """
+    (e0, e1), (g0, g1), (s0, s1), wb = map(float, exposure), map(float, gamma), map(float, s_curve), float(white_balance)
+    if not (0 < e0 <= e1 and 0 < g0 <= g1 and 0 <= s0 <= s1 <= 1 and 0 <= wb < 1):
+        raise InputError(
+            f"sample_camera_change: need 0 < exposure lo <= hi, 0 < gamma lo <= hi, 0 <= s_curve lo <= hi <= 1 and "
+            f"0 <= white_balance < 1; got exposure={exposure}, gamma={gamma}, s_curve={s_curve}, white_balance={white_balance}"
+        )
+    gain = float(np.exp(rng.uniform(np.log(e0), np.log(e1))))
+    wbf = rng.uniform(1.0 - wb, 1.0 + wb, size=3)
+    gm = np.exp(rng.uniform(np.log(g0), np.log(g1), size=3))
+    s = float(rng.uniform(s0, s1))
+    return {"gain": gain, "white_balance": wbf.tolist(), "gamma": gm.tolist(), "s_curve": s}
 
 
 def apply_photometric(image: np.ndarray, params: dict[str, Any]) -> np.ndarray:

@@ -21,13 +21,14 @@ import io
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
+from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError, warn
 from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
 from .io.files import atomic_write_bytes, write_image, write_json
@@ -36,9 +37,11 @@ from .io.meshlab import save_mlp
 from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
-from .metrics import evaluate
+from .metrics import before_after
 from .orientation import UP_AXES, up_axis_transform
 from .render import write_selection_picture
+from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
+from .report.figures import warm_up
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
@@ -127,6 +130,8 @@ class RunResult:
         The scene argument as given (the report's ``scene``; empty for a Scene object).
     images_from : str
         ``"scene"`` (the scene's files), ``"corrected"`` (:func:`run`) or ``"given"``.
+    originals : list of (H, W, 3) arrays or None
+        The images before correction (:func:`run`; None for :func:`texture`).
     """
 
     scene: Scene
@@ -144,24 +149,35 @@ class RunResult:
     command: str = "run"
     source: str = ""
     images_from: str = "scene"
+    originals: list | None = None
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
-               export: dict[str, Any] | None = None) -> dict[str, Any]:
-        """The ``report.json`` content (JSON types); ``export``: the export options :meth:`save` used."""
+               export: dict[str, Any] | None = None, metrics: dict | None = None) -> dict[str, Any]:
+        """The ``report.json`` content (JSON types).
+
+        ``export``: the export options :meth:`save` used; ``metrics``: Table 2
+        (:func:`~o3d_seqcc.metrics.before_after`).
+        """
         s = self.settings
         names = self.scene.names
-        rep: dict[str, Any] = {"command": self.command, "scene": self.source, "images": self.images_from}
+        rep: dict[str, Any] = {"command": self.command, "scene": self.source, **_scene_paths(self.scene),
+                               "images": self.images_from}
         if self.correction is not None:
             res = self.correction
             rep["correction"] = {
                 "method": res.method,
                 "reference": names[res.reference],
                 "t_npm": res.t_npm,
+                "mappings": None if self.mappings is None else self.mappings.mode,
+                "settings": res.settings,
                 "unreachable": [names[i] for i in res.unreachable],
                 "paths": {names[k]: [names[i] for i in p] for k, p in res.paths.items()},
                 "n_graph_edges": len(res.graph_edges),
                 "timings_s": {k: round(float(v), 4) for k, v in res.timings.items()},
             }
+        if metrics is not None:
+            rep["metrics"] = metrics
+        rep["texture_settings"] = asdict(s)
         rep["selection"] = {"method": s.selection, "seed": s.seed, **self.selection_stats,
                             **({"picture_view": picture_view} if picture_view else {})}
         rep["atlas"] = {k: v for k, v in self.textured.stats.items() if not k.startswith("time_")}
@@ -187,8 +203,9 @@ class RunResult:
         up_axis: str = "y",
         texture_format: str = "png",
         jpeg_quality: int = 90,
+        report: bool = True,
     ) -> dict[str, str]:
-        """Write the textured mesh, the selection and ``report.json`` as the folder ``out``, all at once.
+        """Write the textured mesh, the selection, ``report.json`` and ``report.html`` as the folder ``out``, all at once.
 
         Parameters
         ----------
@@ -216,6 +233,10 @@ class RunResult:
             Texture images of the GLB and OBJ (WebP in the GLB through ``EXT_texture_webp``).
         jpeg_quality : int, default 90
             JPEG / WebP quality (1-100).
+        report : bool, default True
+            Also write ``report.html`` (:mod:`o3d_seqcc.report`: the paper's figures for this run)
+            and, after a correction, Table 2 in ``report.json`` (``metrics``: scored on at most
+            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` mappings per pair).
 
         Returns
         -------
@@ -235,7 +256,12 @@ class RunResult:
         if view is not None:
             self.scene.index(view)
         t = time.perf_counter()
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage:
+        table2 = report and self.correction is not None and self.mappings is not None and self.originals is not None
+        with ThreadPoolExecutor(max_workers=1) as pool, \
+                output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage:
+            # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
+            # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
+            prelude = pool.submit(self._report_prelude, table2) if report else None
             picture = None
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
@@ -266,9 +292,36 @@ class RunResult:
             self.timings["export"] = time.perf_counter() - t
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
                       "orientation": {**orientation, "applies_to": [f for f in fmts]}}
-            write_json(stage / "report.json", self.report(written_out, picture_view=None if picture is None else picture[1],
-                                                          export=export))
+            t = time.perf_counter()
+            metrics = None if prelude is None else prelude.result()
+            if report:
+                written_out["report_html"] = str(Path(out) / REPORT_FILE)
+            rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
+                              metrics=metrics)
+            if report:
+                write_report(self, stage / REPORT_FILE, report=rep)
+                self.timings["report"] = time.perf_counter() - t
+                rep["timings_s"]["report"] = round(self.timings["report"], 4)
+            write_json(stage / "report.json", rep)
         return written_out
+
+    def _report_prelude(self, table2: bool) -> dict | None:
+        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2."""
+        warm_up()
+        if not table2:
+            return None
+        return before_after(self.originals, self.images, self.mappings, self.correction.paths,
+                            max_per_pair=METRICS_MAX_PER_PAIR)
+
+
+def _scene_paths(scene: Scene) -> dict[str, str]:
+    """Absolute paths of the scene and its mesh files (what ``o3d-seqcc report`` reloads), when on disk."""
+    out = {}
+    if scene.source is not None:
+        out["scene_path"] = str(Path(scene.source).resolve())
+    if isinstance(scene.mesh, Path):
+        out["mesh"] = str(scene.mesh.resolve())
+    return out
 
 
 def _meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: list | None) -> Path | None:
@@ -360,7 +413,7 @@ def run(
     scene: Scene | str | os.PathLike,
     *,
     reference: str | int = "auto",
-    method: str = "seqcc",
+    method: str = DEFAULT_METHOD,
     t_npm: int = 400,
     mappings: str = "vertices",
     mesh: str | os.PathLike | None = None,
@@ -376,8 +429,8 @@ def run(
         A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
     reference : str or int, default "auto"
         Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
-    method : str, default "seqcc"
-        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`).
+    method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
+        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
     t_npm : int, default 400
         Minimum pairwise mappings (vertex units) for a graph edge.
     mappings : {"vertices", "dense"}, default "vertices"
@@ -436,7 +489,7 @@ def run(
     _timed(timings, "total", t_all)
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
-                     command="run", source=source, images_from="corrected")
+                     command="run", source=source, images_from="corrected", originals=originals)
 
 
 @dataclass(frozen=True, eq=False)
@@ -452,7 +505,8 @@ class CorrectionRun:
     originals : list of (H, W, 3) arrays
     report : dict
         The ``report.json`` content: graph edges, paths, unreachable views, per-pair metrics
-        before / after (unless ``metrics=False``), per-view lookup tables, timings.
+        before / after with the contrast ratios (unless ``metrics=False``), per-view lookup
+        tables, timings.
     """
 
     scene: Scene
@@ -461,8 +515,9 @@ class CorrectionRun:
     originals: list
     report: dict
 
-    def save(self, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write ``out/images/<view>.png``, ``out/scene.json`` (pointing at them) and ``out/report.json``.
+    def save(self, out: str | os.PathLike, *, overwrite: bool = False, report: bool = True) -> Path:
+        """Write ``out/images/<view>.png``, ``out/scene.json`` (pointing at them), ``out/report.json``
+        and ``out/report.html`` (unless ``report=False``; :mod:`o3d_seqcc.report`).
 
         The folder is written as a whole (:func:`o3d_seqcc.io.output.output_folder`: staged, then
         swapped in; it may not hold any input of the scene); ``overwrite`` replaces an earlier
@@ -477,6 +532,10 @@ class CorrectionRun:
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
             save_scene(self.scene.replace_images(paths), stage / "scene.json")
             _meshlab_project(self.scene, stage, mesh=None, images=paths)
+            if report:
+                t = time.perf_counter()
+                write_report(self, stage / REPORT_FILE, report=rep)
+                rep["timings"]["report"] = round(time.perf_counter() - t, 4)
             write_json(stage / "report.json", rep)
         return Path(out)
 
@@ -484,7 +543,7 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = "seqcc", t_npm: int = 400, mappings: str = "vertices",
+    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int = 400, mappings: str = "vertices",
     graph_weight: str = "paper",
     seed: int = 0,
     metrics: bool = True,
@@ -524,7 +583,8 @@ def correct_scene(
     res.timings["mappings"] = t_map
     names = sc.names
     report: dict[str, Any] = {
-        "method": res.method, "reference": names[res.reference], "reference_index": res.reference, "t_npm": t_npm,
+        "command": "correct", "scene": str(scene) if not isinstance(scene, Scene) else "", **_scene_paths(sc),
+        "seed": seed, "method": res.method, "reference": names[res.reference], "reference_index": res.reference, "t_npm": t_npm,
         "t_npm_effective": res.t_npm, "mappings": mappings, "views": names,
         "graph_edges": [{**e, "a_name": names[e["a"]], "b_name": names[e["b"]]} for e in res.graph_edges],
         "paths": {names[v]: [names[x] for x in p] for v, p in sorted(res.paths.items())},
@@ -532,8 +592,7 @@ def correct_scene(
     }
     t = time.perf_counter()
     if metrics:
-        report["metrics"] = {"before": evaluate(originals, maps).to_dict(per_pair=True),
-                             "after": evaluate(res.images, maps).to_dict(per_pair=True)}
+        report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
     t_metrics = time.perf_counter() - t
     if any(isinstance(tr, LutTransform) for tr in res.transforms):
         luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")

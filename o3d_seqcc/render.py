@@ -31,6 +31,7 @@ __all__ = [
     "raycast",
     "render_selection",
     "render_textured",
+    "resized_view",
     "selection_palette",
     "sharpness",
     "supersampled_view",
@@ -196,25 +197,41 @@ def render_textured(
     return np.clip(np.rint(out * 255.0), 0, 255).astype(np.uint8)
 
 
+def resized_view(view: View, width: int, height: int | None = None) -> View:
+    """The camera of ``view`` with another image size (same field of view, pixel centres at integers).
+
+    With ``sx = width / view.width`` (and ``sy`` likewise; ``height`` defaults to the same
+    aspect), pixel ``i`` of the new image is centred on ``(i + 0.5) / sx - 0.5`` of the original,
+    so ``fx' = sx fx`` and ``cx' = sx (cx + 0.5) - 0.5``. Used to render smaller than the photo
+    (a report's figures) or larger (:func:`supersampled_view`).
+    """
+    from dataclasses import replace
+
+    width = int(width)
+    height = int(round(view.height * width / view.width)) if height is None else int(height)
+    if width < 1 or height < 1:
+        raise InputError(f"resized_view: size must be positive, got {width}x{height}")
+    if (width, height) == (view.width, view.height):
+        return view
+    sx, sy = width / view.width, height / view.height
+    K = np.array(view.intrinsic)
+    K[0, :] *= sx
+    K[1, :] *= sy
+    K[0, 2] = sx * (view.intrinsic[0, 2] + 0.5) - 0.5
+    K[1, 2] = sy * (view.intrinsic[1, 2] + 0.5) - 0.5
+    K[2] = [0.0, 0.0, 1.0]
+    return replace(view, intrinsic=K, width=width, height=height)
+
+
 def supersampled_view(view: View, s: int) -> View:
     """The camera of ``view`` with s x s pixels per pixel (same field of view, pixel centres at integers).
 
     Sub-pixel ``i`` of the new image is centred on ``(i + 0.5) / s - 0.5`` of the original, so
     ``fx' = s fx`` and ``cx' = s (cx + 0.5) - 0.5``; averaging s x s blocks gives back the
-    original pixel grid.
+    original pixel grid (:func:`resized_view`).
     """
-    from dataclasses import replace
-
     s = int(s)
-    if s == 1:
-        return view
-    K = np.array(view.intrinsic)
-    K[0, :] *= s
-    K[1, :] *= s
-    K[0, 2] = s * (view.intrinsic[0, 2] + 0.5) - 0.5
-    K[1, 2] = s * (view.intrinsic[1, 2] + 0.5) - 0.5
-    K[2] = [0.0, 0.0, 1.0]
-    return replace(view, intrinsic=K, width=view.width * s, height=view.height * s)
+    return resized_view(view, view.width * s, view.height * s)
 
 
 def selection_palette(n: int, *, cmap: str = "tab20") -> np.ndarray:

@@ -30,7 +30,7 @@ def test_correct_writes_images_scene_report_and_chains(synth, tmp_path):
         assert v.depth == orig.depth  # depth maps still point at the originals
         assert read_image(v.image).dtype == np.uint8
     rep = json.loads((out / "report.json").read_text())
-    assert rep["method"] == "seqcc" and rep["reference"] in scene.names
+    assert rep["method"] == "seqcc-global" and rep["reference"] in scene.names  # the default
     assert rep["graph_edges"] and {"a", "b", "n", "weight"} <= set(rep["graph_edges"][0])
     assert set(rep["paths"]) | set(rep["unreachable"]) == set(scene.names)
     assert rep["metrics"]["after"]["ciede2000"]["mean"] < rep["metrics"]["before"]["ciede2000"]["mean"]
@@ -39,7 +39,7 @@ def test_correct_writes_images_scene_report_and_chains(synth, tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary leftovers
     # refuses a non-empty OUT, replaces it with --overwrite
     assert main(["correct", str(scene_json), "--out", str(out), "--method", "none"]) == 2
-    assert json.loads((out / "report.json").read_text())["method"] == "seqcc"
+    assert json.loads((out / "report.json").read_text())["method"] == "seqcc-global"
     assert main(["correct", str(scene_json), "--out", str(out), "--method", "none", "--overwrite"]) == 0
     assert json.loads((out / "report.json").read_text())["method"] == "none"
     # chains: the corrected scene is a valid input of the next command

@@ -91,7 +91,7 @@ def test_seqcc_recovers_the_reference_colours(problem):
     scene, images, mappings, truth = problem
     before = [_mae(images[v], truth) for v in (1, 2, 3)]
     with pytest.warns(UserWarning, match="v4"):
-        res = correct(scene, images=images, mappings=mappings, reference="v0")
+        res = correct(scene, images=images, mappings=mappings, reference="v0", method="seqcc")
     assert res.reference == 0 and res.method == "seqcc"
     assert res.paths == {0: [0], 1: [1, 0], 2: [2, 1, 0], 3: [3, 2, 1, 0]}
     assert res.unreachable == [4]
@@ -110,7 +110,7 @@ def test_seqcc_recovers_the_reference_colours(problem):
 @pytest.mark.filterwarnings("ignore:1 view")
 def test_sequential_composition_equals_one_by_one(problem):
     scene, images, mappings, _ = problem
-    res = correct(scene, images=images, mappings=mappings, reference=0, outlier_k=None)  # one fit per edge
+    res = correct(scene, images=images, mappings=mappings, reference=0, method="seqcc", outlier_k=None)  # one fit per edge
     fl = [to_float(im) for im in images]
     img = fl[3].copy()
     for t, s in ((3, 2), (2, 1), (1, 0)):
@@ -180,6 +180,23 @@ def test_every_registered_method_runs_without_nan(problem):
         for tr in res.transforms:
             out = tr.apply(to_float(images[1]))
             assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
+
+
+@pytest.mark.filterwarnings("ignore:1 view")
+def test_seqcc_joint_is_seqcc_with_the_literal_fit(problem):
+    """seqcc-joint takes seqcc's options (listed when one is wrong) with no outlier pass by default."""
+    import inspect
+
+    scene, images, mappings, _ = problem
+    kw = dict(images=images, mappings=mappings, reference=0)
+    joint = correct(scene, method="seqcc-joint", **kw)
+    literal = correct(scene, method="seqcc", outlier_k=None, cmf_options={"pairing": "joint", "contrast_guard": None}, **kw)
+    for a, b in zip(joint.images, literal.images):
+        np.testing.assert_array_equal(a, b)
+    opts = inspect.signature(METHODS["seqcc-joint"]).parameters
+    assert list(opts) == list(inspect.signature(METHODS["seqcc"]).parameters) and opts["outlier_k"].default is None
+    with pytest.raises(TypeError, match=r"bogus.*valid: \['bits', 'cmf', 'cmf_options', 'jih_blur', 'n_jobs', 'outlier_k'\]"):
+        correct(scene, method="seqcc-joint", bogus=1, **kw)
 
 
 def test_bad_input_messages(problem):
@@ -262,7 +279,7 @@ def test_seqcc_does_not_wash_out_misregistered_views(rng):
         for i in range(3)
     )
     scene = Scene(Path("/nonexistent/mesh.ply"), views)
-    res = correct(scene, images=images, mappings=mappings, reference=0)
+    res = correct(scene, images=images, mappings=mappings, reference=0, method="seqcc")
     assert res.paths[2] == [2, 1, 0]
     truth = images[0].astype(np.float64)
     for v in (1, 2):

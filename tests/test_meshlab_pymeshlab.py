@@ -159,7 +159,7 @@ def test_parameter_list_is_the_library_defaults(capsys):
         assert text.startswith(f"{f.name} filter") and text == mf.filter_parameter_text(f.name)
         for p in f.parameters:
             assert f"\t{p.name} : {p.type.__name__} = {p.default!r}" in text
-    assert "\tmethod : str = 'seqcc' (or int = " in mf.filter_parameter_text(cc.name)
+    assert "\tmethod : str = 'seqcc-global' (or int = " in mf.filter_parameter_text(cc.name)  # the default
     with pytest.raises(InputError, match="seqcc_color_correct_rasters, seqcc_texture_from_rasters"):
         mf.print_filter_parameter_list("compute_color_from_active_rasters_projection")
 

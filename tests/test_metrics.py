@@ -288,3 +288,39 @@ def test_delta_e_matches_colour_science():
     np.testing.assert_allclose(ciede2000(lab_a, lab_b), ref, atol=1e-9)  # the same formula on the same Lab
     d = np.abs(delta_e_2000_rgb(a, b) - ref)
     assert d.mean() < 2e-3 and np.percentile(d, 99) < 0.02, (d.mean(), np.percentile(d, 99))
+
+
+def test_thin_indices_are_evenly_spaced_and_strictly_increasing():
+    from o3d_seqcc.metrics import thin_indices
+
+    assert thin_indices(10, None) is None and thin_indices(10, 10) is None and thin_indices(3, 7) is None
+    np.testing.assert_array_equal(thin_indices(11, 3), [0, 5, 10])
+    for n in (8, 9, 101, 1000, 7919):
+        for k in (1, 2, 7, 8):
+            idx = thin_indices(n, k)
+            if idx is None:
+                continue
+            assert len(idx) == k and idx[0] == 0 and (k == 1 or idx[-1] == n - 1) and np.all(np.diff(idx) > 0)
+
+
+def test_before_after_thinned_scores_weight_pairs_by_their_full_counts():
+    from o3d_seqcc.metrics import before_after, contrast_ratios
+
+    images, maps = _gained_setup()  # 3 views x 768 mappings per pair
+    paths = {0: [0], 1: [1, 0], 2: [2, 1, 0]}
+    full = before_after(images, images[:1] * 3, maps, paths)
+    thin = before_after(images, images[:1] * 3, maps, paths, max_per_pair=50)
+    assert "max_per_pair" not in full["before"] and thin["before"]["max_per_pair"] == 50
+    assert thin["before"]["n_scored"] == 3 * 50
+    assert thin["before"]["n_mappings"] == full["before"]["n_mappings"] == 3 * 768
+    # a constant gain: every mapping of a pair says the same, so 50 of them give the pair's full score
+    for k in ("psnr", "ciede2000"):
+        for s in ("mean", "weighted_mean", "std"):
+            assert thin["before"][k][s] == pytest.approx(full["before"][k][s], rel=0.02, abs=0.02), (k, s)
+    assert full["after"]["psnr"]["mean"] == 100.0  # identical images after: capped
+    # contrast: target = the view farther from the reference; view 2 is 0.8/0.9/1.2 of view 0, view 1 1.3/1.1/0.9
+    ratios = contrast_ratios(images, maps, paths)
+    assert len(ratios) == 3 == full["contrast"]["before"]["n_pairs"]
+    assert ratios[0] == pytest.approx(np.mean([1.3, 1.1, 0.9]), rel=0.02)  # (0, 1): target 1, source 0
+    assert full["contrast"]["before"]["mean"] == pytest.approx(ratios.mean())
+    assert full["contrast"]["after"]["mean"] == pytest.approx(1.0)

@@ -206,7 +206,7 @@ def test_overwrite_replaces_the_whole_previous_output(S, tmp_path):
     files = set(_visible(out))
     assert "mesh.glb" in files and not files & {"mesh.obj", "mesh.png", "mesh.mtl", "images"}
     report = json.loads((out / "report.json").read_text())
-    assert set(report["files"]) == {"glb", "meshlab_project", "meshlab_mesh"}
+    assert set(report["files"]) == {"glb", "meshlab_project", "meshlab_mesh", "report_html"}
 
 
 def test_overwrite_never_replaces_a_folder_with_foreign_files(S, tmp_path, capsys):

@@ -120,3 +120,19 @@ def test_supersampled_render_is_box_filtered():
     assert np.abs(img[inner] - blur[inner]).mean() > np.abs(img[inner] - expect[inner]).mean()
     with pytest.raises(InputError):
         render_textured(mesh, view, supersample=0)
+
+
+def test_resized_view_renders_the_same_picture_smaller():
+    from o3d_seqcc.render import resized_view, supersampled_view
+
+    mesh, tex, view = plane_and_camera()
+    half = resized_view(view, W // 2)
+    assert (half.width, half.height) == (W // 2, H // 2)
+    # the same field of view: a half-size render is the full one averaged over 2 x 2 blocks
+    full = render_textured(mesh, view).astype(float)
+    small = render_textured(mesh, half, supersample=2).astype(float)
+    np.testing.assert_allclose(small, full.reshape(H // 2, 2, W // 2, 2, 3).mean(axis=(1, 3)), atol=1.0)
+    np.testing.assert_array_equal(supersampled_view(half, 2).intrinsic, view.intrinsic)
+    assert resized_view(view, W) is view
+    with pytest.raises(InputError, match="positive"):
+        resized_view(view, 0)

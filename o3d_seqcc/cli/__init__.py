@@ -17,7 +17,8 @@ from typing import Iterator
 from ..errors import InputError
 
 # sub-command modules, in the order --help lists them
-COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate", "texture", "run", "demo", "synthetic")
+COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate", "texture", "run", "report", "demo",
+                             "synthetic")
 
 
 def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:

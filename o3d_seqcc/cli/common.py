@@ -8,7 +8,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable
 
-from ..correction import available_methods
+from ..correction import DEFAULT_METHOD, available_methods
 from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output
@@ -25,6 +25,7 @@ __all__ = [
     "add_texture_arguments",
     "library_default",
     "prepare_out_dir",
+    "print_report_path",
     "print_run_summary",
     "save_options_from_args",
     "scene_from_args",
@@ -53,8 +54,9 @@ def scene_from_args(args: argparse.Namespace):
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:
     """Reference, method, t_npm and mapping mode (``correct`` and ``run``)."""
     p.add_argument("--reference", default="auto", help="reference view name (or index), or 'auto' (default)")
-    p.add_argument("--method", default="seqcc", choices=available_methods(), metavar="METHOD",
-                   help=f"colour-correction method: {', '.join(available_methods())} (default seqcc)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=available_methods(), metavar="METHOD",
+                   help=f"colour-correction method: {', '.join(available_methods())} (default {DEFAULT_METHOD}; "
+                   "seqcc is the paper's)")
     p.add_argument("--t-npm", type=int, default=400, help="minimum pairwise mappings (vertex units) for a graph edge "
                    "(default 400)")
     p.add_argument("--mappings", choices=MODES, default="vertices", help="pairwise mappings mode (default vertices, "
@@ -175,3 +177,11 @@ def print_run_summary(res, out: Path) -> None:
     if res.seams is not None:
         print(f"seams: mean {res.seams.mean:.2f}, p99 {res.seams.p99:.2f}, >5: {res.seams.frac_above_5:.3f}")
     print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items()))
+    print_report_path(out)
+
+
+def print_report_path(out: Path) -> None:
+    """Print the path of the HTML report of an output folder (the last line of run, texture, correct)."""
+    report = Path(out) / "report.html"
+    if report.is_file():
+        print(f"report: {report}")

@@ -1,6 +1,7 @@
-"""Colour-correct every view toward a reference (sequential pairwise correction by default).
+"""Colour-correct every view toward a reference (joint refinement over all graph edges by default).
 
-Sequential pairwise colour correction (Dal'Col et al. 2023) or one of the Table 1 baselines.
+Sequential pairwise colour correction (Dal'Col et al. 2023) refined jointly over every graph edge
+(seqcc-global, the default), the paper's sequential method (seqcc) or one of the Table 1 baselines.
 Writes, as a whole (staged, then swapped in: OUT is never half-written):
 
   OUT/images/<view>.png   corrected images (16-bit PNG when the input was 16-bit)
@@ -16,7 +17,7 @@ import argparse
 
 from ..graph import WEIGHTS
 from ..pipeline import correct_scene
-from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, scene_from_args
+from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, print_report_path, scene_from_args
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         b, a = job.report["metrics"]["before"], job.report["metrics"]["after"]
         print(f"mean PSNR {b['psnr']['mean']:.2f} -> {a['psnr']['mean']:.2f} dB, "
               f"mean CIEDE2000 {b['ciede2000']['mean']:.2f} -> {a['ciede2000']['mean']:.2f}")
+    print_report_path(out)
     return 0
 
 

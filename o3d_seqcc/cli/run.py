@@ -1,6 +1,7 @@
 """Colour-correct the views, then texture the mesh with the corrected images (the main job).
 
-Sequential pairwise colour correction followed by per-face image selection, atlas baking, seam
+Sequential pairwise colour correction refined jointly over every graph edge (seqcc-global, the
+default; --method seqcc is the paper's) followed by per-face image selection, atlas baking, seam
 leveling and GLB/OBJ export. Writes OUT/mesh.glb, OUT/mesh.obj (+ .mtl, .png), OUT/selection.npy,
 OUT/selection.png (the selection coloured by image), optionally the corrected images
 (--save-images), OUT/report.json (correction summary, selection statistics, seam metric,

@@ -5,8 +5,12 @@ given), builds the colour-correction graph and the Dijkstra paths to the referen
 (:mod:`o3d_seqcc.graph`), runs a method from the registry :data:`METHODS` and applies the
 per-view transforms it returns. The methods, one module per family:
 
-- :mod:`~o3d_seqcc.correction.seqcc`: ``"seqcc"`` (default, the paper's #7, contrast-keeping
-  CMF fit) and ``"seqcc-joint"`` (the paper's literal joint-histogram regression);
+- :mod:`~o3d_seqcc.correction.seqcc_global`: ``"seqcc-global"`` (:data:`DEFAULT_METHOD`:
+  ``seqcc``'s sequential estimate refined jointly over every graph edge, curves continued over
+  the whole value range; its steps in :mod:`~o3d_seqcc.correction.edge_summaries` and
+  :mod:`~o3d_seqcc.correction.joint_curves`);
+- :mod:`~o3d_seqcc.correction.seqcc`: ``"seqcc"`` (the paper's #7, contrast-keeping CMF fit)
+  and ``"seqcc-joint"`` (the paper's literal joint-histogram regression);
 - :mod:`~o3d_seqcc.correction.pairwise`: ``"none"``, ``"reinhard"``, ``"root-polynomial"``,
   ``"vandermonde"`` (#1-#4, per path edge);
 - :mod:`~o3d_seqcc.correction.global_methods`: ``"gain-compensation"``,
@@ -28,8 +32,9 @@ from ..errors import InputError, warn
 from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
 from ..imageops import img_as_dtype, img_as_float
 from ..scene import resolve_view
-from . import global_methods, pairwise, seqcc  # noqa: F401  (register their methods)
+from . import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
 from .base import (
+    DEFAULT_METHOD,
     METHODS,
     CorrectionContext,
     CorrectionResult,
@@ -42,7 +47,7 @@ from .base import (
     register_method,
 )
 
-__all__ = ["METHODS", "CorrectionContext", "CorrectionResult", "FunctionTransform", "IdentityTransform",
+__all__ = ["DEFAULT_METHOD", "METHODS", "CorrectionContext", "CorrectionResult", "FunctionTransform", "IdentityTransform",
            "LutTransform", "Transform", "available_methods", "check_method", "correct", "register_method"]
 
 logger = logging.getLogger(__name__)
@@ -80,7 +85,7 @@ def correct(
     scene=None,
     *,
     reference: str | int = "auto",
-    method: str = "seqcc",
+    method: str = DEFAULT_METHOD,
     t_npm: int = 400,
     mappings=None,
     mappings_mode: str = "vertices",
@@ -99,8 +104,8 @@ def correct(
         then named by ``mappings.view_names`` or their index).
     reference : str or int, default "auto"
         View name, index, or ``"auto"`` (:func:`o3d_seqcc.graph.choose_reference`).
-    method : str, default "seqcc"
-        A name of :data:`METHODS` (see the module docstring).
+    method : str, default :data:`DEFAULT_METHOD` ("seqcc-global")
+        A name of :data:`METHODS` (see the module docstring); ``"seqcc"`` is the paper's.
     t_npm : int, default 400
         Minimum number of pairwise mappings for a graph edge, in vertex-mapping units (scaled
         for dense mappings by :func:`o3d_seqcc.graph.scale_t_npm`).
@@ -227,7 +232,10 @@ def correct(
             out.append(img_as_dtype(tr.apply(fimg), img.dtype))
     timings["apply"] = time.perf_counter() - t0
     timings["total"] = float(sum(timings.values()))
+    settings = {"t_npm": int(t_npm), "seed": int(seed), "interpolation": interpolation, "graph_weight": graph_weight,
+                "options": dict(options)}
     return CorrectionResult(
         images=out, transforms=transforms, reference=ref, paths=paths, unreachable=unreachable,
         graph_edges=graph_edges(graph), timings=timings, method=method, t_npm=t_eff,
+        edge_luts=dict(sorted(ctx.edge_luts.items())), settings=settings,
     )

@@ -2,8 +2,8 @@
 
 A correction method is ``fn(ctx: CorrectionContext, **options) -> list[Transform]`` (one
 transform per view) registered under a name with :func:`register_method`; the method modules
-(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.pairwise`,
-:mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
+(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.seqcc_global`,
+:mod:`~o3d_seqcc.correction.pairwise`, :mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
 :mod:`o3d_seqcc.correction` imports all of them explicitly. Views without a path to the
 reference keep an :class:`IdentityTransform`.
 """
@@ -23,6 +23,7 @@ from ..errors import InputError
 from ..imageops import img_as_dtype, sample_colors
 
 __all__ = [
+    "DEFAULT_METHOD",
     "METHODS",
     "CorrectionContext",
     "CorrectionResult",
@@ -43,6 +44,9 @@ logger = logging.getLogger(__name__)
 
 #: name -> ``fn(ctx, **options) -> list[Transform]``
 METHODS: dict[str, Callable] = {}
+#: method of :func:`o3d_seqcc.correction.correct` (and every entry point) when none is given: the
+#: measured best (README, ``benchmarks/table2.py``); ``"seqcc"`` is the paper's
+DEFAULT_METHOD = "seqcc-global"
 
 
 def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:
@@ -191,6 +195,9 @@ class CorrectionContext:
         Lookup-table length suited to the input bit depth (256 for 8-bit, 4096 for 16-bit/float).
     interpolation : str
         Colour sampling at mappings ("bilinear" or "nearest").
+    edge_luts : dict[(int, int), (3, L) array]
+        Filled by :func:`lut_per_path`: the lookup table of every directed path edge
+        ``(target, source)``, before composition (what the report plots, paper Figure 7).
     """
 
     images: list
@@ -202,6 +209,7 @@ class CorrectionContext:
     paths: dict = field(default_factory=dict)
     lut_size: int = 256
     interpolation: str = "bilinear"
+    edge_luts: dict = field(default_factory=dict)
     _cache: dict = field(default_factory=dict, repr=False)
 
     def colors(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -254,6 +262,14 @@ class CorrectionResult:
     method : str
     t_npm : int
         Edge threshold used, in the units of the mappings (see :func:`o3d_seqcc.graph.scale_t_npm`).
+    edge_luts : dict[(int, int), (3, L) float64]
+        Per directed path edge ``(target, source)``: the colour mapping function fitted on it
+        (R, G, B lookup tables over L evenly spaced inputs), for the methods that compose lookup
+        tables along the paths (``seqcc``, ``seqcc-joint``, ``vandermonde``); empty otherwise.
+    settings : dict
+        The arguments of :func:`~o3d_seqcc.correction.correct` that, with the same images and
+        mappings, give this result again: ``t_npm`` (as given, vertex units), ``seed``,
+        ``interpolation``, ``graph_weight`` and ``options`` (the method's).
     """
 
     images: list
@@ -265,6 +281,8 @@ class CorrectionResult:
     timings: dict
     method: str
     t_npm: int = 400
+    edge_luts: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
 
 
 def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, n_jobs: int | None = None) -> list[list | None]:
@@ -294,14 +312,22 @@ def lut_per_path(
     extrapolate: bool = False,
     n_jobs: int | None = None,
 ) -> list:
-    """Compose per-edge (3, L) tables along every path into one table per view."""
+    """Compose per-edge (3, L) tables along every path into one table per view.
+
+    The per-edge tables are also kept in ``ctx.edge_luts`` (``(target, source) -> (3, L)``).
+    """
+    steps = path_steps(ctx, edge_lut, n_jobs=n_jobs)
+    for v, luts in enumerate(steps):
+        p = ctx.paths.get(v) if luts else None
+        for t, s, lut in zip(p[:-1], p[1:], luts) if p else ():
+            ctx.edge_luts.setdefault((int(t), int(s)), np.asarray(lut, dtype=np.float64))
     return [
         IdentityTransform()
         if luts is None
         else LutTransform(
             np.stack([compose_luts([l[c] for l in luts], n_out=ctx.lut_size, extrapolate=extrapolate) for c in range(3)])
         )
-        for luts in path_steps(ctx, edge_lut, n_jobs=n_jobs)
+        for luts in steps
     ]
 
 

@@ -1,6 +1,6 @@
 """Sequential pairwise colour correction, the paper's method (Table 1 #7) and its literal variant.
 
-``"seqcc"`` (default)
+``"seqcc"`` (the paper's; the default is ``"seqcc-global"``, :mod:`~o3d_seqcc.correction.seqcc_global`)
     For every edge (target t -> source s) on a path: per-channel JIH of the colours at the
     pair's mappings (:mod:`o3d_seqcc.jih`) and a CMF fitted on it (:func:`o3d_seqcc.cmf.fit_cmf`,
     CSVR by default, fitted on the JIH's matched marginal quantiles with a contrast guard, so
@@ -14,6 +14,10 @@
 """
 
 from __future__ import annotations
+
+import functools
+import inspect
+from typing import Callable
 
 import numpy as np
 
@@ -157,17 +161,32 @@ def _method_seqcc(
     return lut_per_path(ctx, edge_lut, extrapolate=not opts.get("clamp", True), n_jobs=n_jobs)
 
 
+def _options_of(fn: Callable, **defaults) -> Callable[[Callable], Callable]:
+    """Decorator: the decorated ``f(ctx, **options)`` takes exactly the options of ``fn`` (its
+    signature, so :func:`~o3d_seqcc.correction.base.check_options` lists them), with
+    ``defaults`` replacing some of ``fn``'s defaults; ``f`` receives every option, defaults filled in."""
+    sig = inspect.signature(fn)
+    sig = sig.replace(parameters=[p.replace(default=defaults.pop(p.name)) if p.name in defaults else p
+                                  for p in sig.parameters.values()])
+    if defaults:
+        raise TypeError(f"{fn.__name__} has no option(s) {sorted(defaults)}")
+
+    def deco(f: Callable) -> Callable:
+        @functools.wraps(f)
+        def method(ctx: CorrectionContext, **options) -> list:
+            bound = sig.bind(ctx, **options)
+            bound.apply_defaults()
+            return f(*bound.args, **bound.kwargs)
+
+        method.__signature__ = sig  # type: ignore[attr-defined]
+        return method
+
+    return deco
+
+
 @register_method("seqcc-joint")
-def _method_seqcc_joint(
-    ctx: CorrectionContext,
-    *,
-    cmf: str = "csvr",
-    cmf_options: dict | None = None,
-    bits: int | None = None,
-    jih_blur: float = 0.0,
-    outlier_k: float | None = None,
-    n_jobs: int | None = None,
-) -> list:
+@_options_of(_method_seqcc, outlier_k=None)
+def _method_seqcc_joint(ctx: CorrectionContext, *, cmf_options: dict | None = None, **options) -> list:
     """``seqcc`` with the paper's literal CMF input: regression on the JIH's joint observations.
 
     Same as ``method="seqcc"`` with ``cmf_options={"pairing": "joint", "contrast_guard": None}``
@@ -182,4 +201,4 @@ def _method_seqcc_joint(
     Kept for comparison with the paper.
     """
     opts = {"pairing": "joint", "contrast_guard": None, **dict(cmf_options or {})}
-    return _method_seqcc(ctx, cmf=cmf, cmf_options=opts, bits=bits, jih_blur=jih_blur, outlier_k=outlier_k, n_jobs=n_jobs)
+    return _method_seqcc(ctx, cmf_options=opts, **options)

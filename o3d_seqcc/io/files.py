@@ -24,6 +24,7 @@ __all__ = [
     "check_image_file",
     "atomic_write_bytes",
     "default_mode",
+    "encode_image",
     "find_file",
     "to_jsonable",
     "read_depth",
@@ -246,16 +247,33 @@ def read_image(path: str | os.PathLike, *, allow_16bit: bool = True) -> np.ndarr
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
+def encode_image(image: np.ndarray, suffix: str = ".png", *, quality: int | None = None) -> bytes:
+    """Encode an (H, W, 3) RGB uint8/uint16 image in memory (format from ``suffix``: ``.png``, ``.jpg``).
+
+    ``quality``: JPEG quality 0-100 (OpenCV's default 95 when None). Deterministic: the same
+    pixels give the same bytes.
+    """
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"encode_image expects (H, W, 3) uint8/uint16, got {image.shape} {image.dtype}")
+    params = [] if quality is None else [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)]
+    ok, buf = cv2.imencode(suffix, cv2.cvtColor(image, cv2.COLOR_RGB2BGR), params)
+    if not ok:
+        raise OSError(f"OpenCV could not encode a {suffix} image")
+    return buf.tobytes()
+
+
 def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     """Write an (H, W, 3) RGB uint8/uint16 image atomically (format from the suffix, PNG advised)."""
     path = Path(path)
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"write_image expects (H, W, 3) uint8/uint16, got {image.shape} {image.dtype}")
-    ok, buf = cv2.imencode(path.suffix or ".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise OSError(f"OpenCV could not encode {path}")
-    return atomic_write_bytes(path, buf.tobytes())
+    try:
+        data = encode_image(image, path.suffix or ".png")
+    except OSError:
+        raise OSError(f"OpenCV could not encode {path}") from None
+    return atomic_write_bytes(path, data)
 
 
 def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None) -> np.ndarray:

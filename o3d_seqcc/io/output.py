@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from ..errors import InputError
-from .files import default_mode
+from .files import atomic_write_bytes, default_mode
 
-__all__ = ["MANIFEST", "check_output", "output_folder"]
+__all__ = ["MANIFEST", "add_output_file", "check_output", "output_folder"]
 
 logger = logging.getLogger(__name__)
 
@@ -219,13 +219,7 @@ def output_folder(
     """
     inputs = list(inputs)
     target = check_output(out, overwrite=overwrite, inputs=inputs)
-    lock_path = target.parent / f".{target.name}.o3d_seqcc.lock"
-    lock = _acquire(lock_path, target, out)
-    try:
-        lock.seek(0)
-        lock.truncate()
-        lock.write(str(os.getpid()))
-        lock.flush()
+    with _locked(target, out):
         _recover(target)
         check_output(out, overwrite=overwrite, inputs=inputs)  # again, under the lock
         stage = _sibling(target, os.getpid(), "staging")
@@ -233,9 +227,7 @@ def output_folder(
             stage.mkdir(mode=0o777)
             os.chmod(stage, default_mode(0o777))
             yield stage
-            files = _listing(stage)
-            (stage / MANIFEST).write_text(json.dumps({"format": MANIFEST_FORMAT, "command": command, "files": files},
-                                                     indent=1) + "\n", encoding="utf-8")
+            (stage / MANIFEST).write_bytes(_manifest(command, _listing(stage)))
             _fsync_tree(stage)
             old = None
             if target.exists():
@@ -250,9 +242,55 @@ def output_folder(
         except BaseException:
             shutil.rmtree(stage, ignore_errors=True)
             raise
+
+
+@contextmanager
+def _locked(target: Path, out) -> Iterator[None]:
+    """Hold the lock of the output folder ``target`` (``.<name>.o3d_seqcc.lock`` beside it, with our PID)."""
+    lock_path = target.parent / f".{target.name}.o3d_seqcc.lock"
+    lock = _acquire(lock_path, target, out)
+    try:
+        lock.seek(0)
+        lock.truncate()
+        lock.write(str(os.getpid()))
+        lock.flush()
+        yield
     finally:
         try:
             lock_path.unlink()
         except OSError:
             pass
         lock.close()
+
+
+def _manifest(command: str, files: list[str]) -> bytes:
+    return (json.dumps({"format": MANIFEST_FORMAT, "command": command, "files": files}, indent=1) + "\n").encode("utf-8")
+
+
+def add_output_file(out: str | os.PathLike, name: str, data: bytes) -> Path:
+    """Write (or replace) one file in an existing output folder of o3d_seqcc, and list it in the manifest.
+
+    For what is added to a finished output later (``o3d-seqcc report RUN_DIR`` writes
+    ``report.html``), so that ``--overwrite`` still recognises the whole folder as o3d_seqcc's.
+    The file and the manifest are each replaced atomically, under the folder's lock.
+
+    Raises
+    ------
+    InputError
+        ``out`` is not an output folder of o3d_seqcc (no manifest), or another run holds it.
+    """
+    given = Path(out)
+    target = Path(os.path.realpath(given))
+    own = _own_files(target) if target.is_dir() else None
+    if own is None:
+        raise InputError(f"{given} is not an o3d-seqcc output folder (no {MANIFEST}); give the --out folder of a run")
+    if Path(name).is_absolute() or ".." in Path(name).parts or name == MANIFEST:
+        raise ValueError(f"add_output_file: {name!r} must be a plain relative path inside the folder")
+    with _locked(target, given):
+        try:
+            path = atomic_write_bytes(target / name, data)
+            command = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("command", "")
+            atomic_write_bytes(target / MANIFEST, _manifest(command, sorted(own | {Path(name).as_posix()})))
+        except OSError as e:
+            raise _disk_error(e, target) from None
+    return path

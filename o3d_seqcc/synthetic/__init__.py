@@ -3,13 +3,16 @@ camera-like photometric changes (:mod:`o3d_seqcc.photometric`) by :mod:`.generat
 
 from __future__ import annotations
 
-from ..photometric import apply_photometric, identity_photometric, sample_photometric
+from ..photometric import CAMERA_CHANGE_RANGES, HARD_CHANGE_RANGES, apply_photometric, identity_photometric, \
+    sample_camera_change, sample_photometric
 from .generate import PHOTOMETRIC_MODES, SYNTHETIC_FORMAT, SyntheticScene, load_synthetic, make_synthetic_scene, perturb_poses
 from .room import ALBEDO_RANGE, DEFAULT_CELL_SIZE, ring_slots
 
 __all__ = [
     "ALBEDO_RANGE",
+    "CAMERA_CHANGE_RANGES",
     "DEFAULT_CELL_SIZE",
+    "HARD_CHANGE_RANGES",
     "PHOTOMETRIC_MODES",
     "SYNTHETIC_FORMAT",
     "SyntheticScene",
@@ -19,5 +22,6 @@ __all__ = [
     "make_synthetic_scene",
     "perturb_poses",
     "ring_slots",
+    "sample_camera_change",
     "sample_photometric",
 ]

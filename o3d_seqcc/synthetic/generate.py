@@ -40,7 +40,8 @@ from ..errors import InputError
 from ..imageops import img_as_dtype
 from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image, write_json
 from ..io.load import load_scene, save_scene
-from ..photometric import apply_photometric, identity_photometric, sample_photometric
+from ..photometric import HARD_CHANGE_RANGES, apply_photometric, identity_photometric, sample_camera_change, \
+    sample_photometric
 from ..scene import Scene, View
 from .room import DEFAULT_CELL_SIZE, ROOM, RoomGeometry, build_geometry, keep_faces, look_extrinsic, render_view, \
     sample_cameras
@@ -52,7 +53,7 @@ logger = logging.getLogger(__name__)
 
 SYNTHETIC_FORMAT = "o3d_seqcc.synthetic/1"
 #: Valid values of ``photometric``.
-PHOTOMETRIC_MODES = ("none", "camera")
+PHOTOMETRIC_MODES = ("none", "camera", "camera-hard")
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,11 +190,14 @@ def make_synthetic_scene(
     seed : int, default 0
         Seed of ``numpy.random.default_rng`` for the cameras and the photometric changes;
         the output is byte-identical for a given seed.
-    photometric : {"camera", "none"}, default "camera"
+    photometric : {"camera", "camera-hard", "none"}, default "camera"
         ``"camera"``: every view but view 0 gets random exposure (0.6-1.6x), white balance
         (+-20 % per channel), per-channel gamma (0.65-1.5) and an S-curve (strength 0-0.5),
         drawn camera-like (:func:`sample_photometric`); the textures' albedo is in
         :data:`ALBEDO_RANGE` so exposure clips only a little;
+        ``"camera-hard"``: the same model drawn uniformly over
+        :data:`~o3d_seqcc.photometric.HARD_CHANGE_RANGES` (exposure 0.65-1.42, gamma 0.67-1.43
+        independently per channel, S-curve 0-0.6; :func:`~o3d_seqcc.photometric.sample_camera_change`);
         ``"none"``: the images are the ground-truth renders.
     overwrite : bool, default False
         Allow writing into a non-empty ``out_dir`` (files of earlier views are replaced,
@@ -243,9 +247,12 @@ def make_synthetic_scene(
     f = 0.8 * width
     K = np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
     cams = sample_cameras(rng, n_views, layout=layout)
-    params = [identity_photometric()] + [
-        sample_photometric(rng) if photometric == "camera" else identity_photometric() for _ in range(n_views - 1)
-    ]
+    draw = {
+        "camera": sample_photometric,
+        "camera-hard": lambda r: sample_camera_change(r, **HARD_CHANGE_RANGES),
+        "none": lambda r: identity_photometric(),
+    }[photometric]
+    params = [identity_photometric()] + [draw(rng) for _ in range(n_views - 1)]
     names = [f"v{i:02d}" for i in range(n_views)]
     extrinsics = [look_extrinsic(c, yaw, pitch, roll) for c, yaw, pitch, roll in cams]
     renders = [render_view(rc, geom, K, ext, width, height) for ext in extrinsics]

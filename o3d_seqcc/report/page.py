@@ -1,0 +1,503 @@
+"""The report page: one section per figure of the paper, assembled into one self-contained HTML string.
+
+:class:`PageInputs` is what a page is drawn from (the ``report.json`` content and the run's data,
+in memory or recomputed); :func:`render_page` draws it. Figures come from
+:mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import inspect
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..imageops import dtype_scale, img_as_uint8, sample_colors
+from ..metrics import thin_indices
+from ..render import render_selection, render_textured, resized_view, selection_palette
+from ..scene import Scene
+from .figures import graph_figure, jih_cmf_figure, jih_thumbnail, jpeg, png, thumbnail, view_layout
+
+__all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "PageInputs", "facts",
+           "render_page"]
+
+logger = logging.getLogger(__name__)
+
+#: bit depth of the JIH drawn (2**bits bins per axis)
+JIH_BITS = 7
+#: mappings per edge drawn in a JIH (evenly spaced)
+JIH_MAX_MAPPINGS = 2000
+#: width in pixels of the selection picture (the folder's selection.png is reused when the view is as wide)
+SELECTION_WIDTH = 640
+#: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
+MAX_DETAIL_EDGES = 3
+
+
+@dataclass(frozen=True, eq=False)
+class PageInputs:
+    """What a report is drawn from: the report.json content and the run's data (None = absent)."""
+
+    rep: dict
+    scene: Scene
+    photos: list | None  # the images before correction (or the images textured)
+    corrected: list | None
+    correction: Any = None  # CorrectionResult
+    mappings: Any = None
+    selection: np.ndarray | None = None
+    mesh: tuple | None = None  # (vertices, faces) of the scene's mesh
+    textured: Any = None  # TexturedMesh
+    usable: np.ndarray | None = None  # (V,) faces usable per view
+    selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
+
+
+def _esc(x: Any) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _img(data: bytes, mime: str, alt: str, cls: str = "") -> str:
+    c = f' class="{cls}"' if cls else ""
+    return f'<img{c} src="data:{mime};base64,{base64.b64encode(data).decode("ascii")}" alt="{_esc(alt)}">'
+
+
+def _num(x: Any, digits: int = 2) -> str:
+    return "–" if x is None else (f"{x:.{digits}f}" if isinstance(x, float) else _esc(x))
+
+
+def _name(inp: PageInputs, v: int) -> str:
+    return f"#{v} {inp.scene.names[v]}"
+
+
+# ----------------------------------------------------------------------------------------- facts
+def facts(rep: dict) -> dict[str, Any]:
+    """The fields the page needs, from a run / texture report.json or a correct report.json."""
+    if "correction" in rep or rep.get("command") in ("run", "texture"):
+        c = rep.get("correction") or {}
+        return {"command": rep.get("command", "run"), "method": c.get("method"), "t_npm": c.get("t_npm"),
+                "mappings": c.get("mappings"), "settings": c.get("settings") or {}, "timings": rep.get("timings_s", {}),
+                "correction_timings": c.get("timings_s", {}), "metrics": rep.get("metrics")}
+    return {"command": rep.get("command", "correct"), "method": rep.get("method"), "t_npm": rep.get("t_npm"),
+            "mappings": rep.get("mappings"), "settings": {k: rep[k] for k in ("seed", "graph_weight") if k in rep},
+            "timings": rep.get("timings", {}), "correction_timings": {}, "metrics": rep.get("metrics")}
+
+
+# -------------------------------------------------------------------------------- graph (Fig 4-5)
+def _path_edges(paths: dict) -> list[tuple[int, int]]:
+    return list(dict.fromkeys((t, s) for v in sorted(paths) for t, s in zip(paths[v][:-1], paths[v][1:])))
+
+
+def _graph_section(inp: PageInputs) -> str:
+    c = inp.correction
+    ref, names = c.reference, inp.scene.names
+    xy = view_layout(np.array([v.center for v in inp.scene.views]))
+    n_paths = sum(1 for v in c.paths if v != ref)
+    title = f"reference: {names[ref]} (#{ref}); {len(c.graph_edges)} edges, {n_paths} paths"
+    fig = graph_figure(xy, c.graph_edges, c.paths, ref, title=title)
+    weight = c.settings.get("graph_weight", "paper")
+    total = inp.mappings.total if inp.mappings is not None else None
+    formula = "w = 1 − n / N" if weight == "paper" else "w = log(N / n)"
+    n_txt = f", N = {total} mappings over all pairs" if total is not None else ""
+    unreach = ", ".join(_esc(_name(inp, v)) for v in c.unreachable) or "none"
+    cap = (f"Colour-correction graph (paper Figures 4-5). One node per view, numbered by index and placed by its "
+           f"camera position (seen from above: the two main axes of the camera centres); the reference "
+           f"<b>{_esc(names[ref])}</b> (#{ref}) in red. An edge joins two views sharing at least "
+           f"t<sub>npm</sub> = {c.t_npm} mappings: its width grows with the number of mappings n, its colour is its "
+           f"weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
+           f"Unreachable views (grey): {unreach}.")
+    by_pair = {(e["a"], e["b"]): e for e in c.graph_edges}
+    rows = "".join(
+        f"<tr><td>{_esc(_name(inp, t))}</td><td>{_esc(_name(inp, s))}</td>"
+        f"<td>{by_pair[(min(t, s), max(t, s))]['n']}</td><td>{by_pair[(min(t, s), max(t, s))]['weight']:.6f}</td></tr>"
+        for t, s in _path_edges(c.paths))
+    table = (f"<details><summary>{len(_path_edges(c.paths))} path edges (target → source)</summary><table>"
+             f"<tr><th>target</th><th>source</th><th>mappings n</th><th>weight w</th></tr>{rows}</table></details>")
+    return (f'<figure data-fig="4-5">{_img(fig, "image/png", "colour-correction graph")}<figcaption>{cap}'
+            f"</figcaption></figure>{table}")
+
+
+# --------------------------------------------------------------------------- JIH / CMF (Fig 6-7)
+def _outlier_k(c) -> float | None:
+    """The outlier threshold the correction's fit used (seqcc's ``outlier_k``), None for methods without one."""
+    from ..correction import METHODS
+
+    p = inspect.signature(METHODS[c.method]).parameters.get("outlier_k") if c.method in METHODS else None
+    return None if p is None else c.settings.get("options", {}).get("outlier_k", p.default)
+
+
+def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
+    """(t, s) -> (inlier JIH, outlier JIH or None), from the photos' colours at the pair's mappings."""
+    from ..correction.seqcc import colour_inliers, quantile_luts
+    from ..jih import joint_histogram
+
+    k = _outlier_k(inp.correction)
+    out = {}
+    for t, s in edges:
+        pm = inp.mappings.pair(t, s)
+        idx = thin_indices(pm.n, JIH_MAX_MAPPINGS)
+        idx = slice(None) if idx is None else idx
+        ct = sample_colors(inp.photos[t], pm.uv_a[idx]) / dtype_scale(inp.photos[t].dtype)
+        cs = sample_colors(inp.photos[s], pm.uv_b[idx]) / dtype_scale(inp.photos[s].dtype)
+        if k is not None and len(ct):
+            lut = inp.correction.edge_luts.get((t, s))
+            keep = colour_inliers(ct, cs, quantile_luts(ct, cs, n_out=256 if lut is None else lut.shape[1]), k=float(k))
+            out[(t, s)] = (joint_histogram(ct[keep], cs[keep], bits=JIH_BITS),
+                           joint_histogram(ct[~keep], cs[~keep], bits=JIH_BITS))
+        else:
+            out[(t, s)] = (joint_histogram(ct, cs, bits=JIH_BITS), None)
+    return out
+
+
+def _jih_section(inp: PageInputs, path: list[int] | None, jihs: dict, thumbs: dict) -> str:
+    c = inp.correction
+    luts = c.edge_luts
+    detail = ""
+    if path:
+        edges = list(zip(path[:-1], path[1:]))
+        shown = edges if len(edges) <= MAX_DETAIL_EDGES else edges[:MAX_DETAIL_EDGES - 1] + edges[-1:]
+        rows = [{"title": f"#{t} → #{s}", "jih": jihs[(t, s)][0], "outliers": jihs[(t, s)][1], "lut": luts.get((t, s)),
+                 "xlabel": f"target #{t} value", "ylabel": f"source #{s} value"} for t, s in shown]
+        which = "edge by edge" if len(shown) == len(edges) else f"{len(shown)} of its {len(edges)} edges (all below)"
+        detail = (f'<figure data-fig="6-7">{_img(jih_cmf_figure(rows), "image/png", "JIH and CMF of one path")}'
+                  f"<figcaption>The path of {_esc(_name(inp, path[0]))} toward the reference, {which} (rows) and "
+                  f"channel by channel (columns): the joint image histogram of the colours at the pair's mappings "
+                  f"(x: target view, y: source view; darker = more mappings, log scale; grey: mappings the outlier "
+                  f"pass discarded) and the fitted colour mapping function (curve; dotted: identity)."
+                  f"</figcaption></figure>")
+    cells = "".join(
+        f'<figure class="thumb">{_img(thumbs[e], "image/png", f"JIH {e[0]} to {e[1]}")}'
+        f"<figcaption>#{e[0]} → #{e[1]}</figcaption></figure>" for e in jihs)
+    what = "with its R, G, B CMF curves" if luts else f"(method {_esc(c.method)} fits no per-edge CMF)"
+    return (detail + f'<figure data-fig="6-7-grid"><div class="grid jih">{cells}</div><figcaption>Every path edge '
+            f"(target → source): the three channels' JIHs overlaid in their colours, {what}.</figcaption></figure>")
+
+
+# ------------------------------------------------------------------------------ steps (Figure 8)
+def _steps_section(inp: PageInputs, path: list[int], thumbs: dict, width: int) -> str:
+    from ..correction import LutTransform
+    from ..luts import compose_luts
+
+    v, luts, ref = path[0], inp.correction.edge_luts, inp.correction.reference
+    top = [f'<figure class="{"ref" if u == ref else ""}">'
+           f'{_img(jpeg(thumbnail(inp.photos[u], width)), "image/jpeg", f"view {u}")}'
+           f"<figcaption>{_esc(_name(inp, u))}{' (reference)' if u == ref else ' (source)' if u == v else ''}"
+           f"</figcaption></figure>" for u in path]
+    edges = list(zip(path[:-1], path[1:]))
+    bottom = ['<div class="blank"></div>']
+    if all(e in luts for e in edges):
+        src = img_as_uint8(inp.photos[v])
+        n_out = luts[edges[0]].shape[1]
+        for k in range(1, len(edges) + 1):
+            lut = np.stack([compose_luts([luts[e][c] for e in edges[:k]], n_out=n_out) for c in range(3)])
+            img = LutTransform(lut).apply_levels(src)
+            t, s = edges[k - 1]
+            bottom.append(f'<figure>{_img(jpeg(thumbnail(img, width)), "image/jpeg", f"step {k}")}'
+                          f'{_img(thumbs[(t, s)], "image/png", f"CMF {t} to {s}", "cmf")}'
+                          f"<figcaption>step {k}: CMF #{t} → #{s}</figcaption></figure>")
+        final = inp.correction.transforms[v]
+        if isinstance(final, LutTransform) and final.lut.shape == lut.shape and np.allclose(final.lut, lut, atol=1e-9):
+            note = ("Second row: the source view after each step (the CMFs composed along the path so far), under the "
+                    "view whose colours that step reaches; the last one is its corrected image. The small plot is the "
+                    "step's JIH and CMF.")
+        else:  # a method that refines the sequential estimate (seqcc-global): its result in one more column
+            top.append('<div class="blank"></div>')
+            bottom.append(f'<figure>{_img(jpeg(thumbnail(inp.corrected[v], width)), "image/jpeg", "corrected")}'
+                          f"<figcaption>after the joint refinement</figcaption></figure>")
+            note = ("Second row: the source view after each step of the sequential estimate (the edges' curves composed "
+                    "along the path so far), under the view whose colours that step reaches; the small plot is the "
+                    f"step's JIH and curve. Last column: its corrected image, after {_esc(inp.correction.method)} "
+                    "refined every view's curves jointly over all graph edges from that estimate.")
+    else:
+        bottom += ['<div class="blank"></div>'] * (len(edges) - 1)
+        bottom.append(f'<figure>{_img(jpeg(thumbnail(inp.corrected[v], width)), "image/jpeg", "corrected")}'
+                      f"<figcaption>corrected</figcaption></figure>")
+        note = f"Method {_esc(inp.correction.method)} keeps no per-edge CMF: second row, the corrected image only."
+    cols = f'style="grid-template-columns:repeat({len(top)},minmax(0,{width}px))"'
+    return (f'<figure data-fig="8"><div class="grid steps" {cols}>{"".join(top + bottom)}</div><figcaption>'
+            f"Sequential pairwise colour correction (paper Figure 8) of {_esc(_name(inp, v))}, "
+            f"{len(edges)} step(s) to the reference: first row, the images of its path. {note}</figcaption></figure>")
+
+
+# ---------------------------------------------------------------------------- before / after (Fig 10)
+def _grid_section(inp: PageInputs, small: list, small_after: list | None) -> str:
+    c = inp.correction
+    cells = []
+    for v in range(len(inp.scene.views)):
+        ref = c is not None and v == c.reference
+        lost = c is not None and v in c.unreachable
+        badge = (' <span class="badge">reference</span>' if ref else
+                 ' <span class="badge grey">no path</span>' if lost else "")
+        imgs = _img(small[v], "image/jpeg", f"view {v} before")
+        if small_after is not None:
+            imgs += _img(small_after[v], "image/jpeg", f"view {v} after")
+        cells.append(f'<figure class="{"ref" if ref else ""}">{imgs}<figcaption>{_esc(_name(inp, v))}{badge}'
+                     f"</figcaption></figure>")
+    cap = ("All views (paper Figure 10): the photo above, the corrected image below it; the reference is outlined "
+           "in red; views without a path to it stay unchanged." if small_after is not None
+           else "All views, as textured (no colour correction in this command).")
+    return f'<figure data-fig="10"><div class="grid views">{"".join(cells)}</div><figcaption>{cap}</figcaption></figure>'
+
+
+# ------------------------------------------------------------------------------------- Table 2
+def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
+    if not metrics or "before" not in metrics:
+        return "<p>No metrics in report.json (the command ran with --no-metrics).</p>"
+    b, a = metrics["before"], metrics["after"]
+    con = metrics.get("contrast", {})
+
+    def cells(m: dict, key: str) -> str:
+        return "".join(f'<td data-key="{key}.{metric}.{s}">{_num(m[metric][s])}</td>'
+                       for metric in ("psnr", "ciede2000") for s in ("mean", "weighted_mean", "std"))
+
+    def contrast(key: str) -> str:
+        d = con.get(key) or {}
+        return "".join(f'<td data-key="contrast.{key}.{s}">{_num(d.get(s), 3)}</td>' for s in ("mean", "min"))
+
+    method = _esc(inp.correction.method) if inp.correction is not None else "corrected"
+    scored = ""
+    if b.get("max_per_pair"):
+        scored = (f" Scored on at most {b['max_per_pair']} evenly spaced mappings per pair ({b['n_scored']} in all; the "
+                  f"weighted means still weight every pair by its full count); <code>o3d-seqcc correct</code> scores "
+                  f"every mapping.")
+    return (f'<table class="t2"><tr><th></th><th colspan="3">PSNR dB (higher: more similar)</th>'
+            f'<th colspan="3">CIEDE2000 (lower: more similar)</th><th colspan="2">contrast ratio (~1)</th></tr>'
+            f"<tr><th></th>{'<th>mean</th><th>w. mean</th><th>std</th>' * 2}<th>mean</th><th>min</th></tr>"
+            f"<tr><td>before (photos)</td>{cells(b, 'before')}{contrast('before')}</tr>"
+            f"<tr><td>after ({method})</td>{cells(a, 'after')}{contrast('after')}</tr></table>"
+            f"<p class=\"note\">Paper Table 2 over the {b['n_pairs']} view pairs with mappings ({b['n_mappings']} "
+            f"mappings): mean, mean weighted by each pair's number of mappings, standard deviation over pairs. "
+            f"Contrast ratio: std of the target view's colours over the source view's at the mappings of every pair at "
+            f"different path depths, averaged over channels (below 1: the correction washes images out, which the "
+            f"pairwise scores reward at misregistered mappings).{scored}</p>")
+
+
+# -------------------------------------------------------------------- selection and renders (9, 12-13)
+def _render_views(inp: PageInputs) -> tuple[int, int]:
+    """The view seeing the most faces (or the one selection.png used), and a second one far from it."""
+    names = inp.scene.names
+    pv = (inp.rep.get("selection") or {}).get("picture_view")
+    usable = inp.usable if inp.usable is not None else np.ones(len(names))
+    a = names.index(pv) if pv in names else int(np.argmax(usable))
+    centers = np.array([v.center for v in inp.scene.views])
+    ok = [v for v in range(len(names)) if v != a and usable[v] >= 0.5 * usable.max()]
+    b = max(ok, key=lambda v: (float(np.linalg.norm(centers[v] - centers[a])), -v)) if ok else a
+    return a, b
+
+
+def _selection_section(inp: PageInputs, view: int) -> str:
+    n = len(inp.scene.views)
+    same = (inp.rep.get("selection") or {}).get("picture_view") == inp.scene.names[view]
+    if inp.selection_png is not None and same and inp.scene.views[view].width >= SELECTION_WIDTH:
+        picture = _img(inp.selection_png, "image/png", "selection")  # the folder's selection.png: the same picture
+    else:
+        cam = inp.scene.views[view]
+        img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n)
+        picture = _img(jpeg(img, quality=90), "image/jpeg", "selection")
+    pal = selection_palette(n)
+    counts = np.bincount(inp.selection[inp.selection >= 0], minlength=n)
+    items = [f'<li><span class="sw" style="background:rgb({pal[v][0]},{pal[v][1]},{pal[v][2]})"></span>'
+             f"{_esc(_name(inp, v))}: {counts[v]} faces</li>" for v in np.argsort(-counts, kind="stable") if counts[v]]
+    unseen = int((inp.selection < 0).sum())
+    items.append(f'<li><span class="sw" style="background:rgb(40,40,40)"></span>seen by no view: {unseen} faces</li>')
+    return (f'<figure data-fig="9" class="side">{picture}'
+            f'<ul class="legend">{"".join(items)}</ul><figcaption>Per-face image selection (paper Figure 9) seen from '
+            f"{_esc(_name(inp, view))}: every face in the colour of the view it is textured from (legend: views by "
+            f"number of faces).</figcaption></figure>")
+
+
+def _renders_section(inp: PageInputs, views: tuple[int, int], width: int) -> str:
+    rows = []
+    for v in dict.fromkeys(views):
+        view = inp.scene.views[v]
+        render = render_textured(inp.textured, resized_view(view, min(view.width, width)))
+        cells = [("photo", inp.photos[v])]
+        if inp.corrected is not None:
+            cells.append(("corrected photo", inp.corrected[v]))
+        cells.append(("textured mesh, rendered from this camera", render))
+        rows.append('<div class="row">' + "".join(
+            f'<figure>{_img(jpeg(thumbnail(im, width)), "image/jpeg", f"{what} {v}")}<figcaption>{_esc(_name(inp, v))}: '
+            f"{what}</figcaption></figure>" for what, im in cells) + "</div>")
+    return (f'<figure data-fig="12-13">{"".join(rows)}<figcaption>The textured mesh rendered by ray casting from two '
+            f"cameras (paper Figures 12-13; no lighting, white where the mesh is absent) beside the photos: texture "
+            f"seams and colour steps show as edges the photo does not have.</figcaption></figure>")
+
+
+# ------------------------------------------------------------------------------------- tables
+def _flat(d: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    out: list[tuple[str, Any]] = []
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out += _flat(v, f"{prefix}{k}." if not isinstance(v, dict) or v else prefix + str(k))
+        return out
+    if isinstance(d, list) and (len(d) > 8 or any(isinstance(x, (dict, list)) for x in d)):
+        return out
+    return [(prefix.rstrip("."), ", ".join(map(str, d)) if isinstance(d, list) else d)]
+
+
+def _value(v: Any) -> str:
+    return _esc(f"{v:.6g}") if isinstance(v, float) else _esc(v)
+
+
+def _kv_tables(d: dict) -> str:
+    """One key / value table per top-level group (nested keys flattened), side by side."""
+    loose = {k: v for k, v in d.items() if not isinstance(v, dict)}
+    groups = ([("", loose)] if loose else []) + [(k, v) for k, v in d.items() if isinstance(v, dict) and v]
+    out = []
+    for name, g in groups:
+        rows = "".join(f"<tr><th>{_esc(k)}</th><td>{_value(v)}</td></tr>" for k, v in _flat(g))
+        head = f'<tr><th colspan="2" class="group">{_esc(name)}</th></tr>' if name else ""
+        out.append(f'<table class="kv">{head}{rows}</table>')
+    return f'<div class="tables">{"".join(out)}</div>'
+
+
+def _seams_section(rep: dict) -> str:
+    keys = ("mean", "median", "p99", "frac_above_5", "seam_mean", "n_edges", "n_seam_edges")
+    cols = [("textured mesh", rep.get("seams"))]
+    if rep.get("seams_original_images"):
+        cols.append(("same texturing, uncorrected photos", rep["seams_original_images"]))
+    cols = [(n, s) for n, s in cols if s]
+    if not cols:
+        return "<p>No seam metric (the command ran with --no-seams).</p>"
+    head = "".join(f"<th>{_esc(n)}</th>" for n, _ in cols)
+    rows = "".join(f"<tr><th>{k}</th>" + "".join(f"<td>{_num(s.get(k), 3)}</td>" for _, s in cols) + "</tr>"
+                   for k in keys)
+    return (f'<table class="kv"><tr><th></th>{head}</tr>{rows}</table><p class="note">CIEDE2000 across every interior '
+            f"mesh edge between the two faces' texture colours (mean, median, 99th percentile, share above 5; "
+            f"seam_mean: over the edges where the texture changes chart).</p>")
+
+
+def _settings(inp: PageInputs, f: dict) -> dict:
+    rep = inp.rep
+    s: dict[str, Any] = {"command": f["command"], "scene": rep.get("scene", ""), "mesh": rep.get("mesh", ""),
+                         "views": len(inp.scene.views)}
+    if f["method"]:
+        s["correction"] = {"method": f["method"], "reference": rep.get("reference") or rep["correction"].get("reference"),
+                           "t_npm": f["t_npm"], "mappings": f["mappings"], **f["settings"]}
+    for key in ("texture_settings", "selection", "atlas"):
+        if rep.get(key):
+            s[key] = {k: v for k, v in rep[key].items() if k not in ("faces_per_view", "leveling", "local_leveling")}
+    vis = rep.get("visibility_stats")
+    if vis:
+        keys = ("valid", "occluded", "depth_inconsistent", "oblique", "usable")
+        s["visibility"] = {k: vis[k] for k in keys if k in vis}
+    return s
+
+
+# ------------------------------------------------------------------------------------- page
+_CSS = """
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#222;background:#fafafa}
+main{max-width:1240px;margin:0 auto;padding:12px 20px 40px}h1{font-size:22px;margin:8px 0 2px}
+h2{font-size:17px;border-bottom:1px solid #ddd;padding-bottom:3px;margin-top:28px}.sub{color:#555;margin:0 0 10px}
+nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
+.cards{display:flex;flex-wrap:wrap;gap:10px;margin:10px 0}.card{background:#fff;border:1px solid #ddd;
+border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
+figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}
+.grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
+.grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}.grid figure,.row figure{margin:0;background:#fff;
+border:2px solid #e4e4e4;padding:3px}.grid figure img{width:100%}.grid figure img+img{margin-top:3px}
+.grid figcaption,.row figcaption{font-size:11px;word-break:break-all}figure.ref{border-color:#d62728}
+.row{display:flex;flex-wrap:wrap;gap:8px;margin-bottom:8px}.row figure{max-width:330px}
+.grid figure img.cmf{width:50%;margin-top:3px}.badge{background:#d62728;color:#fff;border-radius:3px;
+padding:0 4px;font-size:10px}.badge.grey{background:#888}table{border-collapse:collapse;background:#fff;margin:6px 0}
+td,th{border:1px solid #ddd;padding:3px 8px;font-size:12.5px;text-align:right}th{background:#f0f0f0}
+table.kv th{text-align:left;font-weight:normal;color:#444}.note{font-size:12.5px;color:#555;max-width:1100px}
+.side{display:flex;flex-wrap:wrap;gap:14px;align-items:flex-start}.side img{max-width:640px}.side figcaption{width:100%}
+.legend{list-style:none;padding:0;margin:0;font-size:12px;columns:2}.sw{display:inline-block;width:12px;height:12px;
+margin-right:5px;vertical-align:middle;border:1px solid #999}details{margin:6px 0}code{font-size:12px}
+.tables{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}th.group{text-align:left;font-weight:bold}
+"""
+
+
+def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]]:
+    """(id, title, body) of every section the data allow; each timed at DEBUG.
+
+    What the correction did first (Figure 10, Table 2), then how (Figures 4-8), then the texturing
+    (Figures 9, 12-13, seams), then timings and settings.
+    """
+    c = inp.correction
+    out: list[tuple[str, str, str]] = []
+
+    def add(sid: str, title: str, build, *args) -> None:
+        t = time.perf_counter()
+        out.append((sid, title, build(*args)))
+        logger.debug("report section %s: %.3f s", sid, time.perf_counter() - t)
+
+    before = [thumbnail(im, width) for im in inp.photos] if inp.photos is not None else None
+    after = [thumbnail(im, width) for im in inp.corrected] if inp.corrected is not None and before else None
+    if before is not None:
+        add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
+            [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
+    if c is not None:
+        add("table2", "Image-based metrics (Table 2)", _table2_section, inp, f["metrics"])
+    if c is not None and after is not None:
+        change = [float(np.abs(x.astype(np.int16) - y).mean()) for x, y in zip(before, after)]
+        cands = [v for v, p in sorted(c.paths.items()) if len(p) > 1]
+        hops = max((len(c.paths[v]) for v in cands), default=0)
+        # Figure 8's path: a longest one, the view its correction changed most
+        longest = [v for v in cands if len(c.paths[v]) == hops]
+        path = c.paths[max(longest, key=lambda v: (change[v], -v))] if longest else None
+        add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp)
+        if inp.mappings is not None and c.paths:
+            t = time.perf_counter()
+            edges = _path_edges(c.paths)
+            jihs = _edge_jihs(inp, edges)
+            thumbs = {e: png(jih_thumbnail(jihs[e][0], c.edge_luts.get(e), jihs[e][1])) for e in edges}
+            logger.debug("report JIH of %d edges: %.3f s", len(edges), time.perf_counter() - t)
+            add("jih", "Joint image histograms and colour mapping functions (Figures 6-7)", _jih_section, inp, path,
+                jihs, thumbs)
+            if path:
+                add("steps", "Sequential pairwise correction of one path (Figure 8)", _steps_section, inp, path,
+                    thumbs, 3 * width // 2)
+    if inp.textured is not None and inp.selection is not None and inp.mesh is not None:
+        a, b = _render_views(inp)
+        add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
+        add("renders", "Textured mesh and photos (Figures 12-13)", _renders_section, inp, (a, b), 2 * width)
+        add("seams", "Seam metric", _seams_section, inp.rep)
+    timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
+    out.append(("timings", "Timings (s)", f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"))
+    out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
+    return out
+
+
+def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
+    c, m = inp.correction, f["metrics"] or {}
+    cards = []
+    if m.get("before"):
+        cards.append(("CIEDE2000 over pairs, before → after",
+                      f"{_num(m['before']['ciede2000']['mean'])} → {_num(m['after']['ciede2000']['mean'])}"))
+        cards.append(("PSNR dB, before → after",
+                      f"{_num(m['before']['psnr']['mean'])} → {_num(m['after']['psnr']['mean'])}"))
+        if ((m.get("contrast") or {}).get("after") or {}).get("mean") is not None:
+            cards.append(("contrast ratio after", _num(m["contrast"]["after"]["mean"], 3)))
+    if c is not None:
+        cards.append(("reference", _name(inp, c.reference)))
+        cards.append(("views without a path", str(len(c.unreachable))))
+    if inp.rep.get("seams"):
+        cards.append(("seam CIEDE2000, mean", _num(inp.rep["seams"]["mean"], 3)))
+    return cards
+
+
+def render_page(inp: PageInputs, *, width: int = 160) -> str:
+    """The report page of ``inp`` (sections only for the data present), thumbnails ``width`` pixels wide."""
+    from .. import __version__
+
+    f = facts(inp.rep)
+    sections = _sections(inp, f, width)
+    c = inp.correction
+    faces = "" if inp.selection is None else f", {len(inp.selection)} faces"
+    where = inp.rep.get("scene") or inp.rep.get("scene_path") or "a scene in memory"
+    sub = (f"{_esc(f['command'])} of {_esc(where)}: {len(inp.scene.views)} views{faces}"
+           + (f", method {_esc(c.method)}" if c is not None else ""))
+    nav = "".join(f'<a href="#{sid}">{_esc(t.split(" (")[0])}</a>' for sid, t, _ in sections)
+    body = "".join(f'<section id="{sid}"><h2>{_esc(t)}</h2>{b}</section>' for sid, t, b in sections)
+    cards = "".join(f'<div class="card"><span>{_esc(k)}</span><b>{_esc(v)}</b></div>' for k, v in _cards(inp, f))
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
+            f'content="width=device-width,initial-scale=1"><title>o3d-seqcc report: {_esc(f["command"])}</title>'
+            f"<style>{_CSS}</style></head><body><main><h1>o3d-seqcc report: {_esc(f['command'])}</h1>"
+            f'<p class="sub">{sub}</p><div class="cards">{cards}</div><nav>{nav}</nav>{body}'
+            f'<p class="note">Figures and table numbered as in L. Dal\'Col et al., "A Sequential Color Correction '
+            f'Approach for Texture Mapping of 3D Meshes", Sensors 2023, 23(2), 607. Written by o3d_seqcc '
+            f"{_esc(__version__)}.</p></main></body></html>\n")

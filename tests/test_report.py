@@ -1,0 +1,184 @@
+"""The HTML report: self-contained, the paper's figures for the run, numbers equal to report.json's."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+import shutil
+import subprocess
+import tempfile
+
+import numpy as np
+import pytest
+
+import o3d_seqcc as sc
+from o3d_seqcc.cli import main
+from o3d_seqcc.io.output import MANIFEST
+from o3d_seqcc.luts import compose_luts
+from o3d_seqcc.report import regenerate_report
+
+FAST = ["--t-npm", "50", "--atlas-size", "1024", "--format", "glb", "--fallback", "flat"]
+IMG = re.compile(r'<img(?: class="[^"]*")? src="data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)" alt="[^"]*">')
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    return sc.make_synthetic_scene(tmp_path_factory.mktemp("rep") / "scene", n_views=5, width=160, height=120, seed=3)
+
+
+@pytest.fixture(scope="module")
+def run_dir(scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "out"
+    assert main(["-q", "run", str(scene.root / "scene.json"), "--out", str(out), *FAST]) == 0
+    return out
+
+
+def _sections(page: str) -> dict[str, str]:
+    return dict(re.findall(r'<section id="([a-z0-9]+)">(.*?)</section>', page, flags=re.S))
+
+
+def _images(fragment: str) -> list[tuple[str, bytes]]:
+    return [(kind, base64.b64decode(data)) for kind, data in IMG.findall(fragment)]
+
+
+def test_the_report_is_one_self_contained_file(run_dir):
+    page = (run_dir / "report.html").read_text(encoding="utf-8")
+    assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
+    # every image embedded, and decodable as what it says it is
+    imgs = _images(page)
+    assert len(imgs) == page.count("<img") > 20
+    for kind, data in imgs:
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" if kind == "png" else data[:3] == b"\xff\xd8\xff", kind
+    # nothing fetched from anywhere: no URL, no script, no stylesheet link, no CSS url()
+    for bad in ("http://", "https://", "<script", "<link", "url(", "@import", "src=\"/", "src='", "file:"):
+        assert bad not in page, bad
+    assert re.findall(r'src="(?!data:)', page) == [] and re.findall(r'href="(?!#)', page) == []
+
+
+def test_the_report_shows_this_run(run_dir, scene):
+    rep = json.loads((run_dir / "report.json").read_text())
+    page = (run_dir / "report.html").read_text(encoding="utf-8")
+    sec = _sections(page)
+    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "selection", "renders", "seams", "timings",
+                         "settings"]
+    names, ref = scene.scene.names, rep["correction"]["reference"]
+    paths = rep["correction"]["paths"]
+    n_views = len(names)
+    # Figures 4-5: the caption names the reference; one table row per path edge
+    edges = {(p[i], p[i + 1]) for p in paths.values() for i in range(len(p) - 1)}
+    assert f"the reference <b>{ref}</b>" in sec["graph"] and len(_images(sec["graph"])) == 1
+    assert sec["graph"].count("<tr><td>") == len(edges)
+    # Figures 6-7: one detailed figure, one thumbnail per path edge
+    assert len(_images(sec["jih"])) == 1 + len(edges)
+    # Figure 8: the longest path, its views above, one step (image + CMF) per edge below
+    hops = max(len(p) for p in paths.values()) - 1
+    # (+ its corrected image after the joint refinement: the default method refines the sequential estimate)
+    refined = rep["correction"]["method"] != "seqcc"
+    assert len(_images(sec["steps"])) == (hops + 1) + 2 * hops + refined and f"{hops} step(s)" in sec["steps"]
+    assert ("after the joint refinement" in sec["steps"]) == refined
+    # Figure 10: every view before and after, the reference marked
+    assert len(_images(sec["views"])) == 2 * n_views
+    assert sec["views"].count('<figure class="ref">') == 1
+    assert re.search(rf'<figure class="ref">.*?#{names.index(ref)} {ref} <span class="badge">reference', sec["views"])
+    # Table 2: the numbers of report.json
+    m = rep["metrics"]
+    cells = dict(re.findall(r'<td data-key="([a-z0-9_.]+)">([^<]*)</td>', sec["table2"]))
+    assert len(cells) == 16
+    for when in ("before", "after"):
+        for metric in ("psnr", "ciede2000"):
+            for stat in ("mean", "weighted_mean", "std"):
+                assert cells[f"{when}.{metric}.{stat}"] == f"{m[when][metric][stat]:.2f}"
+        for stat in ("mean", "min"):
+            assert cells[f"contrast.{when}.{stat}"] == f"{m['contrast'][when][stat]:.3f}"
+    assert m["after"]["ciede2000"]["mean"] < m["before"]["ciede2000"]["mean"]
+    assert m["before"]["max_per_pair"] == 200 and m["before"]["n_scored"] <= 200 * m["before"]["n_pairs"]
+    # Figure 9: the legend counts the faces of selection.npy
+    sel = np.load(run_dir / "selection.npy")
+    counts = np.bincount(sel[sel >= 0], minlength=n_views)
+    legend = dict(re.findall(r"</span>#\d+ (\w+): (\d+) faces</li>", sec["selection"]))
+    assert legend == {names[v]: str(counts[v]) for v in range(n_views) if counts[v]}
+    assert f"seen by no view: {int((sel < 0).sum())} faces" in sec["selection"]
+    # Figures 12-13: two cameras, photo / corrected photo / render each
+    assert len(_images(sec["renders"])) == 6
+    assert f"{rep['seams']['mean']:.3f}" in sec["seams"]
+
+
+@pytest.mark.parametrize("method", ["seqcc", "seqcc-global"])
+def test_the_edge_luts_compose_to_the_views_transforms(scene, method):
+    res = sc.correct(scene.scene, t_npm=50, method=method)
+    assert res.settings == {"t_npm": 50, "seed": 0, "interpolation": "bilinear", "graph_weight": "paper", "options": {}}
+    assert set(res.edge_luts) == {(p[i], p[i + 1]) for p in res.paths.values() for i in range(len(p) - 1)}
+    for v, p in res.paths.items():
+        if len(p) > 1:
+            luts = [res.edge_luts[(p[i], p[i + 1])] for i in range(len(p) - 1)]
+            composed = np.stack([compose_luts([lut[c] for lut in luts], n_out=256) for c in range(3)])
+            if method == "seqcc":  # the paper's method: the composition is the view's correction
+                np.testing.assert_allclose(composed, res.transforms[v].lut, atol=1e-12)
+            else:  # seqcc-global starts from it (same path, same steps) and refines: close, not equal
+                assert np.abs(composed - res.transforms[v].lut).mean() < 0.05
+
+
+def test_report_command_writes_the_same_report_again(run_dir, tmp_path, capsys):
+    copy = tmp_path / "copy"
+    shutil.copytree(run_dir, copy)
+    before = (copy / "report.html").read_text(encoding="utf-8")
+    (copy / "report.html").unlink()
+    assert main(["report", str(copy)]) == 0
+    assert str(copy / "report.html") in capsys.readouterr().out
+    again = (copy / "report.html").read_text(encoding="utf-8")
+    assert "report.html" in json.loads((copy / MANIFEST).read_text())["files"]  # still o3d-seqcc's own folder
+    # the same figures and numbers (the renders of the mesh reloaded from mesh.glb may differ by a bit)
+    a, b = _sections(before), _sections(again)
+    assert list(a) == list(b)
+    for sid in a:
+        assert len(_images(a[sid])) == len(_images(b[sid])), sid
+    for sid in ("table2", "seams", "settings"):
+        assert a[sid] == b[sid], sid
+    assert _images(a["graph"]) == _images(b["graph"])  # the correction recomputed is the run's
+    assert _images(a["jih"]) == _images(b["jih"])
+
+
+def test_report_refuses_a_folder_that_is_no_output(tmp_path, capsys):
+    with pytest.raises(sc.InputError, match=rf"{re.escape(str(tmp_path))} is not an o3d-seqcc output folder "
+                                            r"\(no report.json\); give the --out folder"):
+        regenerate_report(tmp_path)
+    assert main(["report", str(tmp_path / "missing")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
+def test_correct_writes_a_report_with_the_full_table(scene, tmp_path):
+    job = sc.pipeline.correct_scene(scene.scene, t_npm=50)
+    job.save(tmp_path / "c")
+    page = (tmp_path / "c" / "report.html").read_text(encoding="utf-8")
+    sec = _sections(page)
+    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "timings", "settings"]
+    rep = json.loads((tmp_path / "c" / "report.json").read_text())
+    assert "max_per_pair" not in rep["metrics"]["before"]  # correct scores every mapping
+    cells = dict(re.findall(r'<td data-key="([a-z0-9_.]+)">([^<]*)</td>', sec["table2"]))
+    assert cells["after.ciede2000.mean"] == f"{rep['metrics']['after']['ciede2000']['mean']:.2f}"
+    assert cells["contrast.after.mean"] == f"{rep['metrics']['contrast']['after']['mean']:.3f}"
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed (./dev.sh setup)")
+def test_the_report_renders_in_headless_chromium(run_dir, tmp_path):
+    from scipy import ndimage
+
+    from o3d_seqcc.io.files import read_image
+
+    shot = tmp_path / "shot.png"
+    with tempfile.TemporaryDirectory() as profile:
+        cmd = ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+               "--disable-background-networking", "--disable-component-update", "--disable-sync",
+               f"--user-data-dir={profile}", "--hide-scrollbars", f"--screenshot={shot}", "--window-size=1280,2400",
+               (run_dir / "report.html").resolve().as_uri()]
+        subprocess.run(cmd, check=True, capture_output=True, timeout=120)
+    img = read_image(shot).astype(np.int16)
+    assert img.shape == (2400, 1280, 3)
+    # not blank: the page background with several pictures on it (large regions far from the background)
+    background = np.median(img.reshape(-1, 3), axis=0)
+    ink = np.abs(img - background).max(axis=2) > 40
+    assert 0.05 < ink.mean() < 0.9
+    labels, n = ndimage.label(ndimage.binary_closing(ink, iterations=2))
+    big = np.sort(np.bincount(labels.ravel())[1:])[::-1]
+    assert (big > 4000).sum() >= 6, big[:10]

@@ -1,0 +1,298 @@
+"""seqcc-global (o3d_seqcc.correction.seqcc_global): joint refinement over every graph edge and curves that cover the whole range,
+checked against known photometric changes (known curves must come back)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import skimage.data
+
+from o3d_seqcc.correction import DEFAULT_METHOD, METHODS, CorrectionContext, available_methods, correct
+from o3d_seqcc.correction.edge_summaries import EdgeObservations, _FlatImages, edge_observations, edge_quantiles
+from o3d_seqcc.correction.joint_curves import linear_start, refine_curves
+from o3d_seqcc.correction.seqcc_global import sequential_start
+from o3d_seqcc.errors import InputError
+from o3d_seqcc.graph import build_graph, correction_paths
+from o3d_seqcc.imageops import delta_e_2000, sample_colors
+from o3d_seqcc.imageops import img_as_dtype as from_float
+from o3d_seqcc.imageops import img_as_float as to_float
+from o3d_seqcc.luts import extend_curve
+from o3d_seqcc.mappings import Mappings, PairMapping
+from o3d_seqcc.photometric import apply_photometric, identity_photometric
+from o3d_seqcc.scene import Scene, View
+
+H, W = 120, 160
+K = np.array([[100.0, 0, 79.5], [0, 100.0, 59.5], [0, 0, 1]])
+# camera-like changes (exposure, white balance, per-channel gamma, S-curve)
+P1 = {"gain": 0.8, "white_balance": [1.1, 0.95, 0.9], "gamma": [1.3, 1.1, 0.85], "s_curve": 0.3}
+P2 = {"gain": 1.2, "white_balance": [0.9, 1.0, 1.1], "gamma": [0.9, 1.2, 1.0], "s_curve": 0.2}
+
+
+@pytest.fixture(scope="module")
+def albedo() -> np.ndarray:
+    """A real photo's texture scaled into a surface-like albedo range [0.03, 0.8]."""
+    tex = skimage.data.astronaut()[60 : 60 + 2 * H : 2, 100 : 100 + 2 * W : 2].astype(np.float64) / 255.0
+    return 0.03 + 0.77 * tex
+
+
+def _scene(n: int) -> Scene:
+    views = tuple(
+        View(name=f"v{i}", image=Path(f"/nonexistent/v{i}.png"), intrinsic=K, extrinsic=np.eye(4), width=W, height=H)
+        for i in range(n)
+    )
+    return Scene(Path("/nonexistent/mesh.ply"), views)
+
+
+def _mappings(spec: dict, n: int, seed: int = 0) -> Mappings:
+    """Pairs mapping identical pixels, drawn from each pair's (count, pixel mask)."""
+    rng = np.random.default_rng(seed)
+    pairs = {}
+    for (a, b), (cnt, mask) in spec.items():
+        sel = rng.choice(np.flatnonzero(mask.ravel()), cnt)
+        uv = np.stack([sel % W, sel // W], axis=1).astype(np.float64)
+        pairs[(a, b)] = PairMapping(a, b, uv, uv.copy(), np.arange(cnt) // 3)
+    return Mappings(pairs=pairs, view_names=tuple(f"v{i}" for i in range(n)), mode="vertices")
+
+
+def _images(albedo: np.ndarray, params: list[dict]) -> list[np.ndarray]:
+    return [from_float(apply_photometric(albedo, p), np.uint8) for p in params]
+
+
+def _de(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    return float(delta_e_2000(image[mask] / 255.0, truth[mask] / 255.0).mean())
+
+
+def _full() -> np.ndarray:
+    return np.ones((H, W), dtype=bool)
+
+
+def _lower_half(albedo: np.ndarray) -> np.ndarray:
+    lum = albedo.mean(axis=2)
+    return lum <= np.median(lum)
+
+
+def test_registered_listed_and_the_default():
+    assert "seqcc-global" in available_methods() and DEFAULT_METHOD == "seqcc-global"
+    assert "seqcc-global" in METHODS and "seqcc" in METHODS and "seqcc-joint" in METHODS
+
+
+def test_chain_of_three_recovered_at_the_far_end(albedo):
+    """v0 (reference) - v1 - v2, only chain edges: v2's known curves come back end to end."""
+    images = _images(albedo, [identity_photometric(), P1, P2])
+    truth = from_float(albedo, np.uint8)
+    maps = _mappings({(0, 1): (4000, _full()), (1, 2): (4000, _full())}, 3)
+    res = correct(_scene(3), images=images, mappings=maps, reference=0, method="seqcc-global")
+    assert res.paths[2] == [2, 1, 0]
+    assert _de(images[2], truth, _full()) > 10  # the change is large
+    assert _de(res.images[2], truth, _full()) < 1.0
+    assert _de(res.images[1], truth, _full()) < 1.0
+    np.testing.assert_array_equal(res.images[0], images[0])
+
+
+def test_half_range_overlap_recovered_through_the_other_edges(albedo):
+    """v1 overlaps the reference only where the scene is dark (half of its range); its path is
+    that edge. Its other half is seen by its edge to v2, which overlaps the reference fully:
+    the joint refinement recovers it; the sequential correction can only extrapolate."""
+    images = _images(albedo, [identity_photometric(), P1, P2])
+    truth = from_float(albedo, np.uint8)
+    low = _lower_half(albedo)
+    maps = _mappings({(0, 1): (6000, low), (1, 2): (4000, _full()), (0, 2): (3000, _full())}, 3)
+    de = {}
+    for m in ("seqcc", "seqcc-global"):
+        res = correct(_scene(3), images=images, mappings=maps, reference=0, method=m)
+        assert res.paths[1] == [1, 0]
+        de[m] = (_de(res.images[1], truth, ~low), _de(res.images[1], truth, low))
+    assert de["seqcc-global"][0] < 2.0, de  # the other half
+    assert de["seqcc-global"][1] < 1.0, de
+    assert de["seqcc"][0] > 3 * de["seqcc-global"][0], de
+
+
+@pytest.mark.parametrize("s_curve", [0.0, 0.3])
+def test_half_range_overlap_extrapolated_by_a_power_law(albedo, s_curve):
+    """Only one edge, covering the dark half of v1's range: beyond it the correction continues
+    as a power law (exact for exposure, white balance and gamma), closer to the truth than the
+    straight line from the end slopes."""
+    p = {"gain": 0.75, "white_balance": [1.1, 0.95, 0.9], "gamma": [1.35, 1.15, 0.8], "s_curve": s_curve}
+    images = _images(albedo, [identity_photometric(), p])
+    truth = from_float(albedo, np.uint8)
+    low = _lower_half(albedo)
+    maps = _mappings({(0, 1): (6000, low)}, 2)
+    de = {}
+    for ext in ("power", "line"):
+        res = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", extrapolate=ext)
+        de[ext] = _de(res.images[1], truth, ~low)
+    assert de["power"] < 2.0, de
+    assert de["power"] < de["line"], de
+
+
+def _ring_observations(
+    n_views: int, responses: np.ndarray, *, P: int = 64, noise: float = 0.0, seed: int = 0, extra=(), partial: bool = True
+):
+    """Edge quantiles generated from known responses g_v (V, 3, 65) on a ring plus chords."""
+    rng = np.random.default_rng(seed)
+    kx = np.linspace(0, 1, responses.shape[2])
+    edges = [(i, (i + 1) % n_views) for i in range(n_views)] + list(extra)
+    qa, qb = np.zeros((len(edges), 3, P)), np.zeros((len(edges), 3, P))
+    for e, (a, b) in enumerate(edges):
+        lo, hi = sorted(rng.uniform(0.03, 0.4, 2) * [1.0, 2.0])  # each edge sees part of the range
+        u = np.linspace(lo, hi + 0.15, P).clip(0.03, 0.85) if partial else np.linspace(0.03, 0.85, P)
+        for c in range(3):
+            qa[e, c] = np.interp(u, kx, responses[a, c]) + noise * rng.standard_normal(P)
+            qb[e, c] = np.interp(u, kx, responses[b, c]) + noise * rng.standard_normal(P)
+    arr = np.array(edges)
+    return EdgeObservations(a=arr[:, 0], b=arr[:, 1], qa=qa, qb=qb, n=np.full(len(edges), 5000))
+
+
+def _responses(n_views: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    kx = np.linspace(0, 1, 65)
+    g = np.stack([[np.clip(rng.uniform(0.8, 1.2) * kx, 0, 1) ** rng.uniform(0.75, 1.35) for _ in range(3)] for _ in range(n_views)])
+    g[0] = kx
+    return g
+
+
+def test_refine_curves_recovers_known_responses_and_rejects_a_bad_edge():
+    V = 8
+    g = _responses(V, seed=1)
+    obs = _ring_observations(V, g, noise=0.002, extra=[(0, 4), (2, 6), (1, 5), (3, 7)], partial=False)
+    # corrupt one chord: its second view's values are off by a constant
+    bad = len(obs.a) - 1
+    qb = obs.qb.copy()
+    qb[bad] = np.clip(qb[bad] + 0.08, 0, 1)
+    obs = EdgeObservations(a=obs.a, b=obs.b, qa=obs.qa, qb=qb, n=obs.n)
+    res = refine_curves(obs, n_views=V, reference=0)
+    kx = np.linspace(0, 1, 65)
+    grid = np.linspace(0, 1, 256)
+    err = []
+    for v in range(1, V):
+        for c in range(3):
+            lo, hi = res.support[v, c]
+            inside = (grid >= lo) & (grid <= hi)
+            true_f = np.interp(grid, g[v, c], kx)  # the correction is the response's inverse
+            err.append(np.abs(res.luts[v, c][inside] - true_f[inside]).mean())
+    assert max(err) < 0.002, max(err)  # half an 8-bit level, with 0.5-level noise on every quantile
+    assert res.edge_weights[bad] < 0.2 < res.edge_weights[:bad].min(), res.edge_weights
+    np.testing.assert_allclose(res.luts[0], np.broadcast_to(grid, (3, 256)))
+    assert res.solved.all()
+
+
+def test_refine_curves_does_not_contract_noisy_graphs():
+    """Identity responses, many edges with noisy quantiles: a least-squares fit on the corrected
+    values would contract every curve toward grey; the bundle adjustment keeps the slopes."""
+    V = 12
+    kx = np.linspace(0, 1, 65)
+    g = np.broadcast_to(kx, (V, 3, 65)).copy()
+    chords = [(i, (i + k) % V) for i in range(V) for k in (2, 3, 5)]
+    obs = _ring_observations(V, g, noise=0.02, extra=chords, seed=3)
+    lin = linear_start(obs, n_views=V, reference=0)
+    res = refine_curves(obs, n_views=V, reference=0, init=lin, edge_robust_c=None)
+    slope = {k: ((x[1:, :, 200] - x[1:, :, 50]) / (150 / 255)).mean() for k, x in (("lin", lin), ("ba", res.luts))}
+    assert slope["lin"] < 0.95, slope  # least squares on the corrected values contracts
+    assert abs(slope["ba"] - 1.0) < 0.03, slope
+
+
+def test_refine_curves_validation():
+    kx = np.linspace(0, 1, 65)
+    obs = _ring_observations(3, np.broadcast_to(kx, (3, 3, 65)).copy())
+    with pytest.raises(InputError, match="reference"):
+        refine_curves(obs, n_views=3, reference=5)
+    with pytest.raises(InputError, match="init"):
+        refine_curves(obs, n_views=3, reference=0, init=np.zeros((2, 3, 10)))
+    with pytest.raises(ValueError, match="edge_weight"):
+        refine_curves(obs, n_views=3, reference=0, edge_weight="magic")
+    with pytest.raises(InputError, match="in range"):
+        refine_curves(obs, n_views=2, reference=0)
+    with pytest.raises(InputError, match="reference"):
+        linear_start(obs, n_views=3, reference=3)
+    with pytest.raises(InputError, match="inconsistent"):
+        EdgeObservations(a=np.array([0]), b=np.array([1, 2]), qa=np.zeros((1, 3, 4)), qb=np.zeros((1, 3, 4)), n=np.array([1]))
+    # a view with no edge to the reference's component keeps its start and is reported
+    res = refine_curves(
+        EdgeObservations(a=obs.a[:1], b=obs.b[:1], qa=obs.qa[:1], qb=obs.qb[:1], n=obs.n[:1]), n_views=4, reference=0
+    )
+    assert res.solved.tolist() == [True, True, False, False]
+
+
+def test_extend_curve_continues_a_power_law():
+    grid = np.linspace(0, 1, 256)
+    f = 1.3 * grid**0.7
+    lo, hi = grid[51], grid[127]
+    lut = np.where((grid >= lo) & (grid <= hi), f, 0.0)  # only [0.2, 0.5] is trusted
+    out = extend_curve(lut, lo, hi)
+    np.testing.assert_allclose(out, f, atol=2e-3)
+    assert np.all(np.diff(out) >= 0)
+    np.testing.assert_array_equal(extend_curve(lut, np.nan, hi), lut)
+
+
+def test_edge_quantiles_and_flat_sampler_match_the_reference_implementations(rng):
+    ca, cb = rng.random((500, 3)), rng.random((500, 3)) ** 2
+    qa, qb = edge_quantiles(ca, cb, levels=16)
+    q = np.linspace(0.005, 0.995, 16)
+    pos = (np.arange(500) + 0.5) / 500
+    np.testing.assert_allclose(qa[1], np.interp(q, pos, np.sort(ca[:, 1])))
+    np.testing.assert_allclose(qb[2], np.interp(q, pos, np.sort(cb[:, 2])))
+    with pytest.raises(InputError, match="same shape"):
+        edge_quantiles(ca, cb[:10])
+    img = rng.random((48, 64, 3))
+    uv = np.column_stack([rng.uniform(-1, 64, 400), rng.uniform(-1, 48, 400)])
+    uv[:3] = [[63, 47], [0, 0], [62.5, 46.5]]
+    for interp in ("bilinear", "nearest"):
+        np.testing.assert_allclose(_FlatImages([img], interp).sample(0, uv), sample_colors(img, uv, interpolation=interp), atol=1e-6)
+
+
+def test_edge_observations_drop_wrong_correspondences(albedo):
+    """A quarter of one pair's mappings pair unrelated pixels: the quantiles stay those of the
+    clean pairs (the outlier pass), and every edge of the graph is summarised."""
+    images = [to_float(im) for im in _images(albedo, [identity_photometric(), P1])]
+    rng = np.random.default_rng(2)
+    n = 8000
+    sel = rng.choice(H * W, n)
+    uv = np.stack([sel % W, sel // W], axis=1).astype(np.float64)
+    uv_b = uv.copy()
+    wrong = rng.random(n) < 0.25
+    uv_b[wrong] = uv_b[rng.permutation(np.flatnonzero(wrong))]
+    maps = Mappings(pairs={(0, 1): PairMapping(0, 1, uv, uv_b, np.arange(n) // 3)}, view_names=("v0", "v1"), mode="vertices")
+    clean = Mappings(pairs={(0, 1): PairMapping(0, 1, uv[~wrong], uv[~wrong], np.arange((~wrong).sum()) // 3)}, view_names=("v0", "v1"), mode="vertices")
+    g = build_graph(maps.counts, 2, t_npm=400)
+    obs = {}
+    for name, m, k in (("wrong", maps, 3.0), ("clean", clean, None), ("kept", maps, None)):
+        ctx = CorrectionContext(images=images, mappings=m, reference=0, t_npm=400, graph=g, paths=correction_paths(g, 0))
+        obs[name] = edge_observations(ctx, [(0, 1)], outlier_k=k)
+    # with the outlier pass the summaries stay close to the clean ones; without it they do not matter here
+    # (permuted pixels keep the marginals), so compare the kept count: most wrong pairs are gone
+    assert obs["wrong"].n[0] < n - 0.5 * wrong.sum()
+    assert np.abs(obs["wrong"].qb - obs["clean"].qb).max() < 0.03
+
+
+def test_sequential_start_follows_the_paths(albedo):
+    images = _images(albedo, [identity_photometric(), P1, P2])
+    maps = _mappings({(0, 1): (4000, _full()), (1, 2): (4000, _full())}, 3)
+    g = build_graph(maps.counts, 3, t_npm=400)
+    ctx = CorrectionContext(
+        images=[to_float(im) for im in images], mappings=maps, reference=0, t_npm=400, graph=g, paths=correction_paths(g, 0)
+    )
+    truth = albedo
+    for init in ("quantile", "seqcc"):
+        start = sequential_start(ctx, init=init)
+        out = np.stack([np.interp(to_float(images[2])[..., c], np.linspace(0, 1, 256), start[2, c]) for c in range(3)], -1)
+        assert np.abs(out - truth).mean() < 0.01, init
+    np.testing.assert_array_equal(sequential_start(ctx, init="identity")[2, 1], np.linspace(0, 1, 256))
+    with pytest.raises(ValueError, match="init"):
+        sequential_start(ctx, init="magic")
+
+
+def test_method_options_are_validated(albedo):
+    images = _images(albedo, [identity_photometric(), P1])
+    maps = _mappings({(0, 1): (4000, _full())}, 2)
+    with pytest.raises(ValueError, match="extrapolate"):
+        correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", extrapolate="magic")
+    with pytest.raises(TypeError, match="bogus"):
+        correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", bogus=1)
+    for bad in ({"outlier_k": 0}, {"levels": 2}, {"max_mappings": 3}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", **bad)
+    a = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global")
+    b = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global")
+    np.testing.assert_array_equal(a.images[1], b.images[1])  # deterministic
