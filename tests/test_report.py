@@ -9,6 +9,7 @@ import shutil
 import subprocess
 import tempfile
 
+import cv2
 import numpy as np
 import pytest
 
@@ -102,6 +103,10 @@ def test_the_report_shows_this_run(run_dir, scene):
     # Figures 12-13: two cameras, photo / corrected photo / render each
     assert len(_images(sec["renders"])) == 6
     assert f"{rep['seams']['mean']:.3f}" in sec["seams"]
+    # the atlas facts of report.json in the summary cards
+    a = rep["atlas"]
+    assert f"<span>texture atlas</span><b>{a['atlas_size']}²</b>" in page
+    assert f"<span>atlas covered by triangles</span><b>{100 * a['coverage']:.0f} %</b>" in page
 
 
 @pytest.mark.parametrize("method", ["seqcc", "seqcc-global"])
@@ -137,6 +142,12 @@ def test_report_command_writes_the_same_report_again(run_dir, tmp_path, capsys):
         assert a[sid] == b[sid], sid
     assert _images(a["graph"]) == _images(b["graph"])  # the correction recomputed is the run's
     assert _images(a["jih"]) == _images(b["jih"])
+    # mesh.glb is Y-up (report.json's export.orientation): reloaded, it is rotated back into the cameras' frame
+    assert json.loads((copy / "report.json").read_text())["export"]["orientation"]["up_axis"] == "y"
+    for (_, x), (_, y) in list(zip(_images(a["renders"]), _images(b["renders"])))[2::3]:
+        x, y = (cv2.imdecode(np.frombuffer(im, np.uint8), cv2.IMREAD_COLOR).astype(float) for im in (x, y))
+        white = (y > 250).all(axis=2).mean()
+        assert np.abs(x - y).mean() < 3 and abs((x > 250).all(axis=2).mean() - white) < 0.01, white
 
 
 def test_report_refuses_a_folder_that_is_no_output(tmp_path, capsys):

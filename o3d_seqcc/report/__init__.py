@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -128,6 +129,17 @@ def _read_report(run_dir: Path) -> dict:
     return rep
 
 
+def _scene_frame(tm, rep: dict, fmt: str):
+    """``tm`` back in the scene's frame: the exporters baked the report's up-axis rotation into ``fmt``'s file."""
+    o = (rep.get("export") or {}).get("orientation") or {}
+    if fmt not in o.get("applies_to", ()) or o.get("rotation") is None:
+        return tm
+    R = np.asarray(o["rotation"], dtype=np.float64)
+    if np.allclose(R, np.eye(3)):
+        return tm
+    return replace(tm, vertices=tm.vertices @ R, normals=None if tm.normals is None else tm.normals @ R)
+
+
 def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
     from ..correction import correct
     from ..io.load import load_scene
@@ -172,7 +184,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
             selection = None
     tm_path = next((run_dir / n for n in ("mesh.glb", "mesh.obj", "mesh.ply") if (run_dir / n).is_file()), None)
     if tm_path is not None and selection is not None:
-        textured = load_textured_mesh(tm_path)
+        textured = _scene_frame(load_textured_mesh(tm_path), rep, tm_path.suffix.lstrip("."))
     return PageInputs(rep=rep, scene=sc, photos=photos, corrected=corrected, correction=correction, mappings=maps,
                    selection=selection, mesh=(vis.mesh.vertices, faces), textured=textured,
                    usable=np.asarray(vis.usable).sum(axis=1), selection_png=_selection_png(run_dir))

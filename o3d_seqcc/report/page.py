@@ -477,6 +477,14 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
         cards.append(("views without a path", str(len(c.unreachable))))
     if inp.rep.get("seams"):
         cards.append(("seam CIEDE2000, mean", _num(inp.rep["seams"]["mean"], 3)))
+    a = inp.rep.get("atlas") or {}
+    if a.get("atlas_size"):
+        pages = int(a.get("pages", 1))
+        cards.append(("texture atlas" + (f", {pages} pages" if pages > 1 else ""), f"{a['atlas_size']}²"))
+        if a.get("texels_per_pixel") is not None:
+            cards.append(("atlas texels per photo pixel", _num(a["texels_per_pixel"])))
+        if a.get("coverage") is not None:
+            cards.append(("atlas covered by triangles", f"{100 * a['coverage']:.0f} %"))
     return cards
 
 
