@@ -483,8 +483,8 @@ def run(
     sm0 = None
     if compare_original:
         t = time.perf_counter()
-        s0 = s.updated(atlas_size=tm.atlas_size, texels_per_pixel=tm.stats["texels_per_pixel"])
-        sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s0))
+        # the same settings pack the same charts (they do not depend on the images) into the same atlas
+        sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
         _timed(timings, "compare_original", t)
     _timed(timings, "total", t_all)
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
