@@ -13,6 +13,12 @@ user and the command line get byte-identical files for the same scene and option
     res = sc.pipeline.run("scene.json", reference="auto")          # defaults = the CLI's
     res.save("out/")                                               # mesh.glb, mesh.obj, report.json ...
     res.textured.to_open3d()                                       # an Open3D textured mesh
+
+The work runs as tasks (:mod:`o3d_seqcc.parallel`): visibility per view, mappings + joint
+histogram + CMF fit per graph edge, image encoding per view, on local threads or, with
+``client=`` (a ``dask.distributed.Client``), on a Dask cluster; lookup-table composition,
+view selection, the atlas and the export run here. Images are read when a stage needs them
+(:class:`~o3d_seqcc.images.SceneImages`), never all at once.
 """
 
 from __future__ import annotations
@@ -30,13 +36,16 @@ import numpy as np
 from .correction import CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError, warn
 from .export import FORMATS, export_meshlab_ply, export_textured_mesh
-from .io.files import atomic_write_bytes, write_image, write_json
+from .images import SceneImages
+from .io.files import atomic_write_bytes, encode_image, write_json
 from .io.load import load_scene, save_scene
 from .io.meshlab import save_mlp
 from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import evaluate
+from .parallel import current as current_executor, use as use_executor
+from .progress import stage as _stage
 from .render import write_selection_picture
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric
@@ -75,8 +84,18 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
     return s
 
 
-def _timed(timings: dict[str, float], name: str, t0: float) -> None:
-    timings[name] = time.perf_counter() - t0
+def _encode_view(i: int, images) -> bytes:
+    return encode_image(np.asarray(images[i]), ".png")
+
+
+def _write_images(folder: Path, views, images) -> list[Path]:
+    """``folder/<view>.png`` for every view: encoded by one task per view (threads or Dask workers,
+    results streamed back in view order), written here atomically."""
+    ex = current_executor()
+    shared = ex.share(images)
+    return [atomic_write_bytes(folder / f"{v.name}.png", data)
+            for v, data in zip(views, ex.imap(_encode_view, range(len(views)), shared, desc="write images",
+                                              unit="image"))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,8 +105,10 @@ class RunResult:
     Attributes
     ----------
     scene : Scene
-    images : list of (H, W, 3) arrays
-        The images the mesh was textured with (corrected by :func:`run`).
+    images : sequence of (H, W, 3) arrays
+        The images the mesh was textured with (corrected by :func:`run`); lazy (an
+        :class:`~o3d_seqcc.images.ImageSequence`: each access reads and corrects the view's
+        image) unless a list was given.
     visibility : Visibility
     selection : (F,) int64
         View per face, -1 = seen by no view.
@@ -195,7 +216,8 @@ class RunResult:
         if view is not None:
             self.scene.index(view)
         t = time.perf_counter()
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage:
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage, \
+                _stage("export"):
             picture = None
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
@@ -209,8 +231,7 @@ class RunResult:
                 written["selection_png"] = picture[0]
             rasters = None
             if save_images:
-                rasters = [write_image(stage / "images" / f"{v.name}.png", img)
-                           for v, img in zip(self.scene.views, self.images)]
+                rasters = _write_images(stage / "images", self.scene.views, self.images)
                 written["images"] = stage / "images"
             # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
             layer = stage / "mesh_meshlab.ply"
@@ -239,20 +260,17 @@ def _meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: l
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
-    t = time.perf_counter()
     mesh = vis.mesh
-    adjacency = face_adjacency(mesh.faces, mesh.vertices)
-    opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
-    labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
-    _timed(timings, "selection", t)
-    t = time.perf_counter()
-    tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
-    _timed(timings, "bake", t)
+    with _stage("selection", timings):
+        adjacency = face_adjacency(mesh.faces, mesh.vertices)
+        opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
+        labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
+    with _stage("bake", timings):
+        tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
     seams = None
     if want_seams:
-        t = time.perf_counter()
-        seams = seam_metric(tm)
-        _timed(timings, "seams", t)
+        with _stage("seams", timings):
+            seams = seam_metric(tm)
     return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
 
 
@@ -263,6 +281,7 @@ def texture(
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
     seams: bool = True,
+    client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
     """Texture the mesh from the scene's images (or ``images``): selection, atlas, seam metric.
@@ -279,6 +298,8 @@ def texture(
         Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
     seams : bool, default True
         Compute the seam metric of the result.
+    client : dask.distributed.Client, optional
+        Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
     **texture_options
         Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
         ``atlas_size=4096``, ...).
@@ -292,19 +313,17 @@ def texture(
     t_all = time.perf_counter()
     s = _settings(settings, texture_options)
     sc = _as_scene(scene, mesh)
-    t = time.perf_counter()
     if images is None:
-        imgs = [v.load_image() for v in sc.views]
+        imgs = SceneImages(sc.views)  # read when the bake needs them
     else:
         imgs = list(images)
         if len(imgs) != len(sc.views):
             raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
-    _timed(timings, "load_images", t)
-    t = time.perf_counter()
-    vis = compute_visibility(sc)
-    _timed(timings, "visibility", t)
-    labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
-    _timed(timings, "total", t_all)
+    with use_executor(client):
+        with _stage("visibility", timings):
+            vis = compute_visibility(sc)
+        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
+    timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, seams=sm, timings=timings, command="texture", source=source,
                      images_from="scene" if images is None else "given")
@@ -320,6 +339,7 @@ def run(
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
     seams: bool = True, compare_original: bool = False,
+    client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
     """Colour-correct every view toward a reference, then texture the mesh with the corrected images.
@@ -344,6 +364,10 @@ def run(
         Compute the seam metric of the result.
     compare_original : bool, default False
         Also bake the uncorrected images (in memory) and report their seam metric.
+    client : dask.distributed.Client, optional
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
+        scene's files must be readable at the same paths on every worker); default local
+        threads (``joblib.parallel_config``). The outputs are identical either way.
     **texture_options
         Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection``, ``atlas_size``,
         ``seed``, ...); ``seed`` also seeds the correction.
@@ -368,26 +392,22 @@ def run(
     sc = _as_scene(scene, mesh)
     if reference != "auto":
         resolve_view(sc.names, reference)
-    t = time.perf_counter()
-    vis = compute_visibility(sc)
-    _timed(timings, "visibility", t)
-    t = time.perf_counter()
-    maps = compute_mappings(sc, visibility=vis, mode=mappings)
-    _timed(timings, "mappings", t)
-    t = time.perf_counter()
-    originals = [v.load_image() for v in sc.views]
-    _timed(timings, "load_images", t)
-    t = time.perf_counter()
-    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=s.seed)
-    _timed(timings, "correction", t)
-    labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
-    sm0 = None
-    if compare_original:
-        t = time.perf_counter()
-        s0 = s.updated(atlas_size=tm.atlas_size, texel_scale=tm.stats["texel_scale"], overflow="scale")
-        sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s0))
-        _timed(timings, "compare_original", t)
-    _timed(timings, "total", t_all)
+    originals = SceneImages(sc.views)  # read when a task needs them, released after
+    with use_executor(client):
+        with _stage("visibility", timings):
+            vis = compute_visibility(sc)
+        with _stage("mappings", timings):
+            maps = compute_mappings(sc, visibility=vis, mode=mappings)
+        with _stage("correction", timings):
+            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                          seed=s.seed)
+        labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
+        sm0 = None
+        if compare_original:
+            with _stage("compare_original", timings):
+                s0 = s.updated(atlas_size=tm.atlas_size, texel_scale=tm.stats["texel_scale"], overflow="scale")
+                sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s0))
+    timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
                      command="run", source=source, images_from="corrected")
@@ -424,8 +444,7 @@ class CorrectionRun:
         """
         t = time.perf_counter()
         with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage:
-            paths = [write_image(stage / "images" / f"{v.name}.png", img)
-                     for v, img in zip(self.scene.views, self.result.images)]
+            paths = _write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
@@ -443,6 +462,7 @@ def correct_scene(
     seed: int = 0,
     metrics: bool = True,
     mesh: str | os.PathLike | None = None,
+    client: Any = None,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
 
@@ -458,6 +478,8 @@ def correct_scene(
     metrics : bool, default True
         Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
+    client : dask.distributed.Client, optional
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
 
     Returns
     -------
@@ -470,11 +492,12 @@ def correct_scene(
     if reference != "auto":
         resolve_view(sc.names, reference)
     t = time.perf_counter()
-    maps = compute_mappings(sc, mode=mappings)
-    t_map = time.perf_counter() - t
-    originals = [v.load_image() for v in sc.views]
-    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=seed,
-                  graph_weight=graph_weight)
+    with use_executor(client):
+        maps = compute_mappings(sc, mode=mappings)
+        t_map = time.perf_counter() - t
+        originals = [v.load_image() for v in sc.views]
+        res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                      seed=seed, graph_weight=graph_weight)
     res.timings["mappings"] = t_map
     names = sc.names
     report: dict[str, Any] = {

@@ -24,7 +24,9 @@ __all__ = [
     "check_image_file",
     "atomic_write_bytes",
     "default_mode",
+    "encode_image",
     "find_file",
+    "image_dtype",
     "to_jsonable",
     "read_depth",
     "read_image",
@@ -246,16 +248,62 @@ def read_image(path: str | os.PathLike, *, allow_16bit: bool = True) -> np.ndarr
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
-def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
-    """Write an (H, W, 3) RGB uint8/uint16 image atomically (format from the suffix, PNG advised)."""
-    path = Path(path)
+def encode_image(image: np.ndarray, suffix: str = ".png") -> bytes:
+    """The bytes :func:`write_image` writes for an (H, W, 3) RGB uint8/uint16 image (format from ``suffix``)."""
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"write_image expects (H, W, 3) uint8/uint16, got {image.shape} {image.dtype}")
-    ok, buf = cv2.imencode(path.suffix or ".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    ok, buf = cv2.imencode(suffix or ".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
-        raise OSError(f"OpenCV could not encode {path}")
-    return atomic_write_bytes(path, buf.tobytes())
+        raise OSError(f"OpenCV could not encode a {suffix} image")
+    return buf.tobytes()
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
+    """Write an (H, W, 3) RGB uint8/uint16 image atomically (format from the suffix, PNG advised)."""
+    path = Path(path)
+    return atomic_write_bytes(path, encode_image(image, path.suffix or ".png"))
+
+
+_JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _jpeg_precision(head: bytes) -> int | None:
+    """Sample precision (bits) from a JPEG's start-of-frame segment, None when not found."""
+    i = 2
+    while i + 4 <= len(head):
+        if head[i] != 0xFF:
+            return None
+        marker = head[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        length = int.from_bytes(head[i + 2:i + 4], "big")
+        if marker in _JPEG_SOF:
+            return head[i + 4] if i + 4 < len(head) else None
+        i += 2 + length
+    return None
+
+
+def image_dtype(path: str | os.PathLike) -> np.dtype:
+    """The dtype :func:`read_image` returns for a file (uint8 or uint16), from its header when it can.
+
+    PNG (IHDR bit depth) and JPEG (start-of-frame precision) are read from their first bytes;
+    other formats are decoded.
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR" and len(head) > 24:
+        return np.dtype(np.uint16 if head[24] == 16 else np.uint8)
+    if head.startswith(b"\xff\xd8"):
+        bits = _jpeg_precision(head)
+        if bits == 8:
+            return np.dtype(np.uint8)
+    return read_image(path).dtype
 
 
 def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None) -> np.ndarray:
