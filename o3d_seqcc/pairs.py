@@ -192,7 +192,8 @@ def _packed(rows: list[np.ndarray], n: int) -> np.ndarray:
     return P.view(np.uint64)
 
 
-def shared_counts(rows: list[np.ndarray], n: int, weights: np.ndarray | None = None) -> np.ndarray:
+def shared_counts(rows: list[np.ndarray], n: int, weights: np.ndarray | None = None, *,
+                  method: str = "auto") -> np.ndarray:
     """(V, V) int64: per pair of rows, the (weighted) number of columns both hold.
 
     Parameters
@@ -203,6 +204,7 @@ def shared_counts(rows: list[np.ndarray], n: int, weights: np.ndarray | None = N
         Number of columns.
     weights : (n,) int array, optional
         Integer weight per column (default 1).
+    method : {"auto", "packed", "sparse"}, default "auto"
 
     Exact integers either way; the cheaper of two methods is used: bit-packed AND + popcount
     over every pair of rows (cost ~ V^2 n / 64) or the sparse product ``U diag(w) U^T`` (cost
@@ -218,7 +220,9 @@ def shared_counts(rows: list[np.ndarray], n: int, weights: np.ndarray | None = N
     levels = np.unique(weights[indices]) if weights is not None and len(indices) else np.array([1])
     dense_cost = V * (V + 1) / 2 * ((n + 63) // 64) * len(levels)
     sparse_cost = 8.0 * float((degree.astype(np.float64) ** 2).sum())
-    if sparse_cost < dense_cost:
+    if method not in ("auto", "packed", "sparse"):
+        raise ValueError(f"unknown method {method!r}; valid: 'auto', 'packed', 'sparse'")
+    if method == "sparse" or (method == "auto" and sparse_cost < dense_cost):
         from scipy.sparse import csr_matrix
 
         indptr = np.concatenate([[0], np.cumsum(lengths)])
@@ -284,7 +288,10 @@ class PairSource:
 
     def faces(self, a: int, b: int) -> np.ndarray:
         """(m,) int64 ascending faces usable in both views."""
-        return np.intersect1d(self.usable_faces(a), self.usable_faces(b), assume_unique=True)
+        ua, ub = self.usable_faces(a), self.usable_faces(b)
+        mark = np.zeros(self.vis.n_faces, dtype=bool)
+        mark[ua] = True
+        return ub[mark[ub]]
 
     def build(self, a: int, b: int) -> PairMapping:
         vis = self.vis

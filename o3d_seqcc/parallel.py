@@ -123,7 +123,8 @@ class DaskExecutor:
         done: dict[int, Any] = {}
         nxt = 0
         try:
-            for fut in track(as_completed(futures), desc=desc, total=len(futures), unit=unit):
+            done_order = as_completed(futures, loop=self.client.loop)
+            for fut in track(done_order, desc=desc, total=len(futures), unit=unit):
                 done[index[fut.key]] = fut.result()
                 futures[index[fut.key]] = None
                 while nxt in done:
@@ -193,19 +194,31 @@ def connect(address: str, *, timeout: float = 10.0, option: str = "--scheduler")
     InputError
         ``dask.distributed`` is not installed, or no scheduler answers at ``address``.
     """
+    import socket
+
     from distributed import Client
+    from distributed.comm.addressing import parse_address, parse_host_port
 
     address = str(address).strip()
-    if not address:
-        raise InputError(f"{option}: empty scheduler address; give tcp://HOST:8786")
+    hint = (f"start one with `dask scheduler` and workers with `dask worker {address}`, or drop {option} "
+            f"(and unset {SCHEDULER_ENV}) to run on this machine")
+    try:
+        scheme, loc = parse_address(address if "://" in address else f"tcp://{address}")
+        host, port = parse_host_port(loc)
+        if port is None:
+            raise ValueError(f"no port in {address!r}")
+    except (ValueError, TypeError) as e:
+        raise InputError(f"{option} {address!r}: not a scheduler address ({e}); give tcp://HOST:8786") from None
+    if scheme in ("tcp", "tls"):  # fail fast, before Dask's own retries, when nothing listens there
+        try:
+            socket.create_connection((host, int(port)), timeout=timeout).close()
+        except OSError as e:
+            raise InputError(f"{option} {address}: cannot reach a Dask scheduler ({e}); {hint}") from None
     try:
         client = Client(address, timeout=timeout, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as e:
-        raise InputError(
-            f"{option} {address}: no Dask scheduler answered within {timeout:g} s ({type(e).__name__}: {e}); "
-            f"start one with `dask scheduler` and workers with `dask worker {address}`, or drop {option} "
-            f"(and unset {SCHEDULER_ENV}) to run on this machine"
-        ) from None
+    except Exception as e:  # whatever answered is not a working scheduler
+        raise InputError(f"{option} {address}: no Dask scheduler answered within {timeout:g} s "
+                         f"({type(e).__name__}: {e}); {hint}") from None
     n = len(client.scheduler_info().get("workers", {}))
     logger.info("connected to the Dask scheduler at %s (%d workers)", address, n)
     if n == 0:

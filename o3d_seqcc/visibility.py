@@ -55,6 +55,7 @@ import numpy as np
 from .camera import project_columns, project_points
 from .depthmaps import depth_from_point_cloud
 from .errors import InputError, warn
+from .images import LRUCache
 from .meshops import oriented_face_normals
 from .parallel import current as current_executor
 from .scene import Mesh, load_mesh
@@ -75,7 +76,10 @@ logger = logging.getLogger(__name__)
 #: names of the filters of :func:`compute_visibility`
 FILTERS = ("occlusion", "depth", "oblique")
 
-_DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT")
+_DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT",
+          "_cache")
+#: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
+CACHE_BYTES = 256 * 2**20
 
 
 class UsableFaces:
@@ -192,10 +196,14 @@ class Visibility(UsableFaces):
         """(k,) int64 ascending ids of the faces valid in view ``v``."""
         return self.records[v].faces.astype(np.int64)
 
+    @cached_property
+    def _cache(self) -> LRUCache:
+        return LRUCache(CACHE_BYTES)
+
     def usable_faces(self, v: int) -> np.ndarray:
-        """(k,) int64 ascending ids of the faces usable in view ``v``."""
+        """(k,) int64 ascending ids of the faces usable in view ``v`` (cached; do not modify)."""
         r = self.records[v]
-        return r.faces[r.flags == 0].astype(np.int64)
+        return self._cache.get(("usable", v), lambda: r.faces[r.flags == 0].astype(np.int64))
 
     def usable_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every usable (view, face) incidence, view-major (CSR rows = views).
@@ -241,8 +249,15 @@ class Visibility(UsableFaces):
         ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
         if self.uv_table is not None:
             return self.uv_table[0][v][ids], self.uv_table[1][v][ids]
+        if 8 * len(ids) >= self._XT.shape[1]:  # a large share of the mesh: project it all once (cached)
+            uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
+            return uv[ids], z[ids]
+        return self._project(v, ids)
+
+    def _project(self, v: int, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         K, E = self.cameras
-        u, vv, z = project_columns(np.ascontiguousarray(self._XT[:, ids]), K[v], E[v])
+        XT = self._XT if ids is None else np.ascontiguousarray(self._XT[:, ids])
+        u, vv, z = project_columns(XT, K[v], E[v])
         return np.stack([u, vv], axis=1).astype(np.float32), z.astype(np.float32)
 
     def vertex_uv(self, v: int, vertex_ids: np.ndarray) -> np.ndarray:
