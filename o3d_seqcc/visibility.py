@@ -79,7 +79,7 @@ FILTERS = ("occlusion", "depth", "oblique")
 _DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT",
           "_cache")
 #: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
-CACHE_BYTES = 256 * 2**20
+CACHE_BYTES = 128 * 2**20
 
 
 class UsableFaces:
@@ -249,10 +249,17 @@ class Visibility(UsableFaces):
         ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
         if self.uv_table is not None:
             return self.uv_table[0][v][ids], self.uv_table[1][v][ids]
-        if 8 * len(ids) >= self._XT.shape[1]:  # a large share of the mesh: project it all once (cached)
+        n = self._XT.shape[1]
+        if 12 * n * self.n_views <= CACHE_BYTES:  # every view's whole projection fits the cache: keep them
             uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
             return uv[ids], z[ids]
-        return self._project(v, ids)
+        mark = np.zeros(n, dtype=bool)
+        mark[ids] = True
+        uniq = np.flatnonzero(mark)  # each vertex projected once
+        uv, z = self._project(v, uniq)
+        local = np.empty(n, dtype=np.int64)
+        local[uniq] = np.arange(len(uniq))
+        return uv[local[ids]], z[local[ids]]
 
     def _project(self, v: int, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         K, E = self.cameras

@@ -17,6 +17,7 @@ from o3d_seqcc.mappings import compute_mappings
 from o3d_seqcc.meshops import face_adjacency
 from o3d_seqcc.pairs import shared_counts
 from o3d_seqcc.texturing import select_views
+from o3d_seqcc import visibility
 from o3d_seqcc.view_visibility import CHUNK_FACES, VisibilityJob
 from o3d_seqcc.visibility import compute_visibility
 
@@ -54,7 +55,10 @@ def test_frustum_culling_gives_the_records_of_the_full_computation(wide_scene, m
         assert np.isin(vis.records[v].faces, cand).all()
 
 
-def test_records_are_sparse_and_match_their_dense_views(wide_scene):
+@pytest.mark.parametrize("cache", [True, False])
+def test_records_are_sparse_and_match_their_dense_views(wide_scene, cache, monkeypatch):
+    if not cache:  # projections of only the vertices asked for (the path of large meshes)
+        monkeypatch.setattr(visibility, "CACHE_BYTES", 0)
     vis = compute_visibility(wide_scene)
     st = vis.stats
     # 13 bytes per valid face-view incidence (id, filter bits, area, cosine), nothing per unseen face

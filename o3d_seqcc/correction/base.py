@@ -48,7 +48,7 @@ logger = logging.getLogger(__name__)
 #: name -> ``fn(ctx, **options) -> list[Transform]``
 METHODS: dict[str, Callable] = {}
 #: byte budget of a context's cache of the colours sampled at each pair's mappings
-COLOUR_CACHE_BYTES = 256 * 2**20
+COLOUR_CACHE_BYTES = 64 * 2**20
 
 
 def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:

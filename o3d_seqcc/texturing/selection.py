@@ -182,14 +182,16 @@ def _incident(pairs: np.ndarray, n_faces: int) -> tuple[np.ndarray, np.ndarray]:
     return ptr, (order // 2).astype(np.int64)
 
 
-def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Ascending unique pair ids incident to ``faces``."""
+def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray, mark: np.ndarray) -> np.ndarray:
+    """Ascending unique pair ids incident to ``faces`` (``mark``: an all-False (E,) scratch mask)."""
     n = ptr[faces + 1] - ptr[faces]
     if not n.sum():
         return np.zeros(0, np.int64)
     rows = np.repeat(ptr[faces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
-    x = np.sort(ids[rows])
-    return x[np.concatenate([[True], x[1:] != x[:-1]])]
+    mark[ids[rows]] = True
+    out = np.flatnonzero(mark)
+    mark[out] = False
+    return out
 
 
 @register_selection("mrf")
@@ -264,6 +266,7 @@ def _select_mrf(
     n_dis = int(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
     energy = float(cur_seen.sum()) + w * float(n_dis)  # = sum_f D_f(l_f) + w * transitions
     ptr, pair_ids = _incident(pairs, n_faces)
+    mark = np.zeros(len(pairs), dtype=bool)
     logger.debug("mrf: start energy %.1f, %d transitions", energy, n_dis)
     pos = np.empty(n_faces, dtype=np.int64)
     free = np.zeros(n_faces, dtype=bool)
@@ -281,7 +284,7 @@ def _select_mrf(
             pos[fidx] = np.arange(nfree)
             free[fidx] = True
             lp_all = labels
-            inc = pairs[_gather(ptr, pair_ids, fidx)]  # every pair with a free face, in pair order
+            inc = pairs[_gather(ptr, pair_ids, fidx, mark)]  # every pair with a free face, in pair order
             # unary costs of keeping (x=0) / switching to alpha (x=1)
             cost0 = cur[fidx].copy()
             cost1 = d_alpha.copy()
@@ -314,21 +317,21 @@ def _select_mrf(
             switch = np.asarray(g.get_grid_segments(np.asarray(nodes)), dtype=bool)
             if switch.any():
                 sw = fidx[switch]
-                touched = pairs[_gather(ptr, pair_ids, sw)]
+                touched = pairs[_gather(ptr, pair_ids, sw, mark)]
                 before = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
-                old = labels[sw].copy()
+                old, old_cost = labels[sw].copy(), cur_seen[seen_pos[sw]]
                 labels[sw] = alpha
+                cur_seen[seen_pos[sw]] = d_alpha[switch]
                 after = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
-                new_seen = cur_seen.copy()
-                new_seen[seen_pos[sw]] = d_alpha[switch]
                 n_dis_new = n_dis - before + after
-                e_new = float(new_seen.sum()) + w * float(n_dis_new)
+                e_new = float(cur_seen.sum()) + w * float(n_dis_new)  # the full sum: the same float as before
                 if e_new < energy - 1e-9:
-                    energy, n_dis, cur_seen = e_new, n_dis_new, new_seen
+                    energy, n_dis = e_new, n_dis_new
                     cur[sw] = d_alpha[switch]
                     changed += int(switch.sum())
                 else:
                     labels[sw] = old
+                    cur_seen[seen_pos[sw]] = old_cost
         logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
         if changed == 0:
             break
