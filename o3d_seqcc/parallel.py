@@ -65,6 +65,15 @@ class LocalExecutor:
         """The object itself (threads share memory)."""
         return obj
 
+    def threads(self) -> int:
+        """The number of threads ``n_jobs`` stands for (the active ``joblib.parallel_config`` when None)."""
+        from joblib import cpu_count
+        from joblib.parallel import get_active_backend
+
+        n = self.n_jobs if self.n_jobs is not None else get_active_backend()[1]
+        n = 1 if n is None else int(n)
+        return max(1, cpu_count() + 1 + n if n < 0 else n)
+
     def imap(self, fn: Callable, items: Sequence, *args: Any, desc: str = "tasks", unit: str = "task") -> Iterator:
         """``fn(item, *args)`` for every item, yielded in the order of ``items``."""
         from joblib import Parallel, delayed
@@ -72,7 +81,8 @@ class LocalExecutor:
         items = list(items)
         if not items:
             return iter(())
-        gen = Parallel(n_jobs=self.n_jobs, prefer="threads", return_as="generator")(
+        # n_jobs resolved here: joblib's Parallel(n_jobs=None, prefer="threads") ignores parallel_config's n_jobs
+        gen = Parallel(n_jobs=self.threads(), prefer="threads", return_as="generator")(
             delayed(fn)(item, *args) for item in items)
         return iter(track(gen, desc=desc, total=len(items), unit=unit))
 

@@ -84,6 +84,22 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
     return s
 
 
+def _import_in_background(*modules: str) -> None:
+    """Import slow third-party modules in a daemon thread while this one works (scikit-learn takes
+    about a second; Python's import locks make the later ``import`` wait for it, never run it twice)."""
+    import importlib
+    import threading
+
+    def load() -> None:
+        for m in modules:
+            try:
+                importlib.import_module(m)
+            except Exception:  # the real import, later, reports it
+                return
+
+    threading.Thread(target=load, name="o3d_seqcc-imports", daemon=True).start()
+
+
 def _encode_view(i: int, images) -> bytes:
     return encode_image(np.asarray(images[i]), ".png")
 
@@ -393,6 +409,7 @@ def run(
     if reference != "auto":
         resolve_view(sc.names, reference)
     originals = SceneImages(sc.views)  # read when a task needs them, released after
+    _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc)
