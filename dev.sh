@@ -75,7 +75,7 @@ setup_python() {
   log "installing o3d_seqcc and its dependencies into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
   "$VENV/bin/python" -m pip install -q -e ".[test]" 2>&1 | grep -v '^WARNING: Location' || true
-  "$VENV/bin/python" -c "import o3d_seqcc, open3d, pymeshlab, cv2, sklearn, xatlas" || { log "install failed"; exit 1; }
+  "$VENV/bin/python" -c "import o3d_seqcc, open3d, pymeshlab, cv2, sklearn, xatlas, distributed" || { log "install failed"; exit 1; }
   echo "$want" > "$stamp"
 }
 

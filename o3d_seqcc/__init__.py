@@ -103,9 +103,10 @@ _LAZY: dict[str, str] = {
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
-    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "io",
-    "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "photometric", "pipeline", "render", "report",
-    "scene", "seams", "semireal", "synthetic", "texturing", "visibility",
+    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops",
+    "images", "io", "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "parallel", "photometric",
+    "pipeline", "render", "report", "scene", "seams", "semireal", "synthetic", "texturing", "view_visibility",
+    "visibility",
 })
 
 __all__ = [

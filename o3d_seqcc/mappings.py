@@ -6,9 +6,11 @@ every face that is valid and unfiltered in both views (``mode="vertices"``); ``m
 additionally samples points inside each face (sub-triangle centroids) whose number adapts to the
 face's projected size (more observations for small overlaps).
 
-Storage is lazy: :func:`compute_mappings` keeps the per-view usable-face masks and builds a
-pair's arrays when ``mappings.pairs[(a, b)]`` is read (a few milliseconds; the last
-``cache_size`` pairs are cached). Counts are computed up front (bit-packed AND + popcount).
+Storage is lazy: :func:`compute_mappings` keeps the per-view sparse visibility records and builds
+a pair's arrays when ``mappings.pairs[(a, b)]`` is read (a few milliseconds; the last
+``cache_size`` pairs are cached). Counts are computed up front
+(:func:`~o3d_seqcc.pairs.shared_counts`: bit-packed AND + popcount, or a sparse product for
+many views).
 Mappings are written to and read from ``.npz`` files by :mod:`o3d_seqcc.io.mappings_npz`.
 
 Pixel coordinates follow the package convention: x right, y down, pixel centres at integers.
@@ -177,10 +179,9 @@ class Mappings:
         """Sorted unique face ids present in any pair."""
         if isinstance(self.pairs, LazyPairs):
             src = self.pairs.source
-            U = src.usable()
-            seen = np.zeros(U.shape[1], dtype=bool)
+            seen = np.zeros(src.vis.n_faces, dtype=bool)
             for a, b in self.pairs:
-                seen |= U[a] & U[b]
+                seen[src.faces(a, b)] = True
             return np.flatnonzero(seen)
         if not self.pairs:
             return np.zeros(0, np.int64)
@@ -238,6 +239,16 @@ class Mappings:
 # --------------------------------------------------------------------------------------------
 # computation
 # --------------------------------------------------------------------------------------------
+
+
+def _max_usable_area(vis) -> np.ndarray:
+    """(F,) float32: every face's largest projected area over the views where it is usable (0 if none)."""
+    out = np.zeros(vis.n_faces, dtype=np.float32)
+    if hasattr(vis, "usable_entries"):
+        _, faces, area, _ = vis.usable_entries()
+        np.maximum.at(out, faces, area)
+        return out
+    return np.where(vis.usable, vis.area, 0.0).max(axis=0).astype(np.float32)
 
 
 def compute_mappings(
@@ -306,7 +317,7 @@ def compute_mappings(
     if mode == "dense":
         if dense_spacing <= 0:
             raise ValueError(f"dense_spacing must be > 0, got {dense_spacing}")
-        max_area = np.where(visibility.usable, visibility.area, 0.0).max(axis=0) if visibility.n_views else None
+        max_area = _max_usable_area(visibility)
         level = np.clip(np.ceil(np.sqrt(2.0 * max_area.astype(np.float64)) / dense_spacing), 1, int(dense_max_level))
         level = level.astype(np.int64)
     src = PairSource(visibility, mode, level, None)

@@ -7,9 +7,11 @@ a large projection); see :func:`o3d_seqcc.visibility.compute_visibility`.
 
 from __future__ import annotations
 
+from typing import Any, Callable
+
 import numpy as np
 
-__all__ = ["bary_grid", "occluded_faces"]
+__all__ = ["bary_grid", "occluded_view"]
 
 
 def bary_grid(level: int, *, interior_only: bool) -> np.ndarray:
@@ -22,83 +24,81 @@ def bary_grid(level: int, *, interior_only: bool) -> np.ndarray:
     return w
 
 
-def occluded_faces(mesh, geom, views, areas: np.ndarray, fn_ok: np.ndarray, opts) -> tuple[np.ndarray, int]:
-    """(V, F) occluded mask via any-hit ray queries; returns also the number of rays cast."""
-    import open3d as o3d
+def _rays_to(C: np.ndarray, P: np.ndarray, tol: float, atol: float) -> np.ndarray:
+    """(n, 6) float32 rays from ``C`` toward the points ``P``, scaled so that ``t = 1`` is the first
+    distance that counts as "in front of the point" (``d * (1 - tol) - atol``)."""
+    d = P - C[None, :]
+    dist = np.linalg.norm(d, axis=1, keepdims=True)
+    reach = np.maximum(dist * (1.0 - tol) - atol, 0.0)
+    d = d * np.divide(reach, dist, out=np.zeros_like(dist), where=dist > 0)
+    return np.concatenate([np.broadcast_to(C, d.shape), d], axis=1).astype(np.float32)
+
+
+def _hidden(rs, rays: np.ndarray) -> np.ndarray:
+    """Any-hit test of every ray on ``[0, 1]`` (in batches of 4M rays)."""
     import open3d.core as o3c
 
-    X = mesh.vertices
-    faces = mesh.faces
-    V, F = len(views), len(faces)
-    rs = o3d.t.geometry.RaycastingScene()
-    rs.add_triangles(
-        o3c.Tensor(np.ascontiguousarray(X, dtype=np.float32)),
-        o3c.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)),
-    )
+    out = np.empty(len(rays), dtype=bool)
+    step = 1 << 22
+    for s in range(0, len(rays), step):
+        out[s : s + step] = rs.test_occlusions(o3c.Tensor(rays[s : s + step]), tnear=0.0, tfar=1.0).numpy()
+    return out
+
+
+def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray, center: np.ndarray,
+                  front: np.ndarray, area: np.ndarray, opts: dict) -> tuple[np.ndarray, int]:
+    """Which of a view's front-facing valid faces are hidden by the mesh.
+
+    Parameters
+    ----------
+    raycaster : callable
+        Returns the mesh's (committed) ``open3d.t.geometry.RaycastingScene``; called only
+        when there are rays to cast.
+    X : (N, 3) float64
+        Mesh vertices.
+    faces : (F, 3) int64
+    center : (3,) float64
+        Camera centre.
+    front : (m,) int
+        Ascending ids of the faces to test.
+    area : (m,) float32
+        Their projected areas in px^2.
+    opts : dict
+        ``occlusion_tol``, ``occlusion_atol``, ``occlusion_spacing``, ``occlusion_max_level``.
+
+    Returns
+    -------
+    occluded : (m,) bool
+    n_rays : int
+    """
+    occluded = np.zeros(len(front), dtype=bool)
+    if not len(front):
+        return occluded, 0
     tol, atol = float(opts["occlusion_tol"]), float(opts["occlusion_atol"])
-
-    def rays_to(C: np.ndarray, P: np.ndarray) -> np.ndarray:
-        d = P - C[None, :]
-        dist = np.linalg.norm(d, axis=1, keepdims=True)
-        # scale so that t = 1 is the first distance that counts as "in front of the point"
-        reach = np.maximum(dist * (1.0 - tol) - atol, 0.0)
-        d = d * np.divide(reach, dist, out=np.zeros_like(dist), where=dist > 0)
-        return np.concatenate([np.broadcast_to(C, d.shape), d], axis=1).astype(np.float32)
-
-    def hidden(rays: list[np.ndarray]) -> np.ndarray:
-        if not rays:
-            return np.zeros(0, bool)
-        allr = np.concatenate(rays)
-        out = np.empty(len(allr), dtype=bool)
-        step = 1 << 22
-        for s in range(0, len(allr), step):
-            out[s : s + step] = rs.test_occlusions(o3c.Tensor(allr[s : s + step]), tnear=0.0, tfar=1.0).numpy()
-        return out
-
-    # 1) vertices of the faces to test, all views in one batch
-    rays, vids = [], []
-    for v, view in enumerate(views):
-        need = np.zeros(len(X), dtype=bool)
-        need[faces[fn_ok[v]].ravel()] = True
-        ids = np.flatnonzero(need)
-        vids.append(ids)
-        rays.append(rays_to(view.center, X[ids]))
-    hid = hidden(rays)
+    rs = raycaster()
+    # 1) the vertices of the faces
+    need = np.zeros(len(X), dtype=bool)
+    tri = faces[front]
+    need[tri.ravel()] = True
+    ids = np.flatnonzero(need)
+    hid = _hidden(rs, _rays_to(center, X[ids], tol, atol))
     n_rays = len(hid)
-    occluded = np.zeros((V, F), dtype=bool)
-    off = 0
-    for v in range(V):
-        ids = vids[v]
-        vh = np.zeros(len(X), dtype=bool)
-        vh[ids] = hid[off : off + len(ids)]
-        off += len(ids)
-        occluded[v] = fn_ok[v] & geom.any3(vh)
+    vh = np.zeros(len(X), dtype=bool)
+    vh[ids] = hid
+    occluded = vh[tri[:, 0]] | vh[tri[:, 1]] | vh[tri[:, 2]]
     # 2) interior points of faces with a large projection
     spacing = float(opts["occlusion_spacing"])
     if spacing > 0:
-        rays, owners = [], []
-        for v, view in enumerate(views):
-            area = areas[v]
-            big = np.flatnonzero(fn_ok[v] & ~occluded[v] & (area > 2.0 * spacing**2))
-            if not len(big):
-                owners.append((v, big, None))
-                continue
+        big = np.flatnonzero(~occluded & (area > 2.0 * spacing**2))
+        if len(big):
             level = np.clip(np.ceil(np.sqrt(2.0 * area[big]) / spacing), 2, opts["occlusion_max_level"]).astype(int)
             pts, own = [], []
             for L in np.unique(level):  # at most occlusion_max_level groups
                 sel = big[level == L]
                 w = bary_grid(int(L), interior_only=True)  # (m, 3)
-                tri = X[faces[sel]]  # (k, 3, 3)
-                pts.append(np.einsum("mj,kjc->kmc", w, tri).reshape(-1, 3))
+                pts.append(np.einsum("mj,kjc->kmc", w, X[tri[sel]]).reshape(-1, 3))
                 own.append(np.repeat(sel, len(w)))
-            P = np.concatenate(pts)
-            owners.append((v, np.concatenate(own), None))
-            rays.append(rays_to(view.center, P))
-        hid = hidden(rays)
-        n_rays += len(hid)
-        off = 0
-        for v, own, _ in owners:
-            h = hid[off : off + len(own)]
-            off += len(own)
-            occluded[v, own[h]] = True
+            hid = _hidden(rs, _rays_to(center, np.concatenate(pts), tol, atol))
+            n_rays += len(hid)
+            occluded[np.concatenate(own)[hid]] = True
     return occluded, n_rays

@@ -1,7 +1,8 @@
 """One pair of views' mappings, and the lazy machinery that builds them from a visibility.
 
 :class:`PairMapping` holds the mappings between two views; :class:`PairSource` builds them on
-demand from the per-view usable-face masks of a :class:`~o3d_seqcc.visibility.Visibility`
+demand from the two views' sparse records of a :class:`~o3d_seqcc.visibility.Visibility` (the
+faces usable in both, their corners projected from the cameras)
 (vertex mode: the three vertices of every face usable in both views; dense mode: a fixed
 barycentric pattern per subdivision level, perspective-correct), and :class:`LazyPairs` is the
 read-only ``{(a, b): PairMapping}`` that builds a pair when it is read (LRU-cached).
@@ -17,7 +18,7 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
-__all__ = ["LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key"]
+__all__ = ["LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key", "shared_counts"]
 
 Pair = tuple[int, int]
 
@@ -179,22 +180,73 @@ def _bary_table(max_level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.concatenate(rows), start, count
 
 
-def _shared_counts(U: np.ndarray) -> np.ndarray:
-    """(V, V) int64 number of columns where both rows of the (V, F) bool matrix are True."""
-    V, F = U.shape
-    P = np.packbits(U, axis=1)
-    pad = (-P.shape[1]) % 8
-    if pad:
-        P = np.concatenate([P, np.zeros((V, pad), np.uint8)], axis=1)
-    P = np.ascontiguousarray(P).view(np.uint64)
+def _packed(rows: list[np.ndarray], n: int) -> np.ndarray:
+    """(V, ceil(n / 64)) uint64 bit rows of the index lists ``rows`` over ``n`` columns."""
+    words = (n + 63) // 64
+    P = np.zeros((len(rows), words * 8), dtype=np.uint8)
+    row = np.zeros(n, dtype=bool)
+    for v, ids in enumerate(rows):
+        row[:] = False
+        row[ids] = True
+        P[v, : (n + 7) // 8] = np.packbits(row)
+    return P.view(np.uint64)
+
+
+def shared_counts(rows: list[np.ndarray], n: int, weights: np.ndarray | None = None, *,
+                  method: str = "auto") -> np.ndarray:
+    """(V, V) int64: per pair of rows, the (weighted) number of columns both hold.
+
+    Parameters
+    ----------
+    rows : list of (k_v,) int arrays
+        Ascending column ids of every row (e.g. the faces usable in every view).
+    n : int
+        Number of columns.
+    weights : (n,) int array, optional
+        Integer weight per column (default 1).
+    method : {"auto", "packed", "sparse"}, default "auto"
+
+    Exact integers either way; the cheaper of two methods is used: bit-packed AND + popcount
+    over every pair of rows (cost ~ V^2 n / 64) or the sparse product ``U diag(w) U^T`` (cost
+    ~ the sum over columns of their row count squared, which stays linear in the views when each
+    column is held by a bounded number of rows, as in a large site).
+    """
+    V = len(rows)
+    if V == 0:
+        return np.zeros((0, 0), dtype=np.int64)
+    lengths = np.array([len(r) for r in rows], dtype=np.int64)
+    indices = np.concatenate(rows).astype(np.int64) if lengths.sum() else np.zeros(0, np.int64)
+    degree = np.bincount(indices, minlength=n)
+    levels = np.unique(weights[indices]) if weights is not None and len(indices) else np.array([1])
+    dense_cost = V * (V + 1) / 2 * ((n + 63) // 64) * len(levels)
+    sparse_cost = 8.0 * float((degree.astype(np.float64) ** 2).sum())
+    if method not in ("auto", "packed", "sparse"):
+        raise ValueError(f"unknown method {method!r}; valid: 'auto', 'packed', 'sparse'")
+    if method == "sparse" or (method == "auto" and sparse_cost < dense_cost):
+        from scipy.sparse import csr_matrix
+
+        indptr = np.concatenate([[0], np.cumsum(lengths)])
+        w = np.ones(len(indices), np.int64) if weights is None else np.asarray(weights, np.int64)[indices]
+        U = csr_matrix((w, indices, indptr), shape=(V, n))
+        B = csr_matrix((np.ones(len(indices), np.int64), indices, indptr), shape=(V, n))
+        return np.asarray((U @ B.T).toarray(), dtype=np.int64)
     C = np.zeros((V, V), dtype=np.int64)
-    for a in range(V):
-        C[a, a:] = np.bitwise_count(P[a] & P[a:]).sum(axis=1, dtype=np.int64)
-    return np.triu(C) + np.triu(C, 1).T
+    for L in levels:
+        sub = rows if weights is None else [r[weights[r] == L] for r in rows]
+        P = _packed(sub, n)
+        part = np.zeros((V, V), dtype=np.int64)
+        for a in range(V):
+            part[a, a:] = np.bitwise_count(P[a] & P[a:]).sum(axis=1, dtype=np.int64)
+        C += int(L) * (np.triu(part) + np.triu(part, 1).T)
+    return C
 
 
 class PairSource:
-    """Builds the mappings of one pair from a :class:`~o3d_seqcc.visibility.Visibility`."""
+    """Builds the mappings of one pair from the per-view usable faces of a visibility.
+
+    ``vis`` is a :class:`~o3d_seqcc.visibility.Visibility` (or anything with ``n_views``,
+    ``n_faces``, ``mesh``, ``usable_faces(v)`` and ``vertex_projection(v, vertex_ids)``).
+    """
 
     def __init__(self, vis, mode: str, level: np.ndarray | None, face_mask: np.ndarray | None) -> None:
         self.vis = vis
@@ -206,9 +258,17 @@ class PairSource:
         else:
             self.count = np.array([0, 3])
 
+    def usable_faces(self, v: int) -> np.ndarray:
+        """(k,) int64 ascending faces usable in view ``v`` (within the face mask)."""
+        ids = self.vis.usable_faces(v)
+        return ids if self.face_mask is None else ids[self.face_mask[ids]]
+
     def usable(self) -> np.ndarray:
-        u = self.vis.usable
-        return u if self.face_mask is None else (u & self.face_mask[None, :])
+        """(V, F) bool usable faces within the face mask (dense: small scenes only)."""
+        U = np.zeros((self.vis.n_views, self.vis.n_faces), dtype=bool)
+        for v in range(self.vis.n_views):
+            U[v, self.usable_faces(v)] = True
+        return U
 
     def per_face(self) -> np.ndarray:
         F = self.vis.n_faces
@@ -217,30 +277,29 @@ class PairSource:
         return self.count[self.level]
 
     def counts(self) -> dict[Pair, int]:
-        U = self.usable()
+        rows = [self.usable_faces(v) for v in range(self.vis.n_views)]
         if self.mode == "vertices":
-            C = 3 * _shared_counts(U)
+            C = 3 * shared_counts(rows, self.vis.n_faces)
         else:
-            C = np.zeros((U.shape[0], U.shape[0]), dtype=np.int64)
-            for L in np.unique(self.level):
-                C += int(self.count[L]) * _shared_counts(U & (self.level == L)[None, :])
-        a, b = np.triu_indices(U.shape[0], k=1)
+            C = shared_counts(rows, self.vis.n_faces, weights=self.count[self.level])
+        a, b = np.triu_indices(len(rows), k=1)
         c = C[a, b]
         return {(int(i), int(j)): int(n) for i, j, n in zip(a, b, c) if n > 0}
 
     def faces(self, a: int, b: int) -> np.ndarray:
-        both = self.vis.usable[a] & self.vis.usable[b]
-        if self.face_mask is not None:
-            both &= self.face_mask
-        return np.flatnonzero(both)
+        """(m,) int64 ascending faces usable in both views."""
+        ua, ub = self.usable_faces(a), self.usable_faces(b)
+        mark = np.zeros(self.vis.n_faces, dtype=bool)
+        mark[ua] = True
+        return ub[mark[ub]]
 
     def build(self, a: int, b: int) -> PairMapping:
         vis = self.vis
         k = self.faces(a, b)
-        tri = vis.mesh.faces[k]  # (m, 3)
+        tri = np.asarray(vis.mesh.faces)[k]  # (m, 3)
         if self.mode == "vertices":
-            uv_a = vis.uv[a][tri].reshape(-1, 2)
-            uv_b = vis.uv[b][tri].reshape(-1, 2)
+            uv_a = vis.vertex_projection(a, tri.reshape(-1))[0]
+            uv_b = vis.vertex_projection(b, tri.reshape(-1))[0]
             return PairMapping(a, b, uv_a, uv_b, np.repeat(k, 3))
         # dense: faces grouped by level; per level the samples are a fixed barycentric pattern
         lev = self.level[k]
@@ -258,8 +317,9 @@ class PairSource:
             Wl = self.table[self.start[L] : self.start[L] + self.count[L]]  # (p, 3)
             t = tri[s0:s1]
             for v in (a, b):
-                z = vis.depth[v][t].astype(np.float64)  # (m, 3)
-                uvz = vis.uv[v][t].astype(np.float64) * z[:, :, None]  # (m, 3, 2)
+                uv_v, z_v = vis.vertex_projection(v, t.reshape(-1))
+                z = z_v.reshape(-1, 3).astype(np.float64)  # (m, 3)
+                uvz = uv_v.reshape(-1, 3, 2).astype(np.float64) * z[:, :, None]  # (m, 3, 2)
                 num = np.zeros((len(t), len(Wl), 2))
                 den = np.zeros((len(t), len(Wl)))
                 for j in range(3):

@@ -13,6 +13,12 @@ user and the command line get byte-identical files for the same scene and option
     res = sc.pipeline.run("scene.json", reference="auto")          # defaults = the CLI's
     res.save("out/")                                               # mesh.glb, mesh.obj, report.json ...
     res.textured.to_open3d()                                       # an Open3D textured mesh
+
+The work runs as tasks (:mod:`o3d_seqcc.parallel`): visibility per view, mappings + joint
+histogram + CMF fit per graph edge, image encoding per view, on local threads or, with
+``client=`` (a ``dask.distributed.Client``), on a Dask cluster; lookup-table composition,
+view selection, the atlas and the export run here. Images are read when a stage needs them
+(:class:`~o3d_seqcc.images.SceneImages`), never all at once.
 """
 
 from __future__ import annotations
@@ -29,16 +35,19 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
-from .errors import InputError, warn
+from .errors import InputError
 from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
-from .io.files import atomic_write_bytes, write_image, write_json
+from .images import SceneImages
+from .io.files import atomic_write_bytes, write_json
 from .io.load import load_scene, save_scene
-from .io.meshlab import save_mlp
+from .io.result_files import meshlab_project, scene_paths, write_images
 from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import before_after
 from .orientation import UP_AXES, up_axis_transform
+from .parallel import use as use_executor
+from .progress import stage as _stage
 from .render import write_selection_picture
 from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
 from .report.figures import warm_up
@@ -94,8 +103,20 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
     return s
 
 
-def _timed(timings: dict[str, float], name: str, t0: float) -> None:
-    timings[name] = time.perf_counter() - t0
+def _import_in_background(*modules: str) -> None:
+    """Import slow third-party modules in a daemon thread while this one works (scikit-learn takes
+    about a second; Python's import locks make the later ``import`` wait for it, never run it twice)."""
+    import importlib
+    import threading
+
+    def load() -> None:
+        for m in modules:
+            try:
+                importlib.import_module(m)
+            except Exception:  # the real import, later, reports it
+                return
+
+    threading.Thread(target=load, name="o3d_seqcc-imports", daemon=True).start()
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,8 +126,10 @@ class RunResult:
     Attributes
     ----------
     scene : Scene
-    images : list of (H, W, 3) arrays
-        The images the mesh was textured with (corrected by :func:`run`).
+    images : sequence of (H, W, 3) arrays
+        The images the mesh was textured with (corrected by :func:`run`); lazy (an
+        :class:`~o3d_seqcc.images.ImageSequence`: each access reads and corrects the view's
+        image) unless a list was given.
     visibility : Visibility
     selection : (F,) int64
         View per face, -1 = seen by no view.
@@ -160,7 +183,7 @@ class RunResult:
         """
         s = self.settings
         names = self.scene.names
-        rep: dict[str, Any] = {"command": self.command, "scene": self.source, **_scene_paths(self.scene),
+        rep: dict[str, Any] = {"command": self.command, "scene": self.source, **scene_paths(self.scene),
                                "images": self.images_from}
         if self.correction is not None:
             res = self.correction
@@ -258,7 +281,8 @@ class RunResult:
         t = time.perf_counter()
         table2 = report and self.correction is not None and self.mappings is not None and self.originals is not None
         with ThreadPoolExecutor(max_workers=1) as pool, \
-                output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage:
+                output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage, \
+                _stage("export"):
             # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
             # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
             prelude = pool.submit(self._report_prelude, table2) if report else None
@@ -276,12 +300,11 @@ class RunResult:
                 written["selection_png"] = picture[0]
             rasters = None
             if save_images:
-                rasters = [write_image(stage / "images" / f"{v.name}.png", img)
-                           for v, img in zip(self.scene.views, self.images)]
+                rasters = write_images(stage / "images", self.scene.views, self.images)
                 written["images"] = stage / "images"
             # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
             layer = stage / "mesh_meshlab.ply"
-            project = _meshlab_project(self.scene, stage, mesh=layer, images=rasters)
+            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters)
             if project is not None:
                 written["meshlab_project"] = project
                 reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
@@ -314,44 +337,18 @@ class RunResult:
                             max_per_pair=METRICS_MAX_PER_PAIR)
 
 
-def _scene_paths(scene: Scene) -> dict[str, str]:
-    """Absolute paths of the scene and its mesh files (what ``o3d-seqcc report`` reloads), when on disk."""
-    out = {}
-    if scene.source is not None:
-        out["scene_path"] = str(Path(scene.source).resolve())
-    if isinstance(scene.mesh, Path):
-        out["mesh"] = str(scene.mesh.resolve())
-    return out
-
-
-def _meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: list | None) -> Path | None:
-    """``folder/project.mlp``: the mesh layer and the rasters, so MeshLab opens the result as it opened the input.
-
-    ``images`` default to the scene's own; a camera MeshLab cannot represent (skew) leaves the
-    project out, with a warning.
-    """
-    try:
-        return save_mlp(scene, folder / "project.mlp", mesh=mesh, images=images)
-    except InputError as e:
-        warn(f"no MeshLab project written: {e}")
-        return None
-
-
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
-    t = time.perf_counter()
     mesh = vis.mesh
-    adjacency = face_adjacency(mesh.faces, mesh.vertices)
-    opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
-    labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
-    _timed(timings, "selection", t)
-    t = time.perf_counter()
-    tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
-    _timed(timings, "bake", t)
+    with _stage("selection", timings):
+        adjacency = face_adjacency(mesh.faces, mesh.vertices)
+        opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
+        labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
+    with _stage("bake", timings):
+        tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
     seams = None
     if want_seams:
-        t = time.perf_counter()
-        seams = seam_metric(tm)
-        _timed(timings, "seams", t)
+        with _stage("seams", timings):
+            seams = seam_metric(tm)
     return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
 
 
@@ -362,6 +359,7 @@ def texture(
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
     seams: bool = True,
+    client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
     """Texture the mesh from the scene's images (or ``images``): selection, atlas, seam metric.
@@ -378,6 +376,8 @@ def texture(
         Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
     seams : bool, default True
         Compute the seam metric of the result.
+    client : dask.distributed.Client, optional
+        Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
     **texture_options
         Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
         ``atlas_size=4096``, ...).
@@ -391,19 +391,17 @@ def texture(
     t_all = time.perf_counter()
     s = _settings(settings, texture_options)
     sc = _as_scene(scene, mesh)
-    t = time.perf_counter()
     if images is None:
-        imgs = [v.load_image() for v in sc.views]
+        imgs = SceneImages(sc.views)  # read when the bake needs them
     else:
         imgs = list(images)
         if len(imgs) != len(sc.views):
             raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
-    _timed(timings, "load_images", t)
-    t = time.perf_counter()
-    vis = compute_visibility(sc)
-    _timed(timings, "visibility", t)
-    labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
-    _timed(timings, "total", t_all)
+    with use_executor(client):
+        with _stage("visibility", timings):
+            vis = compute_visibility(sc)
+        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
+    timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, seams=sm, timings=timings, command="texture", source=source,
                      images_from="scene" if images is None else "given")
@@ -419,6 +417,7 @@ def run(
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
     seams: bool = True, compare_original: bool = False,
+    client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
     """Colour-correct every view toward a reference, then texture the mesh with the corrected images.
@@ -443,6 +442,10 @@ def run(
         Compute the seam metric of the result.
     compare_original : bool, default False
         Also bake the uncorrected images (in memory) and report their seam metric.
+    client : dask.distributed.Client, optional
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
+        scene's files must be readable at the same paths on every worker); default local
+        threads (``joblib.parallel_config``). The outputs are identical either way.
     **texture_options
         Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection``, ``atlas_size``,
         ``seed``, ...); ``seed`` also seeds the correction.
@@ -467,26 +470,23 @@ def run(
     sc = _as_scene(scene, mesh)
     if reference != "auto":
         resolve_view(sc.names, reference)
-    t = time.perf_counter()
-    vis = compute_visibility(sc)
-    _timed(timings, "visibility", t)
-    t = time.perf_counter()
-    maps = compute_mappings(sc, visibility=vis, mode=mappings)
-    _timed(timings, "mappings", t)
-    t = time.perf_counter()
-    originals = [v.load_image() for v in sc.views]
-    _timed(timings, "load_images", t)
-    t = time.perf_counter()
-    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=s.seed)
-    _timed(timings, "correction", t)
-    labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
-    sm0 = None
-    if compare_original:
-        t = time.perf_counter()
-        # the same settings pack the same charts (they do not depend on the images) into the same atlas
-        sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
-        _timed(timings, "compare_original", t)
-    _timed(timings, "total", t_all)
+    originals = SceneImages(sc.views)  # read when a task needs them, released after
+    _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
+    with use_executor(client):
+        with _stage("visibility", timings):
+            vis = compute_visibility(sc)
+        with _stage("mappings", timings):
+            maps = compute_mappings(sc, visibility=vis, mode=mappings)
+        with _stage("correction", timings):
+            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                          seed=s.seed)
+        labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
+        sm0 = None
+        if compare_original:
+            with _stage("compare_original", timings):
+                # the same settings pack the same charts (they do not depend on the images) into the same atlas
+                sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
+    timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
                      command="run", source=source, images_from="corrected", originals=originals)
@@ -525,13 +525,12 @@ class CorrectionRun:
         """
         t = time.perf_counter()
         with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage:
-            paths = [write_image(stage / "images" / f"{v.name}.png", img)
-                     for v, img in zip(self.scene.views, self.result.images)]
+            paths = write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
             save_scene(self.scene.replace_images(paths), stage / "scene.json")
-            _meshlab_project(self.scene, stage, mesh=None, images=paths)
+            meshlab_project(self.scene, stage, mesh=None, images=paths)
             if report:
                 t = time.perf_counter()
                 write_report(self, stage / REPORT_FILE, report=rep)
@@ -548,6 +547,7 @@ def correct_scene(
     seed: int = 0,
     metrics: bool = True,
     mesh: str | os.PathLike | None = None,
+    client: Any = None,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
 
@@ -563,6 +563,8 @@ def correct_scene(
     metrics : bool, default True
         Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
+    client : dask.distributed.Client, optional
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
 
     Returns
     -------
@@ -575,15 +577,16 @@ def correct_scene(
     if reference != "auto":
         resolve_view(sc.names, reference)
     t = time.perf_counter()
-    maps = compute_mappings(sc, mode=mappings)
-    t_map = time.perf_counter() - t
-    originals = [v.load_image() for v in sc.views]
-    res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals, seed=seed,
-                  graph_weight=graph_weight)
+    with use_executor(client):
+        maps = compute_mappings(sc, mode=mappings)
+        t_map = time.perf_counter() - t
+        originals = [v.load_image() for v in sc.views]
+        res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                      seed=seed, graph_weight=graph_weight)
     res.timings["mappings"] = t_map
     names = sc.names
     report: dict[str, Any] = {
-        "command": "correct", "scene": str(scene) if not isinstance(scene, Scene) else "", **_scene_paths(sc),
+        "command": "correct", "scene": str(scene) if not isinstance(scene, Scene) else "", **scene_paths(sc),
         "seed": seed, "method": res.method, "reference": names[res.reference], "reference_index": res.reference, "t_npm": t_npm,
         "t_npm_effective": res.t_npm, "mappings": mappings, "views": names,
         "graph_edges": [{**e, "a_name": names[e["a"]], "b_name": names[e["b"]]} for e in res.graph_edges],

@@ -14,7 +14,7 @@ import sys
 from contextlib import contextmanager
 from typing import Iterable, Iterator, TypeVar
 
-__all__ = ["show_progress", "steps", "track"]
+__all__ = ["on_stage", "show_progress", "stage", "steps", "track"]
 
 T = TypeVar("T")
 
@@ -72,3 +72,38 @@ def steps(desc: str, total: int) -> Iterator[_Steps]:
         bar.update(total - bar.n)
     finally:
         bar.close()
+
+
+_LISTENERS: contextvars.ContextVar[tuple] = contextvars.ContextVar("o3d_seqcc_stage_listeners", default=())
+
+
+@contextmanager
+def on_stage(callback) -> Iterator[None]:
+    """Call ``callback(name, event, time)`` as the pipeline's stages start and end in the block.
+
+    ``event`` is ``"start"`` or ``"end"``; ``time`` is ``time.perf_counter()``. For profilers
+    and benchmarks (``benchmarks/scale.py`` samples memory per stage with it).
+    """
+    token = _LISTENERS.set(_LISTENERS.get() + (callback,))
+    try:
+        yield
+    finally:
+        _LISTENERS.reset(token)
+
+
+@contextmanager
+def stage(name: str, timings: dict | None = None) -> Iterator[None]:
+    """A pipeline stage: its duration goes to ``timings[name]``; :func:`on_stage` listeners hear of it."""
+    import time
+
+    t0 = time.perf_counter()
+    for cb in _LISTENERS.get():
+        cb(name, "start", t0)
+    try:
+        yield
+    finally:
+        t1 = time.perf_counter()
+        if timings is not None:
+            timings[name] = t1 - t0
+        for cb in _LISTENERS.get():
+            cb(name, "end", t1)

@@ -350,7 +350,7 @@ def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.nda
     for key, m in vis.stage_masks().items():
         k = np.flatnonzero(m[a] & m[b])
         tri = faces[k]
-        out.append((titles[key], vis.uv[a][tri].reshape(-1, 2), vis.uv[b][tri].reshape(-1, 2)))
+        out.append((titles[key], vis.vertex_uv(a, tri.reshape(-1)), vis.vertex_uv(b, tri.reshape(-1))))
     return out
 
 
@@ -477,7 +477,8 @@ def write_selection_picture(scene, visibility, labels: np.ndarray, path, view: s
     (pathlib.Path, str)
         The path and the view's name.
     """
-    k = int(np.argmax(np.asarray(visibility.usable).sum(axis=1))) if view is None else scene.index(view)
+    counts = visibility.usable_counts() if hasattr(visibility, "usable_counts") else np.asarray(visibility.usable).sum(1)
+    k = int(np.argmax(counts)) if view is None else scene.index(view)
     img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views))
     write_image(path, img)
     return Path(path), scene.names[k]

@@ -29,7 +29,16 @@ For every view ``v`` and mesh face ``f``:
 
 Face normals come from the winding and are flipped where they disagree with the mesh's vertex
 normals (which :func:`~o3d_seqcc.scene.load_mesh` computes when the file has none).
+
+Storage is sparse: :class:`Visibility` keeps one small :class:`~o3d_seqcc.view_visibility.ViewRecord`
+per view (the ids of the faces valid in it, a filter bit per face, projected areas, angles),
+computed by one task per view (:mod:`o3d_seqcc.view_visibility`; local threads or a Dask
+cluster, :mod:`o3d_seqcc.parallel`). Vertex projections are recomputed from the cameras when
+asked for (:meth:`Visibility.vertex_uv`). The dense (V, F) and (V, N) arrays of earlier versions
+(``valid``, ``usable``, ``area``, ``uv``, ...) are still there as properties, built on first
+access and cached: fine for small scenes and tests, never used by the pipeline's hot paths.
 """
+
 
 from __future__ import annotations
 
@@ -38,21 +47,24 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Iterable
 
 import numpy as np
 
 from .camera import project_columns, project_points
-from .depthmaps import depth_edges, depth_from_point_cloud
+from .depthmaps import depth_from_point_cloud
 from .errors import InputError, warn
+from .images import LRUCache
 from .meshops import oriented_face_normals
-from .occlusion import occluded_faces
-from .progress import track
+from .parallel import current as current_executor
 from .scene import Mesh, load_mesh
+from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
 
 __all__ = [
     "FILTERS",
     "UsableFaces",
+    "ViewRecord",
     "Visibility",
     "compute_visibility",
     "depth_from_point_cloud",
@@ -63,6 +75,11 @@ logger = logging.getLogger(__name__)
 
 #: names of the filters of :func:`compute_visibility`
 FILTERS = ("occlusion", "depth", "oblique")
+
+_DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT",
+          "_cache")
+#: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
+CACHE_BYTES = 128 * 2**20
 
 
 class UsableFaces:
@@ -79,53 +96,48 @@ class UsableFaces:
         return int(self.usable.shape[1])
 
 
+def _record(faces: np.ndarray, area: np.ndarray, cos: np.ndarray, name: str = "") -> ViewRecord:
+    k = len(faces)
+    return ViewRecord(faces=np.asarray(faces, np.int32), flags=np.zeros(k, np.uint8), area=np.asarray(area, np.float32),
+                      cos_angle=np.asarray(cos, np.float32), info={"name": name})
+
+
 @dataclass(frozen=True, eq=False)
 class Visibility(UsableFaces):
-    """Per-view visibility of every mesh face.
+    """Per-view visibility of the mesh faces, one sparse record per view.
 
     Attributes
     ----------
-    uv : (V, N, 2) float32
-        Pixel coordinates (x right, y down, pixel centres at integers) of every mesh vertex in
-        every view; NaN for vertices at or behind the camera plane (z <= 0).
-    depth : (V, N) float32
-        Camera z of every vertex in every view (scene units; <= 0 behind the camera).
-    valid : (V, F) bool
-        All three vertices project inside ``[-0.5, W-0.5) x [-0.5, H-0.5)`` with z > 0, and the
-        face is not degenerate (zero 3D area).
-    occluded, depth_inconsistent, oblique : (V, F) bool
-        Faces removed by each filter (each a subset of ``valid``; computed independently, except
-        that back-facing faces are not ray-tested for occlusion).
-    usable : (V, F) bool
-        ``valid & ~occluded & ~depth_inconsistent & ~oblique``.
-    area : (V, F) float32
-        Projected face area in px^2 (0 where not valid).
-    cos_angle : (V, F) float32
-        Cosine between the (oriented) face normal and the unit direction from the face centroid
-        to the camera centre (negative: seen from behind; 0 for degenerate faces).
+    mesh : Mesh
+        The mesh the records refer to.
+    records : tuple of ViewRecord
+        Per view: ids of the valid faces (ascending int32), filter bits, projected areas (px^2,
+        float32) and cosines (float32); see :class:`~o3d_seqcc.view_visibility.ViewRecord`.
     stats : dict
         Counts (face-view incidences) per filter, per view and timings; see
         :func:`compute_visibility`.
-    mesh : Mesh
-        The mesh the arrays refer to.
     view_names : tuple of str
     options : dict
         The filter parameters used.
+    cameras : tuple of ((V, 3, 3), (V, 4, 4)) float64 arrays, optional
+        Intrinsics and extrinsics: vertex projections are computed from them on demand.
+    uv_table : tuple of ((V, N, 2), (V, N)) float32 arrays, optional
+        Stored vertex projections and depths instead (:meth:`from_arrays`).
+
+    Dense views, built on first access and cached (memory V x F; for small scenes and tests):
+    ``valid``, ``occluded``, ``depth_inconsistent``, ``oblique``, ``usable`` (V, F) bool;
+    ``area``, ``cos_angle`` (V, F) float32 (0 where not valid); ``uv`` (V, N, 2) float32 pixel
+    coordinates of every vertex (NaN at or behind the camera plane) and ``depth`` (V, N)
+    float32 camera z. All are read-only.
     """
 
-    uv: np.ndarray
-    depth: np.ndarray
-    valid: np.ndarray
-    occluded: np.ndarray
-    depth_inconsistent: np.ndarray
-    oblique: np.ndarray
-    usable: np.ndarray
-    area: np.ndarray
-    cos_angle: np.ndarray
-    stats: dict
     mesh: Mesh
+    records: tuple
+    stats: dict = field(default_factory=dict)
     view_names: tuple[str, ...] = ()
     options: dict[str, Any] = field(default_factory=dict)
+    cameras: tuple | None = None
+    uv_table: tuple | None = None
 
     @classmethod
     def from_arrays(
@@ -157,12 +169,107 @@ class Visibility(UsableFaces):
             p = uv[:, faces].astype(np.float64)
             e1, e2 = p[:, :, 1] - p[:, :, 0], p[:, :, 2] - p[:, :, 0]
             area = 0.5 * np.abs(e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0])
-        none = np.zeros((V, F), dtype=bool)
-        return cls(uv=uv, depth=np.ones(uv.shape[:2], np.float32) if depth is None else np.asarray(depth, np.float32),
-                   valid=usable.copy(), occluded=none, depth_inconsistent=none, oblique=none, usable=usable,
-                   area=np.asarray(area, dtype=np.float32),
-                   cos_angle=np.ones((V, F), np.float32) if cos_angle is None else np.asarray(cos_angle, np.float32),
-                   stats={}, mesh=mesh, view_names=tuple(view_names))
+        area = np.broadcast_to(np.asarray(area, dtype=np.float32), (V, F))
+        cos = np.ones((V, F), np.float32) if cos_angle is None else np.broadcast_to(np.asarray(cos_angle, np.float32),
+                                                                                    (V, F))
+        names = tuple(view_names)
+        records = []
+        for v in range(V):
+            ids = np.flatnonzero(usable[v])
+            records.append(_record(ids, area[v, ids], cos[v, ids], names[v] if v < len(names) else str(v)))
+        z = np.ones(uv.shape[:2], np.float32) if depth is None else np.asarray(depth, np.float32)
+        return cls(mesh=mesh, records=tuple(records), stats={}, view_names=names, uv_table=(uv, z))
+
+    # ---- shape ---------------------------------------------------------------------------
+
+    @property
+    def n_views(self) -> int:
+        return len(self.records)
+
+    @property
+    def n_faces(self) -> int:
+        return int(len(self.mesh.faces))
+
+    # ---- sparse access -------------------------------------------------------------------
+
+    def valid_faces(self, v: int) -> np.ndarray:
+        """(k,) int64 ascending ids of the faces valid in view ``v``."""
+        return self.records[v].faces.astype(np.int64)
+
+    @cached_property
+    def _cache(self) -> LRUCache:
+        return LRUCache(CACHE_BYTES)
+
+    def usable_faces(self, v: int) -> np.ndarray:
+        """(k,) int64 ascending ids of the faces usable in view ``v`` (cached; do not modify)."""
+        r = self.records[v]
+        return self._cache.get(("usable", v), lambda: r.faces[r.flags == 0].astype(np.int64))
+
+    def usable_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every usable (view, face) incidence, view-major (CSR rows = views).
+
+        Returns
+        -------
+        indptr : (V+1,) int64
+            Entries ``indptr[v]:indptr[v+1]`` belong to view ``v``.
+        faces : (nnz,) int32
+            Face ids, ascending within a view.
+        area, cos_angle : (nnz,) float32
+        """
+        keep = [r.flags == 0 for r in self.records]
+        counts = np.array([int(k.sum()) for k in keep], dtype=np.int64)
+        indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        if not len(self.records):
+            e = np.zeros(0, np.float32)
+            return indptr, np.zeros(0, np.int32), e, e
+        faces = np.concatenate([r.faces[k] for r, k in zip(self.records, keep)])
+        area = np.concatenate([r.area[k] for r, k in zip(self.records, keep)])
+        cos = np.concatenate([r.cos_angle[k] for r, k in zip(self.records, keep)])
+        return indptr, faces, area, cos
+
+    def usable_counts(self) -> np.ndarray:
+        """(V,) int64: the number of usable faces of every view."""
+        return np.array([int(np.count_nonzero(r.flags == 0)) for r in self.records], dtype=np.int64)
+
+    def vertex_projection(self, v: int, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates and camera depths of some vertices in view ``v``.
+
+        Parameters
+        ----------
+        v : int
+        vertex_ids : (n,) int
+            Any vertex ids (repeats allowed).
+
+        Returns
+        -------
+        uv : (n, 2) float32
+            NaN at or behind the camera plane.
+        z : (n,) float32
+        """
+        ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
+        if self.uv_table is not None:
+            return self.uv_table[0][v][ids], self.uv_table[1][v][ids]
+        n = self._XT.shape[1]
+        if 12 * n * self.n_views <= CACHE_BYTES:  # every view's whole projection fits the cache: keep them
+            uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
+            return uv[ids], z[ids]
+        mark = np.zeros(n, dtype=bool)
+        mark[ids] = True
+        uniq = np.flatnonzero(mark)  # each vertex projected once
+        uv, z = self._project(v, uniq)
+        local = np.empty(n, dtype=np.int64)
+        local[uniq] = np.arange(len(uniq))
+        return uv[local[ids]], z[local[ids]]
+
+    def _project(self, v: int, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        K, E = self.cameras
+        XT = self._XT if ids is None else np.ascontiguousarray(self._XT[:, ids])
+        u, vv, z = project_columns(XT, K[v], E[v])
+        return np.stack([u, vv], axis=1).astype(np.float32), z.astype(np.float32)
+
+    def vertex_uv(self, v: int, vertex_ids: np.ndarray) -> np.ndarray:
+        """(n, 2) float32 pixel coordinates of some vertices in view ``v`` (see :meth:`vertex_projection`)."""
+        return self.vertex_projection(v, vertex_ids)[0]
 
     def face_uv(self, selection: np.ndarray) -> np.ndarray:
         """Pixel coordinates of every face's corners in its selected view.
@@ -181,123 +288,109 @@ class Visibility(UsableFaces):
         if labels.shape != (self.n_faces,):
             raise InputError(f"selection has {labels.size} entries but the mesh has {self.n_faces} faces")
         out = np.full((self.n_faces, 3, 2), np.nan)
-        seen = labels >= 0
         if labels.size and labels.max() >= self.n_views:
             raise InputError(f"selection holds view indices outside -1..{self.n_views - 1}")
+        seen = np.flatnonzero(labels >= 0)
+        order = seen[np.argsort(labels[seen], kind="stable")]
+        views, starts = np.unique(labels[order], return_index=True)
+        ends = np.r_[starts[1:], len(order)]
         faces = np.asarray(self.mesh.faces)
-        out[seen] = self.uv[labels[seen][:, None], faces[seen]]
+        for v, s0, s1 in zip(views, starts, ends):
+            fs = order[s0:s1]
+            out[fs] = self.vertex_uv(int(v), faces[fs].reshape(-1)).reshape(-1, 3, 2)
         return out
-
-    def usable_counts(self) -> np.ndarray:
-        """(V,) int64: the number of usable faces of every view."""
-        return np.asarray(self.usable).sum(axis=1).astype(np.int64)
 
     def stage_masks(self) -> dict[str, np.ndarray]:
         """Cumulative (V, F) masks as in the paper's Figure 3.
 
         Keys ``"valid"``, ``"+occlusion"``, ``"+depth"``, ``"+oblique"`` (= ``usable``).
         """
-        m1 = self.valid & ~self.occluded
-        m2 = m1 & ~self.depth_inconsistent
-        return {"valid": self.valid, "+occlusion": m1, "+depth": m2, "+oblique": m2 & ~self.oblique}
+        return {"valid": self.valid, "+occlusion": self._dense_mask(lambda f: (f & OCCLUDED) == 0),
+                "+depth": self._dense_mask(lambda f: (f & (OCCLUDED | DEPTH)) == 0), "+oblique": self.usable}
+
+    # ---- dense views (on demand, cached) -------------------------------------------------
+
+    def _dense_mask(self, keep) -> np.ndarray:
+        M = np.zeros((self.n_views, self.n_faces), dtype=bool)
+        for v, r in enumerate(self.records):
+            M[v, r.faces[keep(r.flags)]] = True
+        M.setflags(write=False)
+        return M
+
+    def _dense_values(self, name: str) -> np.ndarray:
+        M = np.zeros((self.n_views, self.n_faces), dtype=np.float32)
+        for v, r in enumerate(self.records):
+            M[v, r.faces] = getattr(r, name)
+        M.setflags(write=False)
+        return M
+
+    @cached_property
+    def _XT(self) -> np.ndarray:
+        return np.ascontiguousarray(np.asarray(self.mesh.vertices, dtype=np.float64).T)
+
+    @cached_property
+    def valid(self) -> np.ndarray:
+        return self._dense_mask(lambda f: np.ones(len(f), bool))
+
+    @cached_property
+    def occluded(self) -> np.ndarray:
+        return self._dense_mask(lambda f: (f & OCCLUDED) != 0)
+
+    @cached_property
+    def depth_inconsistent(self) -> np.ndarray:
+        return self._dense_mask(lambda f: (f & DEPTH) != 0)
+
+    @cached_property
+    def oblique(self) -> np.ndarray:
+        return self._dense_mask(lambda f: (f & OBLIQUE) != 0)
+
+    @cached_property
+    def usable(self) -> np.ndarray:
+        return self._dense_mask(lambda f: f == 0)
+
+    @cached_property
+    def area(self) -> np.ndarray:
+        return self._dense_values("area")
+
+    @cached_property
+    def cos_angle(self) -> np.ndarray:
+        return self._dense_values("cos_angle")
+
+    def _dense_projection(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.uv_table is not None:
+            return self.uv_table
+        N = len(self.mesh.vertices)
+        uv = np.empty((self.n_views, N, 2), np.float32)
+        z = np.empty((self.n_views, N), np.float32)
+        allv = np.arange(N)
+        for v in range(self.n_views):
+            uv[v], z[v] = self.vertex_projection(v, allv)
+        return uv, z
+
+    @cached_property
+    def uv(self) -> np.ndarray:
+        out = np.array(self._dense_projection()[0])
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def depth(self) -> np.ndarray:
+        out = np.array(self._dense_projection()[1])
+        out.setflags(write=False)
+        return out
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the per-view records."""
+        return int(sum(r.nbytes for r in self.records))
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k not in _DENSE}
 
 
 # --------------------------------------------------------------------------------------------
 # main entry point
 # --------------------------------------------------------------------------------------------
-
-
-class _Geometry:
-    """Column-major copies of the mesh arrays used by the per-view work (no BLAS in hot paths)."""
-
-    def __init__(self, mesh: Mesh, fn: np.ndarray, degenerate: np.ndarray) -> None:
-        X = np.asarray(mesh.vertices, dtype=np.float64)
-        f = np.asarray(mesh.faces, dtype=np.int64)
-        self.n_vertices = len(X)
-        self.XT = np.ascontiguousarray(X.T)  # (3, N)
-        self.f0, self.f1, self.f2 = (np.ascontiguousarray(f[:, i]) for i in range(3))
-        cen = X[f].mean(axis=1)
-        self.cen = [np.ascontiguousarray(cen[:, i]) for i in range(3)]
-        self.fn = [np.ascontiguousarray(fn[:, i]) for i in range(3)]
-        self.degenerate = degenerate
-
-    def any3(self, vert_mask: np.ndarray) -> np.ndarray:
-        return vert_mask[self.f0] | vert_mask[self.f1] | vert_mask[self.f2]
-
-    def all3(self, vert_mask: np.ndarray) -> np.ndarray:
-        return vert_mask[self.f0] & vert_mask[self.f1] & vert_mask[self.f2]
-
-
-def _per_view(view, i: int, g: _Geometry, opts, res: dict[str, np.ndarray]) -> dict:
-    """Projection, validity, area, angles and the depth-consistency test of view ``i``.
-
-    Writes row ``i`` of the (V, ...) arrays in ``res``; returns the per-vertex depth test.
-    """
-    W, H = view.width, view.height
-    u, v, z = project_columns(g.XT, view.intrinsic, view.extrinsic)
-    with np.errstate(invalid="ignore"):
-        inside = (z > 0) & (u >= -0.5) & (u < W - 0.5) & (v >= -0.5) & (v < H - 0.5)
-    valid = g.all3(inside) & ~g.degenerate
-    idx = np.flatnonzero(valid)
-    i0, i1, i2 = g.f0[idx], g.f1[idx], g.f2[idx]
-    area = res["area"][i]
-    area[idx] = 0.5 * np.abs((u[i1] - u[i0]) * (v[i2] - v[i0]) - (v[i1] - v[i0]) * (u[i2] - u[i0]))
-    C = view.center
-    dx, dy, dz = C[0] - g.cen[0], C[1] - g.cen[1], C[2] - g.cen[2]
-    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-    cos = (g.fn[0] * dx + g.fn[1] * dy + g.fn[2] * dz) / np.maximum(dist, 1e-300)
-    if opts["oblique_reference"] == "ray":
-        cos_ref = cos
-    else:
-        a = -view.axis
-        cos_ref = g.fn[0] * a[0] + g.fn[1] * a[1] + g.fn[2] * a[2]
-    if opts["two_sided"]:
-        cos_ref = np.abs(cos_ref)
-        back = np.zeros_like(valid)
-    else:
-        back = cos <= 0
-    res["oblique"][i] = valid & (back | (cos_ref < math.cos(math.radians(opts["max_angle"]))))
-    res["uv"][i, :, 0] = u
-    res["uv"][i, :, 1] = v
-    res["depth"][i] = z
-    res["valid"][i] = valid
-    res["cos_angle"][i] = cos
-    res["back"][i] = valid & back
-    out = {
-        "depth_source": None,
-        "vertex_depth_bad": None,
-        "vertex_depth_known": None,
-    }
-    if "depth" not in opts["filters"]:
-        return out
-    D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
-    if D is not None:
-        out["depth_source"] = "depth"
-    else:
-        points = view.load_points()
-        if points is not None:
-            D = depth_from_point_cloud(points, view.intrinsic, view.extrinsic, W, H, fill_radius=opts["fill_radius"])
-            out["depth_source"] = "point_cloud"
-    if D is None:
-        return out
-    vid = np.flatnonzero(inside)
-    c = np.clip(np.floor(u[vid] + 0.5), 0, W - 1).astype(np.intp)
-    r = np.clip(np.floor(v[vid] + 0.5), 0, H - 1).astype(np.intp)
-    d = D[r, c]
-    known = np.zeros(g.n_vertices, dtype=bool)
-    bad = np.zeros(g.n_vertices, dtype=bool)
-    known[vid] = d > 0
-    zi = z[vid]
-    bad[vid] = (d > 0) & (np.abs(zi - d) > np.maximum(opts["depth_atol"], opts["depth_tol"] * zi))
-    out["vertex_depth_bad"] = bad
-    out["vertex_depth_known"] = known
-    margin = int(opts["depth_edge_margin"])
-    if margin > 0:
-        edge = depth_edges(D, margin, opts["depth_atol"], opts["depth_tol"])
-        near = np.zeros(g.n_vertices, dtype=bool)
-        near[vid] = edge[r, c]
-        out["vertex_near_edge"] = near
-    return out
 
 
 def compute_visibility(
@@ -367,14 +460,14 @@ def compute_visibility(
         Filters to apply (``"occlusion"``, ``"depth"``, ``"oblique"``); disabled filters give
         all-False masks.
     n_jobs : int, optional
-        Workers for the per-view work (projection, depth maps), joblib semantics (None: the
-        active ``joblib.parallel_config`` or 1; -1: all cores); threads are preferred.
-        The ray queries use all cores through Open3D.
+        Threads for the per-view tasks (projection, depth maps, ray queries), joblib semantics
+        (None: the active ``joblib.parallel_config`` or 1; -1: all cores). Inside
+        :func:`o3d_seqcc.parallel.use` with a Dask client the tasks run on its cluster instead.
 
     Returns
     -------
     Visibility
-        ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``, ``normals_flipped``, the
+        One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``, ``normals_flipped``, the
         totals (face-view incidences) ``valid``, ``occluded``, ``depth_inconsistent``,
         ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
         ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
@@ -387,8 +480,6 @@ def compute_visibility(
     ValueError
         Unknown filter or ``oblique_reference``, out-of-range thresholds.
     """
-    from joblib import Parallel, delayed
-
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     filters = tuple(filters)
@@ -437,137 +528,80 @@ def compute_visibility(
         logger.info("%d degenerate (zero-area) faces excluded", int(degenerate.sum()))
     if flipped:
         logger.info("%d face normals flipped to agree with the vertex normals", flipped)
-    geom = _Geometry(mesh, fn, degenerate)
     views = scene.views
     V, F = len(views), len(faces)
+    job = VisibilityJob(views, X, faces, fn, degenerate, opts)
+    del fn
     timings["prepare"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    N = len(X)
-    res = {
-        "uv": np.zeros((V, N, 2), np.float32),
-        "depth": np.zeros((V, N), np.float32),
-        "valid": np.zeros((V, F), bool),
-        "area": np.zeros((V, F), np.float32),
-        "cos_angle": np.zeros((V, F), np.float32),
-        "oblique": np.zeros((V, F), bool),
-        "back": np.zeros((V, F), bool),
-    }
-    per = list(track(Parallel(n_jobs=n_jobs, prefer="threads", require="sharedmem", return_as="generator")(
-        delayed(_per_view)(view, i, geom, opts, res) for i, view in enumerate(views)), desc="visibility", total=V,
-        unit="view"))
-    timings["project+depth"] = time.perf_counter() - t1
+    ex = current_executor(n_jobs)
+    records: list[ViewRecord] = ex.map(view_record, range(V), ex.share(job), desc="visibility", unit="view")
+    del job
+    timings["views"] = time.perf_counter() - t1
+    for step in ("project+depth", "occlusion", "compare"):  # summed over the views' tasks (CPU of all workers)
+        timings[f"{step} (sum over views)"] = float(sum(r.seconds.get(step, 0.0) for r in records))
 
-    valid, back = res["valid"], res["back"]
-    oblique = res["oblique"] if "oblique" in filters else np.zeros((V, F), bool)
-
-    t2 = time.perf_counter()
-    n_rays = 0
-    if "occlusion" in filters and valid.any():
-        front = valid & ~back
-        occluded, n_rays = occluded_faces(mesh, geom, views, res["area"], front, opts)
-    else:
-        occluded = np.zeros((V, F), bool)
-    timings["occlusion"] = time.perf_counter() - t2
-
-    t3 = time.perf_counter()
-    depth_bad = np.zeros((V, F), bool)
-    per_view = []
-    for v, (view, p) in enumerate(zip(views, per)):
-        entry = {"name": view.name, "depth_source": p["depth_source"]}
-        if p["vertex_depth_bad"] is not None:
-            bad_v = p["vertex_depth_bad"]
-            if p.get("vertex_near_edge") is not None:
-                bad_v = bad_v | p["vertex_near_edge"]
-            depth_bad[v] = valid[v] & geom.any3(bad_v)
-            ok = valid[v] & ~occluded[v] & ~back[v]
-            vert = np.zeros(len(X), bool)
-            vert[faces[ok].ravel()] = True
-            vert &= p["vertex_depth_known"]
-            n_known = int(vert.sum())
-            frac = float(p["vertex_depth_bad"][vert].mean()) if n_known else 0.0
-            entry["depth_disagreement"] = frac
-            if n_known >= 30 and frac > opts["max_depth_disagreement"]:
-                src = (view.depth if p["depth_source"] == "depth" else view.point_cloud) or "(in memory)"
-                msg = (
+    per_view = [dict(r.info) for r in records]
+    for view, r, entry in zip(views, records, per_view):
+        if "depth_disagreement" in entry:
+            frac = entry["depth_disagreement"]
+            if r.n_known >= 30 and frac > opts["max_depth_disagreement"]:
+                src = (view.depth if entry["depth_source"] == "depth" else view.point_cloud) or "(in memory)"
+                warn(
                     f"view {view.name!r}: {frac:.0%} of the visible mesh vertices disagree with its "
-                    f"{p['depth_source'].replace('_', ' ')} {src} by more than "
+                    f"{entry['depth_source'].replace('_', ' ')} {src} by more than "
                     f"max({opts['depth_atol']}, {opts['depth_tol']:.0%} of depth); is it registered to the mesh "
                     "(same units / depth_scale, same pose)?"
                 )
-                warn(msg)
         elif "depth" in filters:
             logger.info("view %r has neither a depth map nor a point cloud: depth-consistency filter skipped", view.name)
-        per_view.append(entry)
-    timings["depth-compare"] = time.perf_counter() - t3
     if "depth" in filters and V and not any(v.has_depth for v in views):
         warn("no view has a depth map or a point cloud: the depth-consistency filter is off, so surfaces hidden "
              "from a camera by geometry the mesh lacks may be mapped wrongly; give depth maps (--depth-dir, "
              "load_scene(..., depth_dir=)) when you have them")
 
-    usable = valid & ~occluded & ~depth_bad & ~oblique
-    nothing = [views[v].name for v in range(V) if not valid[v].any()]
+    nothing = [views[v].name for v in range(V) if not len(records[v].faces)]
     for name in nothing:
-        msg = f"view {name!r} sees no face of the mesh entirely (wrong pose, or looking away?); it gets no mappings"
-        warn(msg)
-    if V and not valid.any():
+        warn(f"view {name!r} sees no face of the mesh entirely (wrong pose, or looking away?); it gets no mappings")
+    if V and len(nothing) == V:
         raise InputError(
             f"no overlap: none of the {V} views sees a whole face of the mesh {getattr(scene, 'mesh', '')}; "
             "check that the camera poses (extrinsic, world-to-camera) and the mesh use the same coordinate frame"
         )
-    for v in range(V):
-        per_view[v].update(
-            valid=int(valid[v].sum()),
-            occluded=int(occluded[v].sum()),
-            depth_inconsistent=int(depth_bad[v].sum()),
-            oblique=int(oblique[v].sum()),
-            usable=int(usable[v].sum()),
-        )
-        if valid[v].any() and not usable[v].any():
-            logger.warning("view %r: all %d visible faces were removed by the filters", views[v].name, int(valid[v].sum()))
-    m1 = valid & ~occluded
-    m2 = m1 & ~depth_bad
+    for view, entry in zip(views, per_view):
+        if entry["valid"] and not entry["usable"]:
+            logger.warning("view %r: all %d visible faces were removed by the filters", view.name, entry["valid"])
+
+    def total(key: str) -> int:
+        return int(sum(e[key] for e in per_view))
+
+    m1 = int(sum(np.count_nonzero((r.flags & OCCLUDED) == 0) for r in records))
+    m2 = int(sum(np.count_nonzero((r.flags & (OCCLUDED | DEPTH)) == 0) for r in records))
     stats = {
         "n_views": V,
         "n_faces": F,
         "degenerate_faces": int(degenerate.sum()),
         "normals_flipped": flipped,
-        "valid": int(valid.sum()),
-        "occluded": int(occluded.sum()),
-        "depth_inconsistent": int(depth_bad.sum()),
-        "oblique": int(oblique.sum()),
-        "usable": int(usable.sum()),
-        "cumulative": {
-            "valid": int(valid.sum()),
-            "+occlusion": int(m1.sum()),
-            "+depth": int(m2.sum()),
-            "+oblique": int(usable.sum()),
-        },
+        "valid": total("valid"),
+        "occluded": total("occluded"),
+        "depth_inconsistent": total("depth_inconsistent"),
+        "oblique": total("oblique"),
+        "usable": total("usable"),
+        "cumulative": {"valid": total("valid"), "+occlusion": m1, "+depth": m2, "+oblique": total("usable")},
         "views_seeing_nothing": nothing,
         "views_without_depth": [e["name"] for e in per_view if e["depth_source"] is None],
-        "rays": int(n_rays),
+        "rays": int(sum(r.n_rays for r in records)),
         "per_view": per_view,
         "timings": timings,
     }
-    uv, depth, area, cos = res["uv"], res["depth"], res["area"], res["cos_angle"]
     timings["total"] = time.perf_counter() - t0
     logger.info(
         "visibility: %d views x %d faces: valid %d, occluded %d, depth-inconsistent %d, oblique %d -> usable %d (%.2f s)",
         V, F, stats["valid"], stats["occluded"], stats["depth_inconsistent"], stats["oblique"], stats["usable"],
         timings["total"],
     )
-    return Visibility(
-        uv=uv,
-        depth=depth,
-        valid=valid,
-        occluded=occluded,
-        depth_inconsistent=depth_bad,
-        oblique=oblique,
-        usable=usable,
-        area=area,
-        cos_angle=cos,
-        stats=stats,
-        mesh=mesh,
-        view_names=tuple(v.name for v in views),
-        options=opts,
-    )
+    cams = (np.stack([np.asarray(v.intrinsic, np.float64) for v in views]) if V else np.zeros((0, 3, 3)),
+            np.stack([np.asarray(v.extrinsic, np.float64) for v in views]) if V else np.zeros((0, 4, 4)))
+    return Visibility(mesh=mesh, records=tuple(records), stats=stats, view_names=tuple(v.name for v in views),
+                      options=opts, cameras=cams)

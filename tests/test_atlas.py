@@ -22,7 +22,7 @@ from o3d_seqcc.texturing import bake_texture, select_views
 from o3d_seqcc.texturing.bake import rasterize_faces
 from o3d_seqcc.texturing.packing import pack_charts
 
-from test_texturing import CAMS, RAW, bilinear, camera, grid_mesh, project, smooth_images
+from test_texturing import CAMS, RAW, bilinear, camera, grid_mesh, project, restrict, smooth_images
 
 def _needs_validator():
     if find_validator() is None:
@@ -111,7 +111,9 @@ def test_unseen_faces_are_welded_vertex_ratio(rng):
     cen = mesh.vertices[mesh.faces].mean(axis=1)
     blobs = rng.uniform(-0.9, 0.9, size=(12, 2))
     unseen = (np.linalg.norm(cen[:, None, :2] - blobs[None], axis=2) < 0.18).any(axis=1)
-    vis.usable[:, unseen] = False
+    usable = np.array(vis.usable)
+    usable[:, unseen] = False
+    vis = restrict(vis, usable)
     lab = select_views(vis, method="mrf")
     assert np.count_nonzero(lab < 0) > len(mesh.faces) // 5
     tm = bake_texture(mesh, smooth_images(rng, CAMS), vis, lab, atlas_size=1024)
@@ -126,8 +128,9 @@ def test_unseen_faces_are_welded_vertex_ratio(rng):
 def _paged(rng, cell: int = 4):
     mesh = grid_mesh(12)
     vis = project(mesh, CAMS)
-    vis.usable[:] &= rng.random(vis.usable.shape) > 0.3
-    vis.usable[:, :3] = False  # a few unseen faces (fallback colours)
+    usable = np.array(vis.usable) & (rng.random(vis.usable.shape) > 0.3)
+    usable[:, :3] = False  # a few unseen faces (fallback colours)
+    vis = restrict(vis, usable)
     lab = select_views(vis, method="random")
     return bake_texture(mesh, smooth_images(rng, CAMS, cell=cell), vis, lab, atlas_size=128, padding=2,
                         overflow="pages", **RAW)

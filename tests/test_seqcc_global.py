@@ -10,7 +10,7 @@ import pytest
 import skimage.data
 
 from o3d_seqcc.correction import DEFAULT_METHOD, METHODS, CorrectionContext, available_methods, correct
-from o3d_seqcc.correction.edge_summaries import EdgeObservations, _FlatImages, edge_observations, edge_quantiles
+from o3d_seqcc.correction.edge_summaries import EdgeObservations, _sample_flat, edge_observations, edge_quantiles
 from o3d_seqcc.correction.joint_curves import linear_start, refine_curves
 from o3d_seqcc.correction.seqcc_global import sequential_start
 from o3d_seqcc.errors import InputError
@@ -239,7 +239,7 @@ def test_edge_quantiles_and_flat_sampler_match_the_reference_implementations(rng
     uv = np.column_stack([rng.uniform(-1, 64, 400), rng.uniform(-1, 48, 400)])
     uv[:3] = [[63, 47], [0, 0], [62.5, 46.5]]
     for interp in ("bilinear", "nearest"):
-        np.testing.assert_allclose(_FlatImages([img], interp).sample(0, uv), sample_colors(img, uv, interpolation=interp), atol=1e-6)
+        np.testing.assert_allclose(_sample_flat(img, uv, interp), sample_colors(img, uv, interpolation=interp), atol=1e-6)
 
 
 def test_edge_observations_drop_wrong_correspondences(albedo):

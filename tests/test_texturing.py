@@ -77,6 +77,18 @@ def project(mesh: Mesh, cams) -> Visibility:
     return Visibility.from_arrays(mesh, np.array(uvs), valid, area=np.array(areas), cos_angle=np.array(coss))
 
 
+def restrict(vis: Visibility, usable: np.ndarray) -> Visibility:
+    """The same visibility with another usable mask (its dense arrays are read-only views)."""
+    return Visibility.from_arrays(vis.mesh, vis.uv, usable, area=vis.area, cos_angle=vis.cos_angle, depth=vis.depth)
+
+
+def without(vis: Visibility, index) -> Visibility:
+    """``vis`` with ``usable[index] = False``."""
+    u = np.array(vis.usable)
+    u[index] = False
+    return restrict(vis, u)
+
+
 def smooth_images(rng, cams, cell: int = 4) -> list[np.ndarray]:
     """Random colour images, smooth over about ``cell`` pixels."""
     import cv2
@@ -110,7 +122,7 @@ CAMS = [
 def scene_vis(rng):
     mesh = grid_mesh(12)
     vis = project(mesh, CAMS)
-    vis.usable[:] &= rng.random(vis.usable.shape) > 0.3
+    vis = restrict(vis, vis.usable & (rng.random(vis.usable.shape) > 0.3))
     return mesh, vis
 
 
@@ -187,7 +199,7 @@ def test_mrf_fewer_transitions_than_largest_area(rng):
 
 def test_unseen_faces_are_minus_one_and_counted(scene_vis):
     mesh, vis = scene_vis
-    vis.usable[:, :5] = False
+    vis = without(vis, np.s_[:, :5])
     lab = select_views(vis, method="largest-area")
     assert (lab[:5] == -1).all()
     adj = face_adjacency(mesh.faces, mesh.vertices)
@@ -200,7 +212,7 @@ def test_select_bad_input(scene_vis):
         select_views(vis, method="best")
     with pytest.raises(TypeError):
         select_views(vis, method="largest-area", smoothness=2.0)
-    vis.usable[:] = False
+    vis = without(vis, np.s_[:])
     with pytest.raises(InputError, match="no face"):
         select_views(vis, method="random")
 
@@ -282,8 +294,7 @@ def test_unseen_faces_get_fallback_colour(rng):
     mesh = grid_mesh(8, extra_triangle=True)
     vis = project(mesh, CAMS)
     images = [np.full((h, w, 3), (200, 40, 10), np.uint8) for *_, w, h in CAMS]
-    vis.usable[:, 0] = False  # a grid face next to seen faces
-    vis.usable[:, -1] = False  # the separate triangle: no seen neighbour
+    vis = without(vis, np.s_[:, [0, -1]])  # a grid face next to seen faces; the separate triangle: no seen neighbour
     lab = select_views(vis, method="largest-area")
     tm = bake_texture(mesh, images, vis, lab, atlas_size=256, **RAW)
     assert tm.stats["unseen_faces"] == 2 and (tm.face_view[[0, -1]] == -1).all()
@@ -485,7 +496,7 @@ def test_smooth_fallback_interpolates_neighbour_colours():
     img = np.clip(np.rint(np.stack([40 + 150 * xs / w, np.full_like(xs, 100.0), 60 + 100 * ys / h], -1)), 0, 255)
     img = img.astype(np.uint8)
     unseen = np.array([54, 55, 56, 118])  # a few faces inside the grid, some adjacent to each other
-    vis.usable[:, unseen] = False
+    vis = without(vis, np.s_[:, unseen])
     lab = select_views(vis, method="largest-area")
     assert set(np.flatnonzero(lab < 0)) == set(unseen)
     err = {}

@@ -31,6 +31,10 @@ def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
     p.add_argument("-q", "--quiet", action="store_true", default=d(False), help="only errors")
     p.add_argument("-j", "--jobs", type=int, default=d(-1),
                    help="parallel workers (joblib threads) for per-view and per-edge work (default -1: all cores)")
+    p.add_argument("--scheduler", default=d(None), metavar="ADDRESS",
+                   help="run the per-view and per-edge tasks on a Dask cluster: its scheduler's address, e.g. "
+                   "tcp://HOST:8786 (default: the environment variable O3D_SEQCC_SCHEDULER, else this machine's "
+                   "threads); every worker must read the scene's files at the same paths")
     p.add_argument("--max-image-pixels", type=int, default=d(MAX_IMAGE_PIXELS), metavar="N",
                    help=f"refuse images with more pixels than N before decoding them (default {MAX_IMAGE_PIXELS})")
 
@@ -86,6 +90,24 @@ def _logging(verbose: int, quiet: bool) -> Iterator[None]:
             lg.propagate = prop
 
 
+def _client(address: str | None):
+    """A Dask client for ``--scheduler`` (or ``O3D_SEQCC_SCHEDULER``), None for local threads."""
+    import os
+
+    from ..parallel import SCHEDULER_ENV, connect
+
+    option = "--scheduler"
+    if not address:
+        address, option = os.environ.get(SCHEDULER_ENV, "").strip() or None, SCHEDULER_ENV
+    return None if address is None else connect(address, option=option)
+
+
+def _executor(client):
+    from ..parallel import use
+
+    return use(client)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
     try:
@@ -101,12 +123,17 @@ def main(argv: list[str] | None = None) -> int:
 
         try:
             old = set_max_image_pixels(args.max_image_pixels)
+            client = None
             try:
                 bars = sys.stderr.isatty() and not args.quiet
                 with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs), show_progress(bars):
-                    return int(args.func(args) or 0)
+                    client = _client(args.scheduler)
+                    with _executor(client):
+                        return int(args.func(args) or 0)
             finally:
                 set_max_image_pixels(old)
+                if client is not None:
+                    client.close()
         except InputError as e:
             print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
             return 2

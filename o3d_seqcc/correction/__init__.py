@@ -30,25 +30,28 @@ import numpy as np
 
 from ..errors import InputError, warn
 from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
-from ..imageops import img_as_dtype, img_as_float
+from ..images import FloatImages, ImageSequence, image_dtypes
 from ..scene import resolve_view
 from . import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
 from .base import (
     DEFAULT_METHOD,
     METHODS,
+    CorrectedImages,
     CorrectionContext,
     CorrectionResult,
     FunctionTransform,
     IdentityTransform,
     LutTransform,
     Transform,
+    apply_transform,
     available_methods,
     check_options,
     register_method,
 )
 
-__all__ = ["DEFAULT_METHOD", "METHODS", "CorrectionContext", "CorrectionResult", "FunctionTransform", "IdentityTransform",
-           "LutTransform", "Transform", "available_methods", "check_method", "correct", "register_method"]
+__all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "FunctionTransform",
+           "IdentityTransform", "LutTransform", "Transform", "apply_transform", "available_methods", "check_method",
+           "correct", "register_method"]
 
 logger = logging.getLogger(__name__)
 
@@ -112,8 +115,11 @@ def correct(
     mappings : o3d_seqcc.mappings.Mappings, optional
         Precomputed filtered mappings (default: ``compute_mappings(scene, mode=mappings_mode)``).
     mappings_mode : {"vertices", "dense"}, default "vertices"
-    images : list of (H, W, 3) arrays, optional
-        Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]).
+    images : list of (H, W, 3) arrays or ImageSequence, optional
+        Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]). A lazy
+        :class:`~o3d_seqcc.images.ImageSequence` (e.g. ``SceneImages(scene.views)``) is read
+        view by view when needed, and the result's ``images`` are then lazy too
+        (:class:`~o3d_seqcc.correction.base.CorrectedImages`).
     seed : int, default 0
     interpolation : {"bilinear", "nearest"}, default "bilinear"
         Colour sampling at the mappings.
@@ -126,7 +132,8 @@ def correct(
     Returns
     -------
     CorrectionResult
-        Corrected images in the input dtypes; inputs are not modified.
+        Corrected images in the input dtypes; inputs are not modified. Per-edge fits run on the
+        active executor (:mod:`o3d_seqcc.parallel`: threads, or a Dask cluster).
 
     Raises
     ------
@@ -158,9 +165,15 @@ def correct(
     timings: dict[str, float] = {}
 
     t0 = time.perf_counter()
-    raw = [v.load_image() for v in scene.views] if images is None else _check_images(images, names, sizes)
-    fimgs = [img_as_float(im) for im in raw]
-    lut_size = 256 if all(im.dtype == np.uint8 for im in raw) else 4096
+    lazy = isinstance(images, ImageSequence)
+    if lazy:  # read when a task needs them (each view checks its own file)
+        raw = images
+        if len(raw) != n:
+            raise InputError(f"got {len(raw)} images for {n} views; give one per view")
+    else:
+        raw = [v.load_image() for v in scene.views] if images is None else _check_images(images, names, sizes)
+    fimgs = FloatImages(raw)  # float images converted on access, least recently used dropped
+    lut_size = 256 if all(dt == np.uint8 for dt in image_dtypes(raw)) else 4096
     timings["load_images"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -222,14 +235,7 @@ def correct(
     timings["fit"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    out = []
-    for img, fimg, tr in zip(raw, fimgs, transforms):
-        if isinstance(tr, IdentityTransform):
-            out.append(np.array(img, copy=True))
-        elif isinstance(tr, LutTransform) and img.dtype in (np.uint8, np.uint16):
-            out.append(tr.apply_levels(img))
-        else:
-            out.append(img_as_dtype(tr.apply(fimg), img.dtype))
+    out = CorrectedImages(raw, transforms) if lazy else [apply_transform(tr, img) for img, tr in zip(raw, transforms)]
     timings["apply"] = time.perf_counter() - t0
     timings["total"] = float(sum(timings.values()))
     settings = {"t_npm": int(t_npm), "seed": int(seed), "interpolation": interpolation, "graph_weight": graph_weight,

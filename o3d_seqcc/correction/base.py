@@ -18,19 +18,23 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..luts import compose_luts
-from ..progress import track
 from ..errors import InputError
-from ..imageops import img_as_dtype, sample_colors
+from ..imageops import img_as_dtype, img_as_float, sample_colors
+from ..images import ImageSequence, LRUCache, default_cache_bytes, image_dtypes
+from ..parallel import current as current_executor
 
 __all__ = [
     "DEFAULT_METHOD",
+    "COLOUR_CACHE_BYTES",
     "METHODS",
+    "CorrectedImages",
     "CorrectionContext",
     "CorrectionResult",
     "FunctionTransform",
     "IdentityTransform",
     "LutTransform",
     "Transform",
+    "apply_transform",
     "available_methods",
     "check_options",
     "fit_context",
@@ -47,6 +51,8 @@ METHODS: dict[str, Callable] = {}
 #: method of :func:`o3d_seqcc.correction.correct` (and every entry point) when none is given: the
 #: measured best (README, ``benchmarks/table2.py``); ``"seqcc"`` is the paper's
 DEFAULT_METHOD = "seqcc-global"
+#: byte budget of a context's cache of the colours sampled at each pair's mappings
+COLOUR_CACHE_BYTES = 64 * 2**20
 
 
 def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:
@@ -171,6 +177,40 @@ class IdentityTransform:
 Transform = LutTransform | FunctionTransform | IdentityTransform
 
 
+def apply_transform(tr: Transform, img: np.ndarray) -> np.ndarray:
+    """One view's corrected image in its input dtype (what :func:`~o3d_seqcc.correction.correct` returns).
+
+    Identity: a copy; a lookup table on uint8 / uint16: :meth:`LutTransform.apply_levels`;
+    otherwise the transform on the float image, converted back (rounded, clipped).
+    """
+    img = np.asarray(img)
+    if isinstance(tr, IdentityTransform):
+        return np.array(img, copy=True)
+    if isinstance(tr, LutTransform) and img.dtype in (np.uint8, np.uint16):
+        return tr.apply_levels(img)
+    return img_as_dtype(tr.apply(img_as_float(img)), img.dtype)
+
+
+class CorrectedImages(ImageSequence):
+    """Lazy corrected images: ``images[v]`` is ``apply_transform(transforms[v], originals[v])``,
+    computed on every access (nothing is kept)."""
+
+    def __init__(self, originals, transforms: list) -> None:
+        if len(originals) != len(transforms):
+            raise ValueError(f"{len(originals)} images for {len(transforms)} transforms")
+        self.originals = originals
+        self.transforms = list(transforms)
+
+    def __len__(self) -> int:
+        return len(self.transforms)
+
+    def _load(self, i: int) -> np.ndarray:
+        return apply_transform(self.transforms[i], self.originals[i])
+
+    def dtypes(self) -> list[np.dtype]:
+        return image_dtypes(self.originals)
+
+
 @dataclass(frozen=True, eq=False)
 class CorrectionContext:
     """Everything a correction method sees.
@@ -210,23 +250,27 @@ class CorrectionContext:
     lut_size: int = 256
     interpolation: str = "bilinear"
     edge_luts: dict = field(default_factory=dict)
-    _cache: dict = field(default_factory=dict, repr=False)
+    _cache: Any = field(default_factory=lambda: LRUCache(COLOUR_CACHE_BYTES), repr=False)
 
     def colors(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         """Colours of pair (a, b) at its mappings: ``(ca, cb)``, each (n, 3) float64 in [0, 1].
 
-        Either order of ``a`` and ``b`` works; results are cached.
+        Either order of ``a`` and ``b`` works; results are cached (least recently used pairs
+        dropped beyond :data:`COLOUR_CACHE_BYTES`). The pair's mappings are built and its two
+        images read when first asked for.
         """
         a, b = int(a), int(b)
         key = (min(a, b), max(a, b))
-        if key not in self._cache:
+        hit = self._cache.get(key)
+        if hit is None:
             pm = self.mappings.pairs.get(key)
             if pm is None:
                 raise InputError(f"no pairwise mappings between views {key[0]} and {key[1]}")
             c0 = sample_colors(self.images[key[0]], np.asarray(pm.uv_a), interpolation=self.interpolation)
             c1 = sample_colors(self.images[key[1]], np.asarray(pm.uv_b), interpolation=self.interpolation)
-            self._cache[key] = (c0, c1)
-        c0, c1 = self._cache[key]
+            hit = (c0, c1)
+            self._cache[key] = hit
+        c0, c1 = hit
         return (c0, c1) if a <= b else (c1, c0)
 
     def path_edges(self) -> list[tuple[int, int]]:
@@ -245,8 +289,10 @@ class CorrectionResult:
 
     Attributes
     ----------
-    images : list of (H, W, 3) arrays
-        Corrected images, each in its input dtype (uint8 / uint16 rounded and clipped).
+    images : list of (H, W, 3) arrays, or CorrectedImages
+        Corrected images, each in its input dtype (uint8 / uint16 rounded and clipped); a lazy
+        :class:`CorrectedImages` (computed on access) when the input images were a lazy
+        :class:`~o3d_seqcc.images.ImageSequence`.
     transforms : list of transforms
         One per view (:class:`LutTransform`, :class:`FunctionTransform`, :class:`IdentityTransform`).
     reference : int
@@ -285,19 +331,24 @@ class CorrectionResult:
     settings: dict = field(default_factory=dict)
 
 
+def _edge_task(edge: tuple[int, int], make_step: Callable[[int, int], Any]) -> Any:
+    return make_step(*edge)
+
+
 def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, n_jobs: int | None = None) -> list[list | None]:
     """Per view, the per-edge steps ``make_step(t, s)`` along its path (each directed edge made
     once, even when several paths share it); None for the reference and unreachable views.
 
-    The edges are fitted in joblib threads (``n_jobs``, joblib semantics: None = the active
-    ``joblib.parallel_config`` or 1, -1 = all cores); scikit-learn's SVR fit releases the GIL.
+    One task per edge on the active executor (:mod:`o3d_seqcc.parallel`): joblib threads
+    (``n_jobs``, joblib semantics: None = the active ``joblib.parallel_config`` or 1, -1 = all
+    cores; scikit-learn's SVR fit releases the GIL), or a Dask cluster, to which ``make_step``
+    (with the context it closes over: the visibility records, the image references) is
+    scattered once. Results come back in edge order, whatever finishes first.
     """
-    from joblib import Parallel, delayed
-
     paths = [ctx.paths.get(v) for v in range(len(ctx.images))]
     edges = list(dict.fromkeys((t, s) for p in paths if p is not None for t, s in zip(p[:-1], p[1:])))
-    made = list(track(Parallel(n_jobs=n_jobs, prefer="threads", return_as="generator")(
-        delayed(make_step)(t, s) for t, s in edges), desc="fit edges", total=len(edges), unit="edge"))
+    ex = current_executor(n_jobs)
+    made = ex.map(_edge_task, edges, ex.share(make_step) if edges else None, desc="fit edges", unit="edge")
     cache = dict(zip(edges, made))
     logger.debug("fitted %d directed edge(s) for %d path(s)", len(cache), len(ctx.paths))
     return [
@@ -331,31 +382,32 @@ def lut_per_path(
     ]
 
 
-class _BlurredImages:
-    """Lazy read-only sequence of Gaussian-blurred float images (blurred on first access)."""
+class _BlurredImages(ImageSequence):
+    """Lazy read-only sequence of Gaussian-blurred float images (blurred on access, LRU-cached)."""
 
     def __init__(self, images: Sequence[np.ndarray], sigma: float) -> None:
-        self._images, self._sigma, self._cache = images, float(sigma), {}
+        self._images, self._sigma = images, float(sigma)
+        self._cache = LRUCache(default_cache_bytes())
 
     def __len__(self) -> int:
         return len(self._images)
 
-    def __getitem__(self, i: int) -> np.ndarray:
-        if i not in self._cache:
+    def _load(self, i: int) -> np.ndarray:
+        def blur() -> np.ndarray:
             import cv2
 
             s = self._sigma
-            self._cache[i] = cv2.GaussianBlur(
-                np.asarray(self._images[i], dtype=np.float32), (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT
-            ).astype(np.float64)
-        return self._cache[i]
+            return cv2.GaussianBlur(np.asarray(self._images[i], dtype=np.float32), (0, 0), sigmaX=s, sigmaY=s,
+                                    borderType=cv2.BORDER_REFLECT).astype(np.float64)
+
+        return self._cache.get(i, blur)
 
 
 def fit_context(ctx: CorrectionContext, blur: float) -> CorrectionContext:
     """``ctx`` whose colours are sampled from images blurred by ``blur`` px (0: ctx itself)."""
     if blur <= 0:
         return ctx
-    return replace(ctx, images=_BlurredImages(ctx.images, blur), _cache={})
+    return replace(ctx, images=_BlurredImages(ctx.images, blur), _cache=LRUCache(COLOUR_CACHE_BYTES))
 
 
 def sequential(ctx: CorrectionContext, make_step: Callable[[int, int], Callable[[np.ndarray], np.ndarray]]) -> list:

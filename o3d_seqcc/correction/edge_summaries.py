@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..parallel import LocalExecutor, current as current_executor
 
 __all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
 
@@ -75,38 +76,51 @@ def _rank_inliers(ca: np.ndarray, cb: np.ndarray, order_a: np.ndarray, sorted_b:
     return np.sqrt((z**2).sum(1)) <= k * np.sqrt(3.0)
 
 
-class _FlatImages:
-    """Per-view (H*W, 3) float32 copies of float images, made on first use, sampled by flat index."""
+def _sample_flat(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.ndarray:
+    """(n, 2) pixel positions -> (n, 3) float32 colours of an (H, W, 3) float image, as
+    :func:`o3d_seqcc.imageops.sample_colors` but on a float32 copy (its sorts are twice as fast)."""
+    img = np.asarray(img)
+    H, W = img.shape[:2]
+    flat = np.ascontiguousarray(img, dtype=np.float32).reshape(-1, 3)
+    x = np.clip(uv[:, 0], 0.0, W - 1.0)
+    y = np.clip(uv[:, 1], 0.0, H - 1.0)
+    if interpolation == "nearest":
+        xi = np.minimum(np.floor(x + 0.5).astype(np.int64), W - 1)
+        yi = np.minimum(np.floor(y + 0.5).astype(np.int64), H - 1)
+        return np.take(flat, yi * W + xi, axis=0)
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    dx = (x0 < W - 1).astype(np.int64)
+    i00 = y0 * W + x0
+    i10 = i00 + np.where(y0 < H - 1, W, 0)
+    fx = (x - x0).astype(np.float32)[:, None]
+    fy = (y - y0).astype(np.float32)[:, None]
+    top = np.take(flat, i00, axis=0) * (1.0 - fx) + np.take(flat, i00 + dx, axis=0) * fx
+    bot = np.take(flat, i10, axis=0) * (1.0 - fx) + np.take(flat, i10 + dx, axis=0) * fx
+    return top * (1.0 - fy) + bot * fy
 
-    def __init__(self, images, interpolation: str) -> None:
-        self._images, self._interp, self._flat = images, interpolation, {}
 
-    def prepare(self, v: int) -> None:
-        """Make view v's flat copy (before threads sample it)."""
-        if v not in self._flat:
-            img = np.asarray(self._images[v])
-            self._flat[v] = (np.ascontiguousarray(img, dtype=np.float32).reshape(-1, 3), img.shape[0], img.shape[1])
+def _sample_view_task(item: tuple[int, np.ndarray], images, interpolation: str) -> np.ndarray:
+    """One view's task: read its image once and sample it at every position its edges need."""
+    v, uv = item
+    return _sample_flat(images[v], uv, interpolation)
 
-    def sample(self, v: int, uv: np.ndarray) -> np.ndarray:
-        """(n, 2) pixel positions -> (n, 3) float32 colours, as :func:`o3d_seqcc.imageops.sample_colors`."""
-        self.prepare(v)
-        flat, H, W = self._flat[v]
-        x = np.clip(uv[:, 0], 0.0, W - 1.0)
-        y = np.clip(uv[:, 1], 0.0, H - 1.0)
-        if self._interp == "nearest":
-            xi = np.minimum(np.floor(x + 0.5).astype(np.int64), W - 1)
-            yi = np.minimum(np.floor(y + 0.5).astype(np.int64), H - 1)
-            return np.take(flat, yi * W + xi, axis=0)
-        x0 = np.floor(x).astype(np.int64)
-        y0 = np.floor(y).astype(np.int64)
-        dx = (x0 < W - 1).astype(np.int64)
-        i00 = y0 * W + x0
-        i10 = i00 + np.where(y0 < H - 1, W, 0)
-        fx = (x - x0).astype(np.float32)[:, None]
-        fy = (y - y0).astype(np.float32)[:, None]
-        top = np.take(flat, i00, axis=0) * (1.0 - fx) + np.take(flat, i00 + dx, axis=0) * fx
-        bot = np.take(flat, i10, axis=0) * (1.0 - fx) + np.take(flat, i10 + dx, axis=0) * fx
-        return top * (1.0 - fy) + bot * fy
+
+def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k: float | None):
+    """One edge's task: (ca, cb) float32 colours -> (qa (3, P), qb (3, P), n kept)."""
+    ca, cb = item
+    sb = np.sort(cb, axis=0)
+    if outlier_k is not None and len(ca) >= 10:
+        oa = np.argsort(ca, axis=0)
+        sa = np.take_along_axis(ca, oa, axis=0)
+        keep = _rank_inliers(ca, cb, oa, sb, k=float(outlier_k))
+        if 10 <= keep.sum() < len(keep):
+            # view a's kept values stay in sorted order: filter each channel's sorted list
+            sa = np.stack([sa[keep[oa[:, c]], c] for c in range(3)], axis=1)
+            sb = np.sort(cb[keep], axis=0)
+    else:
+        sa = np.sort(ca, axis=0)
+    return _sorted_quantiles(sa, q).T, _sorted_quantiles(sb, q).T, len(sa)
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,8 +180,11 @@ def edge_observations(
         than this many robust sigmas jointly over the channels
         (:func:`o3d_seqcc.correction.seqcc.colour_inliers`); None keeps all.
     n_jobs : int or None, default None
-        Edges summarised in joblib threads (joblib semantics: None = the active
-        ``joblib.parallel_config`` or 1, -1 = all cores).
+        Threads of the local executor (joblib semantics: None = the active
+        ``joblib.parallel_config`` or 1, -1 = all cores). The colours are sampled by one task
+        per view on the active executor (:mod:`o3d_seqcc.parallel`: its image read once, at
+        every position its edges need, then released; on a Dask cluster the workers read it);
+        the per-edge summaries run in local threads.
 
     Returns
     -------
@@ -178,40 +195,40 @@ def edge_observations(
     qb = np.zeros((E, 3, P))
     ns = np.zeros(E, dtype=np.int64)
     q = np.linspace(TRIM, 1.0 - TRIM, P)
-    imgs = _FlatImages(ctx.images, ctx.interpolation)
-    pairs = [ctx.mappings.pairs[(min(int(a), int(b)), max(int(a), int(b)))] for a, b in edges]  # built lazily, once
-    for v in sorted({int(x) for e in edges for x in e}):
-        imgs.prepare(v)
-
-    def one(i: int) -> None:
-        a, b = int(edges[i][0]), int(edges[i][1])
-        pm = pairs[i]
-        uva, uvb = (pm.uv_a, pm.uv_b) if a <= b else (pm.uv_b, pm.uv_a)
+    # the positions each edge samples in its two views (pairs built lazily, once; strided to max_mappings)
+    uvs: list[tuple[np.ndarray, np.ndarray]] = []
+    for a, b in edges:
+        pm = ctx.mappings.pairs[(min(int(a), int(b)), max(int(a), int(b)))]
+        uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
         if max_mappings is not None and len(uva) > int(max_mappings):
             idx = (np.arange(int(max_mappings)) * (len(uva) / float(max_mappings))).astype(np.int64)
             uva, uvb = uva[idx], uvb[idx]
-        if len(uva) == 0:
-            return
-        ca = imgs.sample(a, np.asarray(uva, dtype=np.float64))  # float32: sorts twice as fast, ample precision
-        cb = imgs.sample(b, np.asarray(uvb, dtype=np.float64))
-        sb = np.sort(cb, axis=0)
-        if outlier_k is not None and len(ca) >= 10:
-            oa = np.argsort(ca, axis=0)
-            sa = np.take_along_axis(ca, oa, axis=0)
-            keep = _rank_inliers(ca, cb, oa, sb, k=float(outlier_k))
-            if 10 <= keep.sum() < len(keep):
-                # view a's kept values stay in sorted order: filter each channel's sorted list
-                sa = np.stack([sa[keep[oa[:, c]], c] for c in range(3)], axis=1)
-                sb = np.sort(cb[keep], axis=0)
-        else:
-            sa = np.sort(ca, axis=0)
-        qa[i], qb[i] = _sorted_quantiles(sa, q).T, _sorted_quantiles(sb, q).T
-        ns[i] = len(sa)
-
-    from joblib import Parallel, delayed
-
-    # numpy's sorts, gathers and medians release the GIL: edges in threads (n_jobs, joblib semantics)
-    Parallel(n_jobs=n_jobs, prefer="threads")(delayed(one)(i) for i in range(E))
+        uvs.append((np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)))
+    # one task per view: its image read once, sampled at all its edges' positions, released
+    parts: dict[int, list[np.ndarray]] = {}
+    for (a, b), (uva, uvb) in zip(edges, uvs):
+        parts.setdefault(int(a), []).append(uva)
+        parts.setdefault(int(b), []).append(uvb)
+    views = sorted(parts)
+    ex = current_executor(n_jobs)
+    sampled = ex.map(_sample_view_task, [(v, np.concatenate(parts[v])) for v in views],
+                     ex.share(ctx.images), ctx.interpolation, desc="sample views", unit="view")
+    offset = {v: 0 for v in views}
+    colours: dict[int, np.ndarray] = dict(zip(views, sampled))
+    pairs: list[tuple[np.ndarray, np.ndarray]] = []
+    for (a, b), (uva, uvb) in zip(edges, uvs):
+        a, b = int(a), int(b)
+        ca = colours[a][offset[a]:offset[a] + len(uva)]
+        offset[a] += len(uva)
+        cb = colours[b][offset[b]:offset[b] + len(uvb)]
+        offset[b] += len(uvb)
+        pairs.append((ca, cb))
+    # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
+    live = [i for i in range(E) if len(pairs[i][0])]
+    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
+    for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [pairs[i] for i in live], q, outlier_k,
+                                                   desc="edge summaries", unit="edge")):
+        qa[i], qb[i], ns[i] = qa_i, qb_i, n_i
     arr = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns)
 

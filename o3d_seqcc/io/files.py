@@ -26,6 +26,7 @@ __all__ = [
     "default_mode",
     "encode_image",
     "find_file",
+    "image_dtype",
     "to_jsonable",
     "read_depth",
     "read_image",
@@ -274,6 +275,47 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     except OSError:
         raise OSError(f"OpenCV could not encode {path}") from None
     return atomic_write_bytes(path, data)
+
+
+_JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _jpeg_precision(head: bytes) -> int | None:
+    """Sample precision (bits) from a JPEG's start-of-frame segment, None when not found."""
+    i = 2
+    while i + 4 <= len(head):
+        if head[i] != 0xFF:
+            return None
+        marker = head[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        length = int.from_bytes(head[i + 2:i + 4], "big")
+        if marker in _JPEG_SOF:
+            return head[i + 4] if i + 4 < len(head) else None
+        i += 2 + length
+    return None
+
+
+def image_dtype(path: str | os.PathLike) -> np.dtype:
+    """The dtype :func:`read_image` returns for a file (uint8 or uint16), from its header when it can.
+
+    PNG (IHDR bit depth) and JPEG (start-of-frame precision) are read from their first bytes;
+    other formats are decoded.
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR" and len(head) > 24:
+        return np.dtype(np.uint16 if head[24] == 16 else np.uint8)
+    if head.startswith(b"\xff\xd8"):
+        bits = _jpeg_precision(head)
+        if bits == 8:
+            return np.dtype(np.uint8)
+    return read_image(path).dtype
 
 
 def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None) -> np.ndarray:

@@ -37,7 +37,8 @@ def save_mappings(mappings: Mappings, path: str | os.PathLike, *, format: str = 
         (M,) int64 (slice ``offsets[i]:offsets[i+1]`` is pair ``pairs[i]``), ``weights``
         (M, 3) float32 when every pair has them. ``"compact"`` (mappings from
         :func:`compute_mappings` only): what the pairs are built from: per-vertex ``uv``
-        (V, N, 2) float32 and ``depth`` (V, N), bit-packed ``usable`` (V, F) faces, the mesh
+        (V, N, 2) float32 and ``depth`` (V, N) (the visibility's dense views, computed for the
+        file), bit-packed ``usable`` (V, F) faces, the mesh
         ``vertices`` / ``faces``, dense ``level`` and the face mask of a split, about 10x
         smaller for big meshes. ``"auto"``: compact when possible.
         Both have ``format``, ``layout``, ``view_names``, ``mode``, ``pairs``, ``counts``
@@ -105,6 +106,13 @@ class _StoredVisibility(UsableFaces):
         self.depth = depth
         self.usable = usable
         self.mesh = Mesh(vertices=vertices, faces=faces, vertex_normals=np.zeros_like(vertices))
+
+    def usable_faces(self, v: int) -> np.ndarray:
+        return np.flatnonzero(self.usable[v])
+
+    def vertex_projection(self, v: int, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
+        return np.asarray(self.uv[v][ids], np.float32), np.asarray(self.depth[v][ids], np.float32)
 
 
 def load_mappings(path: str | os.PathLike) -> Mappings:

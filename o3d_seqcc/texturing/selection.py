@@ -16,6 +16,7 @@ occluded, depth-inconsistent or too oblique (``visibility.usable``).
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -87,62 +88,110 @@ def register_selection(name: str) -> Callable[[SelectionFn], SelectionFn]:
     return deco
 
 
-def _usable(visibility: VisibilityLike) -> np.ndarray:
+@dataclass(frozen=True)
+class _Entries:
+    """Every usable (view, face) incidence, view-major: view ``v`` owns ``indptr[v]:indptr[v+1]``."""
+
+    indptr: np.ndarray  # (V+1,) int64
+    faces: np.ndarray  # (nnz,) int64, ascending within a view
+    area: np.ndarray  # (nnz,) float64
+    cos_angle: np.ndarray | None  # (nnz,) float64
+    n_views: int
+    n_faces: int
+
+    def view(self, v: int) -> slice:
+        return slice(int(self.indptr[v]), int(self.indptr[v + 1]))
+
+
+def _entries(visibility: VisibilityLike, *, cos: bool = False) -> _Entries:
+    """The usable incidences of a :class:`~o3d_seqcc.visibility.Visibility` (sparse records) or of
+    any object with dense ``usable`` (V, F), ``area`` and ``cos_angle`` arrays."""
+    if hasattr(visibility, "usable_entries"):
+        indptr, faces, area, cos_angle = visibility.usable_entries()
+        return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
+                        cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces))
     usable = np.asarray(visibility.usable, dtype=bool)
     if usable.ndim != 2:
         raise InputError(f"visibility.usable must be (V, F) bool, got shape {usable.shape}")
-    return usable
+    v, f = np.nonzero(usable)
+    indptr = np.concatenate([[0], np.cumsum(usable.sum(axis=1))]).astype(np.int64)
+    area = np.asarray(visibility.area, dtype=np.float64)[v, f]
+    cos_angle = np.asarray(visibility.cos_angle, dtype=np.float64)[v, f] if cos else None
+    return _Entries(indptr, f.astype(np.int64), area, cos_angle, usable.shape[0], usable.shape[1])
 
 
 @register_selection("random")
 def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
     """Uniformly random usable view per face (paper 3.8), reproducible for a given seed."""
-    usable = _usable(visibility)
-    count = usable.sum(axis=0)
+    e = _entries(visibility)
+    count = np.bincount(e.faces, minlength=e.n_faces)
     rng = np.random.default_rng(seed)
-    k = np.floor(rng.random(usable.shape[1]) * np.maximum(count, 1)).astype(np.int64)
-    csum = np.cumsum(usable, axis=0)  # (V, F)
-    lab = np.argmax(csum > k[None, :], axis=0).astype(np.int64)
-    lab[count == 0] = -1
+    k = np.floor(rng.random(e.n_faces) * np.maximum(count, 1)).astype(np.int64)
+    lab = np.full(e.n_faces, -1, dtype=np.int64)
+    rank = np.zeros(e.n_faces, dtype=np.int64)  # usable views of the face met so far, in view order
+    for v in range(e.n_views):
+        f = e.faces[e.view(v)]
+        lab[f[rank[f] == k[f]]] = v  # the k-th usable view (0-based) of each face
+        rank[f] += 1
     return lab
 
 
 @register_selection("largest-area")
 def _select_largest_area(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
     """Usable view with the largest projected face area (paper 3.8); ``seed`` is unused."""
-    usable = _usable(visibility)
-    area = np.asarray(visibility.area, dtype=np.float64)
-    score = np.where(usable, np.nan_to_num(area, nan=-1.0), -np.inf)
-    lab = np.argmax(score, axis=0).astype(np.int64)
-    lab[~usable.any(axis=0)] = -1
+    return _largest(_entries(visibility))
+
+
+def _largest(e: _Entries) -> np.ndarray:
+    """Per face the usable view of largest area; ties go to the lowest view index."""
+    score = np.nan_to_num(e.area, nan=-1.0)
+    best = np.full(e.n_faces, -np.inf)
+    lab = np.full(e.n_faces, -1, dtype=np.int64)
+    for v in range(e.n_views):
+        sl = e.view(v)
+        f, sc = e.faces[sl], score[sl]
+        better = sc > best[f]
+        best[f[better]] = sc[better]
+        lab[f[better]] = v
     return lab
 
 
-_BIG = 1e6  # data cost of an unusable view in the MRF (never selected: > any smoothness gain)
-
-
-def _mrf_data_cost(visibility: VisibilityLike, usable: np.ndarray, data_term: str, max_cost: float) -> np.ndarray:
-    area = np.nan_to_num(np.asarray(visibility.area, dtype=np.float64), nan=0.0)
+def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
+    """(nnz,) float64 data cost of every usable incidence (unusable ones are never considered)."""
+    area = np.nan_to_num(e.area, nan=0.0)
     if data_term == "log-area":
         q = area
     elif data_term == "log-area-cos":
-        q = area * np.clip(np.nan_to_num(np.asarray(visibility.cos_angle, dtype=np.float64)), 0.0, 1.0)
+        q = area * np.clip(np.nan_to_num(e.cos_angle), 0.0, 1.0)
     else:
         raise ValueError(f"unknown data_term {data_term!r}; valid: 'log-area', 'log-area-cos'")
-    q = np.where(usable, np.maximum(q, 0.0), 0.0)
-    qmax = q.max(axis=0, keepdims=True)
+    q = np.maximum(q, 0.0)
+    qmax = np.zeros(e.n_faces)
+    np.maximum.at(qmax, e.faces, q)
+    qm = qmax[e.faces]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cost = -np.log(q / np.where(qmax > 0, qmax, 1.0))
-    cost = np.clip(np.nan_to_num(cost, nan=max_cost, posinf=max_cost), 0.0, max_cost)
-    return np.where(usable, cost, _BIG)
+        cost = -np.log(q / np.where(qm > 0, qm, 1.0))
+    return np.clip(np.nan_to_num(cost, nan=max_cost, posinf=max_cost), 0.0, max_cost)
 
 
-def _mrf_energy(labels: np.ndarray, data: np.ndarray, pairs: np.ndarray, smoothness: float) -> float:
-    seen = labels >= 0
-    e = float(data[labels[seen], np.flatnonzero(seen)].sum())
-    if len(pairs):
-        e += smoothness * float(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
-    return e
+def _incident(pairs: np.ndarray, n_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR (ptr, pair ids) of the pairs each face belongs to."""
+    ends = pairs.reshape(-1)
+    order = np.argsort(ends, kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=n_faces))]).astype(np.int64)
+    return ptr, (order // 2).astype(np.int64)
+
+
+def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray, mark: np.ndarray) -> np.ndarray:
+    """Ascending unique pair ids incident to ``faces`` (``mark``: an all-False (E,) scratch mask)."""
+    n = ptr[faces + 1] - ptr[faces]
+    if not n.sum():
+        return np.zeros(0, np.int64)
+    rows = np.repeat(ptr[faces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+    mark[ids[rows]] = True
+    out = np.flatnonzero(mark)
+    mark[out] = False
+    return out
 
 
 @register_selection("mrf")
@@ -165,7 +214,8 @@ def _select_mrf(
     for unusable ones. Starts from ``"largest-area"`` (energy only decreases, so the result
     never has more transitions *plus* data cost than it); each sweep runs one expansion move
     per view in a seeded random order, restricted to the faces where that view is usable;
-    stops after ``n_sweeps`` or when a sweep changes nothing.
+    stops after ``n_sweeps`` or when a sweep changes nothing. Works on the usable incidences
+    only (memory and time proportional to them, not to views x faces).
 
     Options
     -------
@@ -186,41 +236,61 @@ def _select_mrf(
 
     if smoothness < 0:
         raise ValueError(f"smoothness must be >= 0, got {smoothness}")
-    usable = _usable(visibility)
-    n_views, n_faces = usable.shape
+    if data_term not in ("log-area", "log-area-cos"):
+        raise ValueError(f"unknown data_term {data_term!r}; valid: 'log-area', 'log-area-cos'")
+    e = _entries(visibility, cos=data_term == "log-area-cos")
+    n_views, n_faces = e.n_views, e.n_faces
     if adjacency is None:
         m = mesh if mesh is not None else getattr(visibility, "mesh", None)
         if m is None:
             raise InputError("mrf selection needs the mesh adjacency: pass adjacency= or mesh=")
         adjacency = face_adjacency(m.faces, m.vertices)
     adjacency = np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
-    labels = _select_largest_area(visibility)
+    labels = _largest(e)
     seen = labels >= 0
     pairs = adjacency[seen[adjacency[:, 0]] & seen[adjacency[:, 1]]]
     if smoothness == 0 or len(pairs) == 0:
         return labels
-    data = _mrf_data_cost(visibility, usable, data_term, max_data_cost)
+    data = _mrf_data_cost(e, data_term, max_data_cost)
     w = float(smoothness)
     rng = np.random.default_rng(seed)
-    energy = _mrf_energy(labels, data, pairs, w)
-    logger.debug("mrf: start energy %.1f, %d transitions", energy, count_transitions(labels, pairs))
+    cur = np.zeros(n_faces)  # data cost of every face's current label
+    for v in range(n_views):
+        sl = e.view(v)
+        mine = labels[e.faces[sl]] == v
+        cur[e.faces[sl][mine]] = data[sl][mine]
+    seen_idx = np.flatnonzero(seen)
+    seen_pos = np.full(n_faces, -1, dtype=np.int64)
+    seen_pos[seen_idx] = np.arange(len(seen_idx))
+    cur_seen = cur[seen_idx]
+    n_dis = int(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
+    energy = float(cur_seen.sum()) + w * float(n_dis)  # = sum_f D_f(l_f) + w * transitions
+    ptr, pair_ids = _incident(pairs, n_faces)
+    mark = np.zeros(len(pairs), dtype=bool)
+    logger.debug("mrf: start energy %.1f, %d transitions", energy, n_dis)
     pos = np.empty(n_faces, dtype=np.int64)
+    free = np.zeros(n_faces, dtype=bool)
     for sweep in range(int(n_sweeps)):
         changed = 0
         for alpha in rng.permutation(n_views):
-            free = usable[alpha] & (labels != alpha)  # unusable/unseen faces are never free
-            nfree = int(np.count_nonzero(free))
+            sl = e.view(int(alpha))
+            fa = e.faces[sl]
+            keep = labels[fa] != alpha  # unusable/unseen faces are never free
+            fidx = fa[keep]
+            nfree = len(fidx)
             if nfree == 0:
                 continue
-            fidx = np.flatnonzero(free)
+            d_alpha = data[sl][keep]
             pos[fidx] = np.arange(nfree)
+            free[fidx] = True
             lp_all = labels
+            inc = pairs[_gather(ptr, pair_ids, fidx, mark)]  # every pair with a free face, in pair order
             # unary costs of keeping (x=0) / switching to alpha (x=1)
-            cost0 = data[lp_all[fidx], fidx].copy()
-            cost1 = data[alpha, fidx].copy()
-            fp, fq = free[pairs[:, 0]], free[pairs[:, 1]]
+            cost0 = cur[fidx].copy()
+            cost1 = d_alpha.copy()
+            fp, fq = free[inc[:, 0]], free[inc[:, 1]]
             # both free: Potts expansion term, submodular
-            both = pairs[fp & fq]
+            both = inc[fp & fq]
             bi, bj = pos[both[:, 0]], pos[both[:, 1]]
             A = w * (lp_all[both[:, 0]] != lp_all[both[:, 1]])
             # E = A + (C-A) x_i + (D-C) x_j + (B+C-A-D)(1-x_i) x_j with B = C = w, D = 0
@@ -229,13 +299,14 @@ def _select_mrf(
             cost0_add = np.zeros(nfree)
             # one free, one fixed: unary on the free one
             for a_col, b_col, mask in ((0, 1, fp & ~fq), (1, 0, fq & ~fp)):
-                pp = pairs[mask]
+                pp = inc[mask]
                 i = pos[pp[:, a_col]]
                 lf = lp_all[pp[:, a_col]]
                 lo = lp_all[pp[:, b_col]]
                 cost0_add += w * np.bincount(i, weights=(lf != lo).astype(np.float64), minlength=nfree)
                 cost1 += w * np.bincount(i, weights=(lo != alpha).astype(np.float64), minlength=nfree)
             cost0 += cost0_add
+            free[fidx] = False
             g = maxflow.Graph[float](nfree, len(both))
             nodes = g.add_nodes(nfree)
             if len(both):
@@ -245,12 +316,22 @@ def _select_mrf(
             g.maxflow()
             switch = np.asarray(g.get_grid_segments(np.asarray(nodes)), dtype=bool)
             if switch.any():
-                new = labels.copy()
-                new[fidx[switch]] = alpha
-                e_new = _mrf_energy(new, data, pairs, w)
+                sw = fidx[switch]
+                touched = pairs[_gather(ptr, pair_ids, sw, mark)]
+                before = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
+                old, old_cost = labels[sw].copy(), cur_seen[seen_pos[sw]]
+                labels[sw] = alpha
+                cur_seen[seen_pos[sw]] = d_alpha[switch]
+                after = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
+                n_dis_new = n_dis - before + after
+                e_new = float(cur_seen.sum()) + w * float(n_dis_new)  # the full sum: the same float as before
                 if e_new < energy - 1e-9:
-                    labels, energy = new, e_new
+                    energy, n_dis = e_new, n_dis_new
+                    cur[sw] = d_alpha[switch]
                     changed += int(switch.sum())
+                else:
+                    labels[sw] = old
+                    cur_seen[seen_pos[sw]] = old_cost
         logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
         if changed == 0:
             break
@@ -269,8 +350,10 @@ def select_views(
     Parameters
     ----------
     visibility : Visibility
-        From :func:`o3d_seqcc.visibility.compute_visibility`; uses ``usable`` (V, F) bool,
-        ``area`` (V, F) projected area in px^2, ``cos_angle`` (V, F) and, for ``"mrf"``, ``mesh``.
+        From :func:`o3d_seqcc.visibility.compute_visibility`; uses its usable (view, face)
+        incidences with their projected areas (px^2) and cosines (``usable_entries()``, sparse)
+        and, for ``"mrf"``, ``mesh``. Any object with dense ``usable`` (V, F) bool, ``area`` and
+        ``cos_angle`` (V, F) arrays, ``n_views`` and ``n_faces`` works too.
     method : {"mrf", "largest-area", "random"}, default "mrf"
         See the module docstring and :data:`SELECTION_METHODS`.
     seed : int, default 0
@@ -294,10 +377,11 @@ def select_views(
     """
     if method not in SELECTION_METHODS:
         raise ValueError(f"unknown selection method {method!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
-    usable = _usable(visibility)
-    if usable.shape[1] == 0 or not usable.any():
+    n_usable = (int(visibility.usable_counts().sum()) if hasattr(visibility, "usable_counts")
+                else len(_entries(visibility).faces))
+    if visibility.n_faces == 0 or not n_usable:
         raise InputError(
-            f"no face of the mesh is usable in any of the {usable.shape[0]} views (outside every image, occluded, "
+            f"no face of the mesh is usable in any of the {visibility.n_views} views (outside every image, occluded, "
             "depth-inconsistent or too oblique): check that the mesh and the cameras are in the same coordinates "
             "(extrinsic = world-to-camera), or relax the visibility filters"
         )
