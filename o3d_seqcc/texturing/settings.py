@@ -102,7 +102,12 @@ class TextureSettings:
         if self.local_leveling and (int(self.local_band) < 1 or int(self.local_band) != self.local_band):
             raise InputError(f"local_band must be an integer >= 1, got {self.local_band}")
         if not self.smoothness >= 0:
-            raise ValueError(f"smoothness must be >= 0, got {self.smoothness}")
+            raise InputError(f"smoothness (--smoothness) must be >= 0, got {self.smoothness}")
+        if not self.leveling_smoothness >= 0:
+            raise InputError(f"leveling_smoothness (--leveling-smoothness) must be >= 0, got {self.leveling_smoothness}")
+        if int(self.atlas_size) > int(self.max_atlas_size):
+            raise InputError(f"atlas_size (--atlas-size) must be at most max_atlas_size = {self.max_atlas_size}, "
+                             f"got {self.atlas_size}")
 
     def updated(self, **changes: Any) -> "TextureSettings":
         """A copy with some fields changed; unknown names raise ``TypeError`` listing the valid ones."""
