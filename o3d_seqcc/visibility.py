@@ -489,11 +489,12 @@ def compute_visibility(
     if oblique_reference not in ("ray", "axis"):
         raise ValueError(f"unknown oblique_reference {oblique_reference!r}; valid: 'ray', 'axis'")
     if not 0.0 < float(max_angle) <= 180.0:
-        raise ValueError(f"max_angle must be in (0, 180] degrees, got {max_angle}")
-    if occlusion_tol < 0 or occlusion_tol >= 1 or occlusion_atol < 0:
-        raise ValueError("occlusion_tol must be in [0, 1) and occlusion_atol >= 0")
-    if depth_tol < 0 or depth_atol < 0:
-        raise ValueError("depth_tol and depth_atol must be >= 0")
+        raise InputError(f"max_angle (--max-angle) must be in (0, 180] degrees, got {max_angle}")
+    if not (0 <= occlusion_tol < 1 and occlusion_atol >= 0):
+        raise InputError(f"occlusion_tol (--occlusion-tol) must be in [0, 1) and occlusion_atol >= 0, "
+                         f"got {occlusion_tol}, {occlusion_atol}")
+    if not (depth_tol >= 0 and depth_atol >= 0):
+        raise InputError(f"depth_tol (--depth-tol) and depth_atol (--depth-atol) must be >= 0, got {depth_tol}, {depth_atol}")
     opts = {
         "occlusion_tol": float(occlusion_tol),
         "occlusion_atol": float(occlusion_atol),

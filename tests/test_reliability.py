@@ -352,3 +352,50 @@ def test_a_warning_is_printed_once(S, tmp_path, capsys):
     assert main(["run", str(S), "--out", str(tmp_path / "w"), *FAST[2:], "--t-npm", "100000", "--method", "none"]) == 0
     err = capsys.readouterr().err
     assert err.count("no colour-correction path") <= 1
+
+
+# found by benchmarks/hostile_inputs.py ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["mappings", "{S}", "--out", "{T}/m.npz", "--max-angle", "-5"], "max_angle"),
+    (["mappings", "{S}", "--out", "{T}/m.npz", "--depth-tol", "-1"], "depth_tol"),
+    (["mappings", "{S}", "--out", "{T}/m.npz", "--occlusion-tol", "nan"], "occlusion_tol"),
+    (["texture", "{S}", "--out", "{T}/o", "--smoothness", "-1"], "smoothness"),
+    (["run", "{S}", "--out", "{T}/o", "--leveling-smoothness", "-1"], "leveling_smoothness"),
+    (["texture", "{S}", "--out", "{T}/o", "--atlas-size", "100000"], "at most 16384"),
+    (["evaluate", "{S}", "--blur", "-1"], "--blur"),
+    (["correct", "{S}", "--out", "{T}/o", "--depth-scale", "-1"], "--depth-scale"),
+    (["synthetic", "{T}/syn", "--width", "100000", "--height", "100000"], "over the limit"),
+])
+def test_bad_option_values_are_messages_not_tracebacks(S, tmp_path, capsys, argv, match):
+    argv = [a.format(S=S, T=tmp_path) for a in argv]
+    assert main(["-q", *argv]) == 2
+    assert match in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["S"]
+
+
+def test_json_report_never_replaces_an_input(S, capsys):
+    before = checksums(S)
+    assert main(["-q", "evaluate", str(S), "--json", str(S / "scene.json")]) == 2
+    assert "would replace it" in capsys.readouterr().err
+    assert main(["-q", "seams", str(S / "mesh.ply"), "--json", str(S / "mesh.ply")]) == 2
+    assert checksums(S) == before
+
+
+def test_interrupt_while_open3d_initialises_exits_130(monkeypatch, capsys):
+    import o3d_seqcc.cli as cli
+
+    def interrupted(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise ImportError("initialization failed") from e
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    args = parser.parse_args(["info", "x"])
+    monkeypatch.setattr(args, "func", interrupted, raising=False)
+    monkeypatch.setattr(parser, "parse_args", lambda argv=None: args)
+    assert cli.main(["info", "x"]) == 130
+    assert "interrupted" in capsys.readouterr().err

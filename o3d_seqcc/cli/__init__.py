@@ -143,6 +143,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("o3d-seqcc: interrupted", file=sys.stderr)
         return 130
+    except ImportError as e:  # Ctrl-C while a compiled module (open3d) initialises is re-raised as ImportError
+        if isinstance(e.__cause__ or e.__context__, KeyboardInterrupt):
+            print("o3d-seqcc: interrupted", file=sys.stderr)
+            return 130
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

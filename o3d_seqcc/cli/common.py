@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ..correction import DEFAULT_METHOD, available_methods
+from ..errors import InputError
 from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output
@@ -48,6 +49,8 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
 
 def scene_from_args(args: argparse.Namespace):
     """The scene named on the command line (validated)."""
+    if not 0 < args.depth_scale < float("inf"):
+        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
     return load_scene(args.scene, mesh=args.mesh, depth_dir=args.depth_dir, depth_scale=args.depth_scale)
 
 
@@ -156,6 +159,29 @@ def prepare_out_dir(args: argparse.Namespace, scene) -> Path:
     """Check ``--out`` against the scene's inputs before any work (:func:`o3d_seqcc.io.output.check_output`)."""
     check_output(args.out, overwrite=args.overwrite, inputs=scene.input_paths())
     return Path(args.out)
+
+
+def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
+    """Refuse an output file path that is one of the inputs (it would be replaced by the result).
+
+    Parameters
+    ----------
+    path : str or Path
+        The output file given on the command line.
+    inputs : iterable of path-like
+        Every file the command reads.
+    option : str
+        The option's name, for the message.
+
+    Raises
+    ------
+    InputError
+        ``path`` resolves to one of ``inputs``.
+    """
+    target = Path(path).resolve()
+    for p in inputs:
+        if Path(p).resolve() == target:
+            raise InputError(f"{option} {path} is the input {p}: writing there would replace it; choose another file")
 
 
 def library_default(fn: Callable) -> dict[str, Any]:

@@ -17,10 +17,11 @@ from __future__ import annotations
 import argparse
 
 from ..correction import available_methods
+from ..errors import InputError
 from ..evaluation import evaluate_scene
 from ..io.files import write_json
 from ..mappings import MODES
-from .common import add_scene_arguments, scene_from_args
+from .common import add_scene_arguments, refuse_input_overwrite, scene_from_args
 
 
 def _row(label: str, ev) -> str:
@@ -30,7 +31,11 @@ def _row(label: str, ev) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.blur >= 0:
+        raise InputError(f"--blur must be a Gaussian sigma >= 0 pixels, got {args.blur}")
     scene = scene_from_args(args)
+    if args.json:
+        refuse_input_overwrite(args.json, scene.input_paths(), "--json")
     out = evaluate_scene(scene, mappings=args.mappings, method=args.method, reference=args.reference,
                          holdout=args.holdout, seed=args.seed, t_npm=args.t_npm, blur=args.blur, min_n=args.min_n)
     rows = out.pop("rows")

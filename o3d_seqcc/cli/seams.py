@@ -13,9 +13,12 @@ import json
 
 from ..io.files import write_json
 from ..seams import seam_metric
+from .common import refuse_input_overwrite
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.json:
+        refuse_input_overwrite(args.json, [args.mesh], "--json")
     report = seam_metric(args.mesh, offset=args.offset, samples_per_edge=args.samples_per_edge)
     d = {"mesh": str(args.mesh), **report.to_dict()}
     if args.json:

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..imageops import img_as_dtype
+from ..io import files as iofiles
 from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image, write_json
 from ..io.load import load_scene, save_scene
 from ..photometric import HARD_CHANGE_RANGES, apply_photometric, identity_photometric, sample_camera_change, \
@@ -232,6 +233,9 @@ def make_synthetic_scene(
         raise InputError(f"cell_size must be a number of metres in [0.01, 1], got {cell_size!r}")
     if n_views > 100:
         raise InputError(f"n_views must be <= 100 (names are v00..v99), got {n_views}")
+    if int(width) * int(height) > iofiles.MAX_IMAGE_PIXELS:
+        raise InputError(f"width x height = {int(width) * int(height)} pixels, over the limit of "
+                         f"{iofiles.MAX_IMAGE_PIXELS} pixels (--max-image-pixels); choose smaller images")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"output folder {out_dir} is a file; give a folder path")
     if out_dir.is_dir() and any(out_dir.iterdir()) and not overwrite:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["FALLBACKS", "LEVELING_SMOOTHNESS", "MRF_SMOOTHNESS", "OVERFLOWS", "TextureSettings", "VisibilityLike",
+__all__ = ["FALLBACKS", "LEVELING_SMOOTHNESS", "MAX_ATLAS_SIZE", "MRF_SMOOTHNESS", "OVERFLOWS", "TextureSettings", "VisibilityLike",
            "parse_texels_per_pixel"]
 
 #: default Potts weight of the ``"mrf"`` selection
@@ -38,6 +38,9 @@ class VisibilityLike(Protocol):  # pragma: no cover - typing only
 
     def face_uv(self, selection: np.ndarray) -> np.ndarray: ...
 
+
+#: largest atlas side accepted (the texture size limit of current GPUs and engines)
+MAX_ATLAS_SIZE = 16384
 
 @dataclass(frozen=True)
 class TextureSettings:
@@ -116,7 +119,12 @@ class TextureSettings:
         if self.local_leveling and (int(self.local_band) < 1 or int(self.local_band) != self.local_band):
             raise InputError(f"local_band must be an integer >= 1, got {self.local_band}")
         if not self.smoothness >= 0:
-            raise ValueError(f"smoothness must be >= 0, got {self.smoothness}")
+            raise InputError(f"smoothness (--smoothness) must be >= 0, got {self.smoothness}")
+        if not self.leveling_smoothness >= 0:
+            raise InputError(f"leveling_smoothness (--leveling-smoothness) must be >= 0, got {self.leveling_smoothness}")
+        if int(self.atlas_size) > MAX_ATLAS_SIZE:
+            raise InputError(f"atlas_size (--atlas-size) must be at most {MAX_ATLAS_SIZE} (the largest texture GPUs "
+                             f"load), got {self.atlas_size}; use overflow='pages' (--atlas-overflow pages) for more")
 
     def updated(self, **changes: Any) -> "TextureSettings":
         """A copy with some fields changed; unknown names raise ``TypeError`` listing the valid ones."""
