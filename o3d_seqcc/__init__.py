@@ -98,9 +98,9 @@ _LAZY: dict[str, str] = {
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
-    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops", "images",
-    "io", "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "parallel", "photometric", "pipeline",
-    "render", "scene", "seams", "synthetic", "texturing", "view_visibility", "visibility",
+    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops",
+    "images", "io", "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "parallel", "photometric",
+    "pipeline", "render", "scene", "seams", "synthetic", "texturing", "view_visibility", "visibility",
 })
 
 __all__ = [

@@ -44,8 +44,9 @@ from .base import (
     register_method,
 )
 
-__all__ = ["METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "FunctionTransform", "IdentityTransform",
-           "LutTransform", "Transform", "apply_transform", "available_methods", "check_method", "correct", "register_method"]
+__all__ = ["METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "FunctionTransform",
+           "IdentityTransform", "LutTransform", "Transform", "apply_transform", "available_methods", "check_method",
+           "correct", "register_method"]
 
 logger = logging.getLogger(__name__)
 
