@@ -295,24 +295,19 @@ def plot(results: list[dict], path: Path) -> None:
     faces = sorted({r["faces_target"] for r in results})
     views = sorted({r["views"] for r in results})
     for backend, ls in (("local", "-"), ("cluster", "--")):
-        for F in faces:
-            rs = sorted((r for r in results if r["backend"] == backend and r["faces_target"] == F), key=lambda r: r["views"])
-            if rs:
-                lab = f"{backend}, {F / 1e6:g}M faces"
-                ax[0, 0].plot([r["views"] for r in rs], [r["wall_s"] for r in rs], ls, marker="o", label=lab)
-                ax[1, 0].plot([r["views"] for r in rs], [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
+        # column 0: against views at a fixed face count; column 1: against faces at a fixed view count
+        for col, group, x, values, fmt in ((0, "faces_target", "views", faces, lambda F: f"{F / 1e6:g}M faces"),
+                                           (1, "views", "faces", views, lambda V: f"{V} views")):
+            for g in values:
+                rs = sorted((r for r in results if r["backend"] == backend and r[group] == g), key=lambda r: r[x])
+                if not rs:
+                    continue
+                lab = f"{backend}, {fmt(g)}"
+                xs = [r[x] for r in rs]
+                ax[0, col].plot(xs, [r["wall_s"] for r in rs], ls, marker="o", label=lab)
+                ax[1, col].plot(xs, [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
                 if backend == "cluster":
-                    ax[1, 0].plot([r["views"] for r in rs], [r["worker_mb"] for r in rs], ":", marker="s",
-                                  label=lab + " (per worker)")
-        for V in views:
-            rs = sorted((r for r in results if r["backend"] == backend and r["views"] == V), key=lambda r: r["faces"])
-            if rs:
-                lab = f"{backend}, {V} views"
-                ax[0, 1].plot([r["faces"] for r in rs], [r["wall_s"] for r in rs], ls, marker="o", label=lab)
-                ax[1, 1].plot([r["faces"] for r in rs], [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
-                if backend == "cluster":
-                    ax[1, 1].plot([r["faces"] for r in rs], [r["worker_mb"] for r in rs], ":", marker="s",
-                                  label=lab + " (per worker)")
+                    ax[1, col].plot(xs, [r["worker_mb"] for r in rs], ":", marker="s", label=lab + " (per worker)")
     titles = [["run time vs views", "run time vs faces"], ["peak RSS vs views", "peak RSS vs faces"]]
     for i in range(2):
         for j in range(2):
