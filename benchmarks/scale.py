@@ -135,7 +135,7 @@ def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0) -> Path
                       1.6 + 1.2 * (i % 3) + rng.uniform(-0.1, 0.1)])
         yaw = np.deg2rad(rng.uniform(-15, 15))
         E = look_extrinsic(c, np.pi / 2 + yaw - np.pi, np.deg2rad(rng.uniform(-5, 10)), 0.0)
-        R, t = E[:3, :3], E[:3, 3]
+        R = E[:3, :3]
         d = d_cam @ R
         ans = rs.cast_rays(o3c.Tensor(np.concatenate([np.broadcast_to(c, d.shape), d], 1).astype(np.float32)))
         th = ans["t_hit"].numpy().astype(np.float64)
