@@ -135,7 +135,7 @@ def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0) -> Path
                       1.6 + 1.2 * (i % 3) + rng.uniform(-0.1, 0.1)])
         yaw = np.deg2rad(rng.uniform(-15, 15))
         E = look_extrinsic(c, np.pi / 2 + yaw - np.pi, np.deg2rad(rng.uniform(-5, 10)), 0.0)
-        R, t = E[:3, :3], E[:3, 3]
+        R = E[:3, :3]
         d = d_cam @ R
         ans = rs.cast_rays(o3c.Tensor(np.concatenate([np.broadcast_to(c, d.shape), d], 1).astype(np.float32)))
         th = ans["t_hit"].numpy().astype(np.float64)
@@ -260,6 +260,7 @@ def reference_timing(sizes=(400, 1000), seed: int = 0) -> None:
     from o3d_seqcc.graph import build_graph, choose_reference, correction_paths
 
     rng = np.random.default_rng(seed)
+    choose_reference(build_graph({(0, 1): 500, (1, 2): 500}, 3, t_npm=400))  # imports (SciPy's Dijkstra) not timed
     for n in sizes:
         counts = {(a, a + d): int(rng.integers(400, 40000) // d) for a in range(n) for d in range(1, 9) if a + d < n}
         t = time.perf_counter()
@@ -294,24 +295,19 @@ def plot(results: list[dict], path: Path) -> None:
     faces = sorted({r["faces_target"] for r in results})
     views = sorted({r["views"] for r in results})
     for backend, ls in (("local", "-"), ("cluster", "--")):
-        for F in faces:
-            rs = sorted((r for r in results if r["backend"] == backend and r["faces_target"] == F), key=lambda r: r["views"])
-            if rs:
-                lab = f"{backend}, {F / 1e6:g}M faces"
-                ax[0, 0].plot([r["views"] for r in rs], [r["wall_s"] for r in rs], ls, marker="o", label=lab)
-                ax[1, 0].plot([r["views"] for r in rs], [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
+        # column 0: against views at a fixed face count; column 1: against faces at a fixed view count
+        for col, group, x, values, fmt in ((0, "faces_target", "views", faces, lambda F: f"{F / 1e6:g}M faces"),
+                                           (1, "views", "faces", views, lambda V: f"{V} views")):
+            for g in values:
+                rs = sorted((r for r in results if r["backend"] == backend and r[group] == g), key=lambda r: r[x])
+                if not rs:
+                    continue
+                lab = f"{backend}, {fmt(g)}"
+                xs = [r[x] for r in rs]
+                ax[0, col].plot(xs, [r["wall_s"] for r in rs], ls, marker="o", label=lab)
+                ax[1, col].plot(xs, [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
                 if backend == "cluster":
-                    ax[1, 0].plot([r["views"] for r in rs], [r["worker_mb"] for r in rs], ":", marker="s",
-                                  label=lab + " (per worker)")
-        for V in views:
-            rs = sorted((r for r in results if r["backend"] == backend and r["views"] == V), key=lambda r: r["faces"])
-            if rs:
-                lab = f"{backend}, {V} views"
-                ax[0, 1].plot([r["faces"] for r in rs], [r["wall_s"] for r in rs], ls, marker="o", label=lab)
-                ax[1, 1].plot([r["faces"] for r in rs], [r["peak_mb"] for r in rs], ls, marker="o", label=lab + " (client)")
-                if backend == "cluster":
-                    ax[1, 1].plot([r["faces"] for r in rs], [r["worker_mb"] for r in rs], ":", marker="s",
-                                  label=lab + " (per worker)")
+                    ax[1, col].plot(xs, [r["worker_mb"] for r in rs], ":", marker="s", label=lab + " (per worker)")
     titles = [["run time vs views", "run time vs faces"], ["peak RSS vs views", "peak RSS vs faces"]]
     for i in range(2):
         for j in range(2):

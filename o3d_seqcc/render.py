@@ -477,7 +477,10 @@ def write_selection_picture(scene, visibility, labels: np.ndarray, path, view: s
     (pathlib.Path, str)
         The path and the view's name.
     """
-    counts = visibility.usable_counts() if hasattr(visibility, "usable_counts") else np.asarray(visibility.usable).sum(1)
+    if hasattr(visibility, "usable_counts"):
+        counts = visibility.usable_counts()
+    else:
+        counts = np.asarray(visibility.usable).sum(axis=1)
     k = int(np.argmax(counts)) if view is None else scene.index(view)
     img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views))
     write_image(path, img)

@@ -43,7 +43,6 @@ access and cached: fine for small scenes and tests, never used by the pipeline's
 from __future__ import annotations
 
 import logging
-import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -467,9 +466,9 @@ def compute_visibility(
     Returns
     -------
     Visibility
-        One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``, ``normals_flipped``, the
-        totals (face-view incidences) ``valid``, ``occluded``, ``depth_inconsistent``,
-        ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
+        One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
+        ``normals_flipped``, the totals (face-view incidences) ``valid``, ``occluded``,
+        ``depth_inconsistent``, ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
         ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
         ``views_seeing_nothing`` (names), ``rays`` and ``timings`` (seconds per stage).
 

@@ -67,13 +67,13 @@ def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = 
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
-            usable=np.asarray(vis.usable).sum(axis=1), selection_png=_selection_png(folder))
+            usable=vis.usable_counts(), selection_png=_selection_png(folder))
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
             rep=result.report if report is None else report, scene=result.scene, photos=result.originals,
             corrected=result.result.images, correction=result.result, mappings=result.mappings,
-            usable=None if vis is None else np.asarray(vis.usable).sum(axis=1))
+            usable=None if vis is None else vis.usable_counts())
     raise TypeError(f"html_report needs a pipeline.RunResult or pipeline.CorrectionRun, got {type(result).__name__}")
 
 
@@ -187,7 +187,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         textured = _scene_frame(load_textured_mesh(tm_path), rep, tm_path.suffix.lstrip("."))
     return PageInputs(rep=rep, scene=sc, photos=photos, corrected=corrected, correction=correction, mappings=maps,
                    selection=selection, mesh=(vis.mesh.vertices, faces), textured=textured,
-                   usable=np.asarray(vis.usable).sum(axis=1), selection_png=_selection_png(run_dir))
+                   usable=vis.usable_counts(), selection_png=_selection_png(run_dir))
 
 
 def regenerate_report(
