@@ -161,6 +161,25 @@ def prepare_out_dir(args: argparse.Namespace, scene) -> Path:
     return Path(args.out)
 
 
+def texture_job_from_args(args: argparse.Namespace) -> tuple[TextureSettings, dict[str, Any], Any, Path]:
+    """What ``run`` and ``texture`` check before any work: export formats and options, texture
+    settings, the scene, and ``--out`` against the scene's inputs.
+
+    Returns
+    -------
+    (TextureSettings, dict, Scene, Path)
+        The settings, the keyword options of :meth:`~o3d_seqcc.pipeline.RunResult.save`, the
+        loaded scene and the output folder.
+    """
+    from ..pipeline import parse_formats
+
+    parse_formats(args.format)
+    settings = texture_settings_from_args(args)
+    save_options = save_options_from_args(args)
+    scene = scene_from_args(args)
+    return settings, save_options, scene, prepare_out_dir(args, scene)
+
+
 def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
     """Refuse an output file path that is one of the inputs (it would be replaced by the result).
 

@@ -15,16 +15,12 @@ import argparse
 from dataclasses import replace
 
 from .. import pipeline
-from .common import add_correction_arguments, add_scene_arguments, add_texture_arguments, prepare_out_dir, \
-    print_run_summary, save_options_from_args, scene_from_args, texture_settings_from_args
+from .common import add_correction_arguments, add_scene_arguments, add_texture_arguments, print_run_summary, \
+    texture_job_from_args
 
 
 def run(args: argparse.Namespace) -> int:
-    pipeline.parse_formats(args.format)
-    settings = texture_settings_from_args(args)
-    save_options = save_options_from_args(args)
-    scene = scene_from_args(args)
-    out = prepare_out_dir(args, scene)
+    settings, save_options, scene, out = texture_job_from_args(args)
     res = pipeline.run(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
                        settings=settings, seams=args.seams, compare_original=args.compare_original)
     res = replace(res, source=args.scene)

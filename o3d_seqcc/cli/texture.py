@@ -13,16 +13,11 @@ from dataclasses import replace
 
 from .. import pipeline
 from ..io.files import read_view_images
-from .common import add_scene_arguments, add_texture_arguments, prepare_out_dir, scene_from_args, \
-    print_run_summary, save_options_from_args, texture_settings_from_args
+from .common import add_scene_arguments, add_texture_arguments, print_run_summary, texture_job_from_args
 
 
 def run(args: argparse.Namespace) -> int:
-    pipeline.parse_formats(args.format)
-    settings = texture_settings_from_args(args)
-    save_options = save_options_from_args(args)
-    scene = scene_from_args(args)
-    out = prepare_out_dir(args, scene)
+    settings, save_options, scene, out = texture_job_from_args(args)
     images = read_view_images(scene, args.images) if args.images else None
     res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams)
     res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
