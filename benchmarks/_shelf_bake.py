@@ -6,7 +6,8 @@ pixel for pixel from the photos (no rotation, no xatlas), fallback blocks per un
 charts do not fit). Used by ``benchmarks/atlas.py`` to measure the shelf bake and the xatlas bake in the
 same process; the library itself no longer has the shelf packer (issue 13: it measured worse on coverage,
 GLB size, vertices and budget, see the benchmark's table). Only library helpers that issue 13 kept
-unchanged are imported (seam_leveling_offsets, pull-push fill, weld / adjacency / normals); the local
+unchanged are imported (seam_leveling_offsets, _rasterize_uv, _seam_edge_corners, _propagate, _check, pull-push
+fill, weld / adjacency / normals); the local
 seam leveling is main's, copied here.
 """
 # ruff: noqa
@@ -22,7 +23,9 @@ import numpy as np
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.imageops import img_as_uint8, sample_bilinear
 from o3d_seqcc.meshops import face_adjacency, vertex_normals, weld_vertices
-from o3d_seqcc.texturing.leveling import seam_leveling_offsets
+from o3d_seqcc.texturing.atlas import _check  # unchanged since 89e7de7: shared, not copied
+from o3d_seqcc.texturing.fallback import _propagate
+from o3d_seqcc.texturing.leveling import _rasterize_uv, _seam_edge_corners, seam_leveling_offsets
 from o3d_seqcc.texturing.textured_mesh import TexturedMesh
 from o3d_seqcc.texturing.bake import push_pull_fill
 
@@ -46,34 +49,6 @@ class ShelfSettings:
     local_leveling: bool = True
     local_band: int = 8
     fallback: str = "smooth"
-
-def _rasterize_uv(txy: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Face id and barycentric weights of the texels in ``mask`` (texel centres at integers).
-
-    Ray casting on the UV mesh ``(x, y, 0)`` with rays along -z through the texel centres
-    (Open3D ``RaycastingScene``). Returns the flat indices of the texels that hit a face, their
-    face (index into ``faces``) and (n, 3) barycentric weights.
-    """
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    v3 = np.zeros((len(txy), 3), dtype=np.float32)
-    v3[:, :2] = txy
-    scene.add_triangles(o3d.core.Tensor(v3), o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)))
-    idx = np.flatnonzero(mask.reshape(-1))
-    ty, tx = np.divmod(idx, mask.shape[1])
-    rays = np.zeros((len(idx), 6), dtype=np.float32)
-    rays[:, 0] = tx
-    rays[:, 1] = ty
-    rays[:, 2] = 1.0
-    rays[:, 5] = -1.0
-    ans = scene.cast_rays(o3d.core.Tensor(rays))
-    prim = ans["primitive_ids"].numpy()
-    hit = prim != np.iinfo(np.uint32).max
-    uvs = ans["primitive_uvs"].numpy()[hit].astype(np.float64)
-    bary = np.stack([1.0 - uvs[:, 0] - uvs[:, 1], uvs[:, 0], uvs[:, 1]], axis=1)
-    return idx[hit], prim[hit].astype(np.int64), bary
-
 
 def leveling_corner_offsets(
     images: list[np.ndarray],
@@ -164,32 +139,6 @@ def apply_corner_offsets(
     flat = out[:R].reshape(-1, 3)
     flat[inr] = np.clip(np.rint(flat[inr].astype(np.float32) + off[inr]), 0, 255).astype(np.uint8)
     return out, {"texels_in_faces": int(len(tidx)), "time_raster_s": t1 - t0, "time_apply_s": time.perf_counter() - t0}
-
-
-def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iters: int) -> np.ndarray:
-    """Fill unknown rows of ``values`` (n, 3) with the mean of their known neighbours, front by front.
-
-    ``pairs`` (E, 2): undirected neighbour pairs. Rows that no front reaches after ``iters``
-    steps get :data:`FALLBACK_GREY`. Returns a new array.
-    """
-    import scipy.sparse as sp
-
-    n = len(values)
-    col = np.array(values, dtype=np.float64)
-    have = np.asarray(known, dtype=np.float64)
-    if len(pairs) and not have.all():
-        adj = sp.coo_matrix((np.ones(2 * len(pairs)), (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
-                            shape=(n, n)).tocsr()
-        for _ in range(int(iters)):
-            ssum = adj @ (col * have[:, None])
-            cnt = adj @ have
-            upd = (have == 0) & (cnt > 0)
-            if not upd.any():
-                break
-            col[upd] = ssum[upd] / cnt[upd, None]
-            have[upd] = 1.0
-    col[have == 0] = FALLBACK_GREY
-    return col
 
 
 def _face_colors(
@@ -292,23 +241,6 @@ def fallback_blocks(
     blocks = c0 + (c1 - c0) * tx[None] + (c2 - c0) * ty[None]
     block_of_face[unseen] = np.arange(len(unseen))
     return np.clip(np.rint(blocks), 0, 255).astype(np.uint8), block_of_face, corner_xy
-def _seam_edge_corners(wf: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Corner indices (0..2) of the shared edge of each adjacent face pair.
-
-    ``wf`` (F, 3): welded vertex id of every face corner; ``pairs`` (E, 2): faces sharing an
-    edge. Returns ``cp`` and ``cq``, both (E, 2) int64: the corners of face ``pairs[:, 0]`` /
-    ``pairs[:, 1]`` at the two shared vertices, in the same vertex order.
-    """
-    wp = wf[pairs[:, 0]]
-    wq = wf[pairs[:, 1]]
-    match = wp[:, :, None] == wq[:, None, :]  # (E, 3, 3)
-    ip = match.any(axis=2)
-    cp = np.argsort(~ip, axis=1, kind="stable")[:, :2].astype(np.int64)
-    rows = np.arange(len(pairs))[:, None]
-    cq = np.argmax(match[rows, cp], axis=2).astype(np.int64)
-    return cp, cq
-
-
 def local_seam_leveling(
     tex: np.ndarray, region: np.ndarray, txy: np.ndarray, new_faces: np.ndarray, face_chart: np.ndarray,
     labels: np.ndarray, adjacency: np.ndarray, wf: np.ndarray, *, band: int, smooth_iters: int = 1,
@@ -472,34 +404,6 @@ class _Layout:
     wh: np.ndarray  # (C, 2) rectangle size
     px: np.ndarray  # (C,) atlas position
     py: np.ndarray
-
-
-def _check(mesh: Any, images: Sequence[np.ndarray], visibility: Any, selection: np.ndarray):
-    verts = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
-    labels = np.asarray(selection, dtype=np.int64).reshape(-1)
-    n_views = visibility.n_views
-    if len(labels) != len(faces) or visibility.n_faces != len(faces):
-        raise InputError(f"selection has {len(labels)} entries and the visibility {visibility.n_faces} faces, but the "
-                         f"mesh has {len(faces)} faces")
-    if labels.size and (labels.max() >= n_views or labels.min() < -1):
-        raise InputError(f"selection holds view indices outside -1..{n_views - 1}")
-    if len(images) != n_views:
-        raise InputError(f"{len(images)} images given for {n_views} views")
-    if not (labels >= 0).any():
-        raise InputError(
-            "no face is seen by any view, so there is nothing to texture: check the mesh/camera registration "
-            "or relax the visibility filters"
-        )
-    seen = labels >= 0
-    fuv = visibility.face_uv(labels)
-    if not np.isfinite(fuv[seen]).all():
-        bad = np.flatnonzero(seen & ~np.isfinite(fuv).all(axis=(1, 2)))
-        raise InputError(
-            f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to views where their vertices have no "
-            "projection (NaN uv): select only usable views (select_views does)"
-        )
-    return verts, faces, labels, fuv
 
 
 def _make_charts(images, fuv, verts, faces, labels, adjacency, s: ShelfSettings) -> _Charts:
