@@ -150,7 +150,8 @@ def native_filters() -> list[dict[str, Any]]:
         ``parameters``: per parameter ``name`` (the pymeshlab-style name, MeshLab's parameter
         name), ``kind`` (``bool``, ``int``, ``float``, ``string``, ``enum``, ``raster``),
         ``label``, ``tooltip`` (the library's description), ``default`` (text), ``values`` (enum
-        values), ``flag`` (the command-line option) and ``commands`` (the commands that take it).
+        values), ``flag`` (the command-line option), ``commands`` (the commands that take it) and
+        ``keyword`` (the library's name of it, as error messages give it).
 
     Raises
     ------
@@ -173,6 +174,7 @@ def native_filters() -> list[dict[str, Any]]:
                 "name": p.name, "kind": _kind(p), "label": p.label,
                 "tooltip": nf.savedir_help if name == "savedir" else p.description,
                 "default": _default_text(p.default), "values": list(p.values), "flag": flag, "commands": takes,
+                "keyword": p.keyword,
             })
         out.append({"title": nf.title, "info": nf.info, "command": nf.command, "switch": nf.switch,
                     "command_off": nf.command_off, "parameters": params})

@@ -310,13 +310,16 @@ QStringList FilterO3dSeqccPlugin::childArguments(const QJsonObject &f, const Ric
 
 QString FilterO3dSeqccPlugin::meshLabWords(const QJsonObject &f, QString message) const
 {
-	// the child's messages name command-line options: name the dialog's fields instead
+	// the child's messages name command-line options (--t-npm) and library keywords (t_npm): name the dialog's
+	// fields instead (keywords only when they cannot be plain words: with an underscore)
 	for (const QJsonValue &v : f["parameters"].toArray()) {
 		const QJsonObject p = v.toObject();
-		const QString flag = p["flag"].toString();
+		const QString label = QString("'%1'").arg(p["label"].toString());
+		const QString flag = p["flag"].toString(), keyword = p["keyword"].toString();
 		if (!flag.isEmpty())
-			message.replace(QRegularExpression(QRegularExpression::escape(flag) + "(?![-\\w])"),
-			                QString("'%1'").arg(p["label"].toString()));
+			message.replace(QRegularExpression(QRegularExpression::escape(flag) + "(?![-\\w])"), label);
+		if (keyword.contains('_'))
+			message.replace(QRegularExpression("\\b" + QRegularExpression::escape(keyword) + "\\b"), label);
 	}
 	return message;
 }
