@@ -24,7 +24,9 @@ MeshLab filter                                         child process
 by the plugin to a temporary folder; the child runs with ``-v --progress-lines`` and its log and
 progress go to MeshLab's log and progress bar (:func:`o3d_seqcc.progress.progress_lines`).
 
-Run ``python -m meshlab_filters.native json`` to see what the plugin is built with.
+Run ``python -m meshlab_filters.native json`` to see what the plugin is built with, and
+``python -m meshlab_filters.native script "Seamless texture from rasters (o3d_seqcc)" tnpm=100``
+for a complete filter script (:func:`filter_script`).
 """
 
 from __future__ import annotations
@@ -105,7 +107,8 @@ NATIVE_FILTERS: tuple[NativeFilter, ...] = (
              "field: large projections, few seams), the charts are packed into an atlas at the rasters' own "
              "resolution and the seams are levelled. The textured mesh (mesh_meshlab.ply and its texture in the "
              "output folder, with report.html, mesh.glb and mesh.obj) is added as a new layer and becomes the "
-             "current mesh; the rasters are not changed. Runs <tt>o3d-seqcc run</tt> (<tt>o3d-seqcc texture</tt> "
+             "current mesh; the source mesh's layer is hidden (the textured copy covers it) and the rasters are "
+             "not changed. Runs <tt>o3d-seqcc run</tt> (<tt>o3d-seqcc texture</tt> "
              "without colour correction)." + _PAPER,
         savedir_help="Folder for the textured mesh (mesh_meshlab.ply + texture: the new layer's files, kept), "
                      "mesh.glb, mesh.obj, report.html / report.json and project.mlp, written as a whole. A relative "
@@ -146,7 +149,8 @@ def native_filters() -> list[dict[str, Any]]:
     Returns
     -------
     list of dict
-        Per filter: ``title``, ``info``, ``command``, ``switch``, ``command_off`` and
+        Per filter: ``title``, ``python_name`` (pymeshlab's name of it: the registry's), ``info``,
+        ``command``, ``switch``, ``command_off`` and
         ``parameters``: per parameter ``name`` (the pymeshlab-style name, MeshLab's parameter
         name), ``kind`` (``bool``, ``int``, ``float``, ``string``, ``enum``, ``raster``),
         ``label``, ``tooltip`` (the library's description), ``default`` (text), ``values`` (enum
@@ -176,8 +180,8 @@ def native_filters() -> list[dict[str, Any]]:
                 "default": _default_text(p.default), "values": list(p.values), "flag": flag, "commands": takes,
                 "keyword": p.keyword,
             })
-        out.append({"title": nf.title, "info": nf.info, "command": nf.command, "switch": nf.switch,
-                    "command_off": nf.command_off, "parameters": params})
+        out.append({"title": nf.title, "python_name": nf.registry, "info": nf.info, "command": nf.command,
+                    "switch": nf.switch, "command_off": nf.command_off, "parameters": params})
     return out
 
 
@@ -280,17 +284,47 @@ def cpp_header() -> str:
             f"static const char O3D_SEQCC_FILTERS_JSON[] = R\"o3dseqcc({text})o3dseqcc\";\n")
 
 
+def _value(text: str) -> Any:
+    """A ``NAME=VALUE`` value as typed: true/false, an integer, or the text."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m meshlab_filters.native", description=__doc__.split("\n\n")[0])
-    p.add_argument("what", choices=("header", "json"), help="the C++ header the plugin is built with, or the JSON")
-    p.add_argument("out", nargs="?", default="-", help="output file (default -: standard output); written only "
-                   "when its content changes")
+    p = argparse.ArgumentParser(
+        prog="python -m meshlab_filters.native", description=__doc__.split("\n\n")[0],
+        epilog="examples: python -m meshlab_filters.native header build/o3d_seqcc_filters.h; python -m "
+               "meshlab_filters.native script \"Seamless texture from rasters (o3d_seqcc)\" tnpm=100 savedir=textured "
+               "> texture.mlx (then: meshlabserver -p /abs/project.mlp -s /abs/texture.mlx -o /abs/out.ply -m wt)")
+    p.add_argument("what", choices=("header", "json", "script"),
+                   help="the C++ header the plugin is built with, the same as JSON, or a filter script (.mlx)")
+    p.add_argument("args", nargs="*", help="header / json: the output file (default: standard output; written only "
+                   "when its content changes); script: the filter's name, then its parameters as NAME=VALUE (the rest "
+                   "take the library's defaults)")
     args = p.parse_args(argv)
+    if args.what == "script":
+        if not args.args:
+            p.error(f"script: give a filter name: {', '.join(repr(f.title) for f in NATIVE_FILTERS)}")
+        values = {}
+        for item in args.args[1:]:
+            name, sep, value = item.partition("=")
+            if not sep:
+                p.error(f"script: parameters are NAME=VALUE, got {item!r}")
+            values[name] = _value(value)
+        try:
+            sys.stdout.write(filter_script((args.args[0], values)))
+        except (KeyError, TypeError, ValueError) as e:
+            p.error(f"script: {e}")
+        return 0
     text = cpp_header() if args.what == "header" else json.dumps(native_filters(), indent=1) + "\n"
-    if args.out == "-":
+    if not args.args or args.args[0] == "-":
         sys.stdout.write(text)
         return 0
-    out = Path(args.out)
+    out = Path(args.args[0])
     if not out.is_file() or out.read_text(encoding="utf-8") != text:  # unchanged: no rebuild
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text, encoding="utf-8")

@@ -56,7 +56,7 @@ QString num(double x)
 /// The raster's image file: absolute, or written from memory into dir when MeshLab has no file for it
 QString rasterImageFile(const MeshDocument &md, RasterModel *r, int index, const QString &dir, QString *err)
 {
-	Plane *pl = r->currentPlane != nullptr ? r->currentPlane : (r->planeList.isEmpty() ? nullptr : r->planeList[0]);
+	RasterImage *pl = r->currentPlane != nullptr ? r->currentPlane : (r->planeList.isEmpty() ? nullptr : r->planeList[0]);
 	if (pl == nullptr) {
 		*err = QString("raster %1 ('%2') has no image").arg(index).arg(r->label());
 		return QString();
@@ -99,7 +99,7 @@ QDomElement cameraElement(const Shotm &shot, QDomDocument &doc)
 }
 
 /// dir/project.mlp: the current mesh (dir/mesh.ply, placement applied) and every raster
-QString exportProject(const MeshDocument &md, MeshModel &mm, const QString &dir, vcg::CallBackPos *cb, QString *err)
+QString exportProject(MeshDocument &md, MeshModel &mm, const QString &dir, vcg::CallBackPos *cb, QString *err)
 {
 	const QString meshPath = QDir(dir).absoluteFilePath("mesh.ply");
 	CMeshO *src = &mm.cm;
@@ -129,8 +129,9 @@ QString exportProject(const MeshDocument &md, MeshModel &mm, const QString &dir,
 	meshes.appendChild(m);
 	QDomElement rasters = doc.createElement("RasterGroup");
 	root.appendChild(rasters);
-	for (int i = 0; i < md.rasterList.size(); ++i) {
-		RasterModel *r = md.rasterList[i];
+	const std::vector<RasterModel *> all = mlapi::rasters(md);
+	for (int i = 0; i < int(all.size()); ++i) {
+		RasterModel *r = all[i];
 		QString image = rasterImageFile(md, r, i, dir, err);
 		if (image.isEmpty())
 			return QString();
@@ -168,34 +169,80 @@ QString shellQuoted(const QStringList &args)
 FilterO3dSeqccPlugin::FilterO3dSeqccPlugin()
 {
 	filters = QJsonDocument::fromJson(QByteArray(O3D_SEQCC_FILTERS_JSON)).array();
-	typeList << FP_CORRECT << FP_TEXTURE;
-	for (FilterIDType tt : types())
-		actionList << new QAction(filterName(tt), this);
+	typeList.push_back(FP_CORRECT);
+	typeList.push_back(FP_TEXTURE);
+	for (int tt : types())
+		actionList.push_back(new QAction(filterName(tt), this));
 }
 
 QString FilterO3dSeqccPlugin::pluginName() const { return "FilterO3dSeqcc"; }
 
-QJsonObject FilterO3dSeqccPlugin::spec(FilterIDType id) const { return filters.at(id).toObject(); }
+QJsonObject FilterO3dSeqccPlugin::spec(int id) const { return filters.at(id).toObject(); }
 
-QString FilterO3dSeqccPlugin::filterName(FilterIDType filter) const { return spec(filter)["title"].toString(); }
+QString FilterO3dSeqccPlugin::filterName(int filter) const { return spec(filter)["title"].toString(); }
 
-QString FilterO3dSeqccPlugin::filterInfo(FilterIDType filter) const { return spec(filter)["info"].toString(); }
+QString FilterO3dSeqccPlugin::filterInfo(int filter) const { return spec(filter)["info"].toString(); }
 
-MeshFilterInterface::FilterClass FilterO3dSeqccPlugin::getClass(QAction *a)
+FilterO3dSeqccPlugin::FilterClass FilterO3dSeqccPlugin::getClass(FilterAction *a) O3D_SEQCC_CONST_GETTER
 {
 	// both under Filters > Texture; the correction also under Filters > Raster Layer
 	return ID(a) == FP_CORRECT ? FilterClass(RasterLayer | Texture) : Texture;
 }
 
-MeshFilterInterface::FILTER_ARITY FilterO3dSeqccPlugin::filterArity(QAction *) const { return SINGLE_MESH; }
+int FilterO3dSeqccPlugin::getPreConditions(FilterAction *) const { return MeshModel::MM_FACENUMBER; }
 
-int FilterO3dSeqccPlugin::getPreConditions(QAction *) const { return MeshModel::MM_FACENUMBER; }
+int FilterO3dSeqccPlugin::postCondition(FilterAction *) const { return MeshModel::MM_NONE; }
 
-int FilterO3dSeqccPlugin::postCondition(QAction *) const { return MeshModel::MM_NONE; }
+#ifdef O3D_SEQCC_MESHLAB_2022
+QString FilterO3dSeqccPlugin::pythonFilterName(int filter) const { return spec(filter)["python_name"].toString(); }
+
+FilterO3dSeqccPlugin::FilterArity FilterO3dSeqccPlugin::filterArity(const QAction *) const { return SINGLE_MESH; }
+
+RichParameterList FilterO3dSeqccPlugin::initParameterList(const QAction *a, const MeshDocument &md)
+{
+	RichParameterList par;
+	parameters(ID(a), md, par);
+	return par;
+}
+
+std::map<std::string, QVariant> FilterO3dSeqccPlugin::applyFilter(const QAction *a, const RichParameterList &par,
+                                                                 MeshDocument &md, unsigned int &, vcg::CallBackPos *cb)
+{
+	if (!run(ID(a), md, par, cb))
+		throw MLException(failure);
+	return {};
+}
+#else
+FilterO3dSeqccPlugin::FILTER_ARITY FilterO3dSeqccPlugin::filterArity(QAction *) const { return SINGLE_MESH; }
 
 void FilterO3dSeqccPlugin::initParameterSet(QAction *a, MeshDocument &md, RichParameterList &par)
 {
-	for (const QJsonValue &v : spec(ID(a))["parameters"].toArray()) {
+	parameters(ID(a), md, par);
+}
+
+bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichParameterList &par,
+                                       vcg::CallBackPos *cb)
+{
+	errorMessage.clear();
+	const bool ok = run(ID(a), md, par, cb);
+	if (!ok)
+		errorMessage = failure;
+	return ok;
+}
+#endif
+
+void FilterO3dSeqccPlugin::say(GLLogStream::Levels level, const QString &text)
+{
+#ifdef O3D_SEQCC_MESHLAB_2022
+	log(level, qUtf8Printable(text));
+#else
+	Log(level, qUtf8Printable(text));
+#endif
+}
+
+void FilterO3dSeqccPlugin::parameters(int id, const MeshDocument &md, RichParameterList &par) const
+{
+	for (const QJsonValue &v : spec(id)["parameters"].toArray()) {
 		const QJsonObject p = v.toObject();
 		const QString name = p["name"].toString(), kind = p["kind"].toString(), label = p["label"].toString();
 		const QString tip = p["tooltip"].toString(), def = p["default"].toString();
@@ -209,13 +256,13 @@ void FilterO3dSeqccPlugin::initParameterSet(QAction *a, MeshDocument &md, RichPa
 			QStringList values;
 			if (kind == "raster") {  // "auto", then the document's rasters (index k + 1 = raster k)
 				values << "auto";
-				for (RasterModel *r : md.rasterList)
-					values << r->label();
+				for (const QString &label : mlapi::rasterLabels(md))
+					values << label;
 			}
 			else
 				for (const QJsonValue &x : p["values"].toArray())
 					values << x.toString();
-			par.addParam(RichEnum(name, std::max(0, values.indexOf(def)), values, label, tip));
+			par.addParam(RichEnum(name, std::max(0, int(values.indexOf(def))), values, label, tip));
 		}
 		else
 			par.addParam(RichString(name, def, label, tip));
@@ -326,22 +373,20 @@ QString FilterO3dSeqccPlugin::meshLabWords(const QJsonObject &f, QString message
 
 bool FilterO3dSeqccPlugin::fail(const QString &message)
 {
-	errorMessage = message;
-	Log(GLLogStream::WARNING, qUtf8Printable("o3d_seqcc: " + message));
+	failure = message;
+	say(GLLogStream::WARNING, "o3d_seqcc: " + message);
 	return false;
 }
 
-bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichParameterList &par,
-                                       vcg::CallBackPos *cb)
+bool FilterO3dSeqccPlugin::run(int id, MeshDocument &md, const RichParameterList &par, vcg::CallBackPos *cb)
 {
-	errorMessage.clear();
-	const FilterIDType id = ID(a);
+	failure.clear();
 	const QJsonObject f = spec(id);
 	MeshModel *mm = md.mm();
 	if (mm == nullptr || mm->cm.fn == 0)
 		return fail("the current layer has no faces: make a triangle mesh the current layer (the rasters are "
 		            "projected onto it)");
-	if (md.rasterList.isEmpty())
+	if (mlapi::rasterCount(md) == 0)
 		return fail("the document has no rasters: the filter needs registered photos of the mesh (File > Import "
 		            "Raster... and align them, or open a MeshLab project .mlp that has rasters, such as the "
 		            "project.mlp o3d-seqcc writes)");
@@ -363,7 +408,7 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 
 	QString command;
 	const QStringList args = childArguments(f, par, project, out, &command);
-	Log(GLLogStream::FILTER, qUtf8Printable("o3d_seqcc: running " + shellQuoted(QStringList(exe) + args)));
+	say(GLLogStream::FILTER, "o3d_seqcc: running " + shellQuoted(QStringList(exe) + args));
 
 	QProcess proc;
 	proc.setProcessChannelMode(QProcess::MergedChannels);
@@ -405,7 +450,7 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 			errors << m.captured(1);
 		const bool warning = isError || line.startsWith("WARNING") || line.startsWith("ERROR") ||
 		                     line.startsWith("Traceback");
-		Log(warning ? GLLogStream::WARNING : GLLogStream::FILTER, qUtf8Printable(line));
+		say(warning ? GLLogStream::WARNING : GLLogStream::FILTER, line);
 		tail << line;
 		if (tail.size() > 12)
 			tail.removeFirst();
@@ -442,8 +487,8 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 			              .arg(proc.exitCode()).arg(tail.join("\n"));
 		return fail(message);
 	}
-	Log(GLLogStream::FILTER, qUtf8Printable(QString("o3d_seqcc: %1 finished in %2 s -> %3").arg(command)
-	                                          .arg(clock.elapsed() / 1000.0, 0, 'f', 1).arg(out)));
+	say(GLLogStream::FILTER, QString("o3d_seqcc: %1 finished in %2 s -> %3").arg(command)
+	                             .arg(clock.elapsed() / 1000.0, 0, 'f', 1).arg(out));
 
 	if (id == FP_CORRECT) {
 		// DIR/scene.json lists the views in raster order with their corrected images (relative to it)
@@ -451,13 +496,14 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 		if (!sj.open(QIODevice::ReadOnly))
 			return fail(QString("o3d-seqcc correct wrote no %1").arg(sj.fileName()));
 		const QJsonArray views = QJsonDocument::fromJson(sj.readAll()).object()["views"].toArray();
-		if (views.size() != md.rasterList.size())
+		const std::vector<RasterModel *> all = mlapi::rasters(md);
+		if (views.size() != int(all.size()))
 			return fail(QString("%1 lists %2 views for %3 rasters").arg(sj.fileName()).arg(views.size())
-			                .arg(md.rasterList.size()));
-		QList<Plane *> planes;
+			                .arg(all.size()));
+		QList<RasterImage *> planes;
 		for (int i = 0; i < views.size(); ++i) {
 			const QString image = QDir(out).absoluteFilePath(views[i].toObject()["image"].toString());
-			Plane *pl = new Plane(image, Plane::RGBA);
+			RasterImage *pl = new RasterImage(image, RasterImage::RGBA);
 			if (pl->image.isNull()) {
 				delete pl;
 				qDeleteAll(planes);
@@ -466,12 +512,11 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 			planes << pl;
 		}
 		for (int i = 0; i < planes.size(); ++i) {
-			RasterModel *r = md.rasterList[i];
+			RasterModel *r = all[i];
 			qDeleteAll(r->planeList);
 			r->planeList.clear();
 			r->addPlane(planes[i]);
-			Log(GLLogStream::FILTER, qUtf8Printable(QString("o3d_seqcc: raster %1 now shows %2").arg(r->label(),
-			                                                                                   planes[i]->fullName())));
+			say(GLLogStream::FILTER, QString("o3d_seqcc: raster %1 now shows %2").arg(r->label(), planes[i]->fullName()));
 		}
 		emit md.rasterSetChanged();
 		return true;
@@ -484,22 +529,31 @@ bool FilterO3dSeqccPlugin::applyFilter(QAction *a, MeshDocument &md, const RichP
 	const QString label = QFileInfo(mm->label()).completeBaseName() + "_textured";
 	int mask = 0;
 	tri::io::ImporterPLY<CMeshO>::LoadMask(qUtf8Printable(ply), mask);
+	const bool wasVisible = mlapi::visible(*mm);
+	mlapi::setVisible(*mm, false);  // the textured copy covers the source mesh: hide it (before the views hear of it)
 	MeshModel *nm = md.addNewMesh(ply, label, true);
-	nm->Enable(mask);
+	mlapi::enable(*nm, mask);
 	int res = tri::io::ImporterPLY<CMeshO>::Open(nm->cm, qUtf8Printable(ply), mask, nullptr);
 	if (tri::io::ImporterPLY<CMeshO>::ErrorCritical(res)) {
-		md.delMesh(nm);
+		const int back = mm->id();
+		mlapi::deleteMesh(md, nm);
+		mlapi::setVisible(*mm, wasVisible);
+		md.setCurrentMesh(back);
 		return fail(QString("cannot read %1: %2").arg(ply, tri::io::ImporterPLY<CMeshO>::ErrorMsg(res)));
 	}
 	for (std::string &t : nm->cm.textures)  // MeshLab resolves texture names against its working folder
 		t = qUtf8Printable(QDir(out).absoluteFilePath(QString::fromStdString(t)));
+#ifdef O3D_SEQCC_MESHLAB_2022
+	nm->loadTextures();  // the mesh holds its textures' images since 2022
+#endif
 	tri::UpdateNormal<CMeshO>::PerFaceNormalized(nm->cm);
 	if (!(mask & tri::io::Mask::IOM_VERTNORMAL))
 		tri::UpdateNormal<CMeshO>::PerVertexAngleWeighted(nm->cm);
 	tri::UpdateBounding<CMeshO>::Box(nm->cm);
-	Log(GLLogStream::FILTER, qUtf8Printable(QString("o3d_seqcc: added layer '%1' (%2 faces, texture %3)")
-	                                          .arg(nm->label()).arg(nm->cm.fn)
-	                                          .arg(nm->cm.textures.empty() ? QString("none") : QString::fromStdString(nm->cm.textures[0]))));
+	say(GLLogStream::FILTER, QString("o3d_seqcc: added layer '%1' (%2 faces, texture %3); layer '%4' hidden")
+	                             .arg(nm->label()).arg(nm->cm.fn)
+	                             .arg(nm->cm.textures.empty() ? QString("none") : QString::fromStdString(nm->cm.textures[0]))
+	                             .arg(mm->label()));
 	return true;
 }
 

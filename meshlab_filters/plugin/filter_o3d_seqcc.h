@@ -16,13 +16,17 @@
 #include <QObject>
 #include <QStringList>
 
-#include <common/interfaces.h>
+#include "meshlab_api.h"
 
-class FilterO3dSeqccPlugin : public QObject, public MeshFilterInterface
+class FilterO3dSeqccPlugin : public QObject, public FilterBase
 {
 	Q_OBJECT
-	MESHLAB_PLUGIN_IID_EXPORTER(MESH_FILTER_INTERFACE_IID)
+	MESHLAB_PLUGIN_IID_EXPORTER(O3D_SEQCC_FILTER_IID)
+#ifdef O3D_SEQCC_MESHLAB_2022
+	Q_INTERFACES(FilterPlugin)
+#else
 	Q_INTERFACES(MeshFilterInterface)
+#endif
 
 public:
 	// order of the filters in o3d_seqcc_filters.h
@@ -31,31 +35,44 @@ public:
 	FilterO3dSeqccPlugin();
 
 	QString pluginName() const override;
-	using MeshFilterInterface::filterName;
-	using MeshFilterInterface::filterInfo;
-	QString filterName(FilterIDType filter) const override;
-	QString filterInfo(FilterIDType filter) const override;
-	FilterClass getClass(QAction *a) override;
+	using FilterBase::filterName;
+	using FilterBase::filterInfo;
+	QString filterName(int filter) const override;
+	QString filterInfo(int filter) const override;
+	FilterClass getClass(FilterAction *a) O3D_SEQCC_CONST_GETTER override;
+	int getPreConditions(FilterAction *a) const override;
+	int postCondition(FilterAction *a) const override;
+#ifdef O3D_SEQCC_MESHLAB_2022
+	using FilterBase::pythonFilterName;
+	QString pythonFilterName(int filter) const override;  // pymeshlab: the names meshlab_filters.apply takes
+	FilterArity filterArity(const QAction *a) const override;
+	RichParameterList initParameterList(const QAction *a, const MeshDocument &md) override;
+	std::map<std::string, QVariant> applyFilter(const QAction *a, const RichParameterList &par, MeshDocument &md,
+	                                            unsigned int &postConditionMask, vcg::CallBackPos *cb) override;
+#else
 	FILTER_ARITY filterArity(QAction *a) const override;
-	int getPreConditions(QAction *a) const override;
-	int postCondition(QAction *a) const override;
-	using MeshFilterInterface::initParameterSet;
+	using FilterBase::initParameterSet;
 	void initParameterSet(QAction *a, MeshDocument &md, RichParameterList &par) override;
 	bool applyFilter(QAction *a, MeshDocument &md, const RichParameterList &par, vcg::CallBackPos *cb) override;
+#endif
 
 	/// The o3d-seqcc executable the filters run: $O3D_SEQCC_EXECUTABLE, else the one this plugin was built
 	/// with, else o3d-seqcc on PATH; empty if none (then *why says where it looked).
 	static QString findExecutable(QString *why);
 
 private:
-	QJsonObject spec(FilterIDType id) const;
+	QJsonObject spec(int id) const;
+	void parameters(int id, const MeshDocument &md, RichParameterList &par) const;
+	bool run(int id, MeshDocument &md, const RichParameterList &par, vcg::CallBackPos *cb);
 	QStringList childArguments(const QJsonObject &f, const RichParameterList &par, const QString &project,
 	                           const QString &out, QString *command) const;
 	QString outputFolder(const MeshDocument &md, const QString &given) const;
 	QString meshLabWords(const QJsonObject &f, QString message) const;
+	void say(GLLogStream::Levels level, const QString &text);
 	bool fail(const QString &message);
 
 	QJsonArray filters;
+	QString failure;  // the last error message
 };
 
 #endif
