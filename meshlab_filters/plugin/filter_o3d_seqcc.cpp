@@ -290,7 +290,7 @@ QString FilterO3dSeqccPlugin::findExecutable(QString *why)
 	tried << "o3d-seqcc on PATH (none)";
 	if (why)
 		*why = "o3d-seqcc not found; looked for " + tried.join(", ") +
-		       ". Install o3d_seqcc (./dev.sh setup in its checkout, or pip install o3d-seqcc) and rebuild the "
+		       ". Install o3d_seqcc (./dev.sh setup in its checkout, or pip install CHECKOUT) and rebuild the "
 		       "plugin, or set O3D_SEQCC_EXECUTABLE to its o3d-seqcc.";
 	return QString();
 }
