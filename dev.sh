@@ -3,12 +3,13 @@
 #
 #   ./dev.sh demo    install everything (once) and run the pipeline on the built-in synthetic scene
 #   ./dev.sh test    install everything (once) and run the test suite
-#   ./dev.sh setup   only install
+#   ./dev.sh setup   only install (with the MeshLab filter plugin, which test needs and demo does not)
 #
 # Installs: the system libraries Open3D and pymeshlab need, the MeshLab application and Debian's
 # chromium (the HTML report's rendering test) (apt, when root or with sudo), a virtual environment
-# in .venv with the package and its test extra, and the Khronos glTF validator (npm) into
-# .cache/node. Re-running is cheap: each step is skipped when done.
+# in .venv with the package and its test extra, the Khronos glTF validator (npm) into .cache/node and
+# (setup, test) the MeshLab filter plugin of meshlab_filters/plugin/, built in .cache/meshlab-plugin and
+# installed into MeshLab's plugin folder. Re-running is cheap: each step is skipped when done.
 set -euo pipefail
 cd "$(dirname "$0")"
 ROOT=$(pwd)
@@ -94,6 +95,82 @@ setup_node() {
 
 setup() { setup_system; setup_python; setup_node; }
 
+# ---- the MeshLab filter plugin (meshlab_filters/plugin/, GPL-3) ----------------------------------------------------
+# Built against the sources of the installed MeshLab (Debian 12 / Ubuntu: 2020.09, no -dev package: `apt-get source`
+# through a private source list, /etc/apt untouched) and installed where Debian's MeshLab loads plugins. Skipped when
+# already built for the same sources, parameters (generated from the library) and o3d-seqcc.
+PLUGIN_APT_PACKAGES=(g++ cmake make dpkg-dev xz-utils qtbase5-dev libqt5opengl5-dev libglew-dev libeigen3-dev)
+PLUGIN_INSTALL_DIR=/usr/lib/x86_64-linux-gnu/meshlab/plugins  # the only folder MeshLab 2020.09 loads plugins from
+PLUGIN_FILE=libfilter_o3d_seqcc.so
+
+setup_meshlab_plugin() {
+  local t0=$SECONDS cache=$ROOT/.cache/meshlab-plugin src_dir=meshlab_filters/plugin
+  local version; version=$(dpkg-query -W -f='${Version}' meshlab 2>/dev/null || true)
+  if [[ -z $version || ! -d $PLUGIN_INSTALL_DIR ]]; then
+    log "MeshLab plugin: Debian's meshlab is not installed: skipped (its tests skip)"; return 0
+  fi
+  if [[ $version != 2020.09* ]]; then
+    log "MeshLab plugin: MeshLab $version installed, the plugin is written for 2020.09: skipped"; return 0
+  fi
+  local SUDO=""
+  if [[ $(id -u) -ne 0 ]]; then
+    if command -v sudo >/dev/null 2>&1; then SUDO=sudo; else
+      log "MeshLab plugin: installing into $PLUGIN_INSTALL_DIR needs root: skipped (run ./dev.sh setup as root)"
+      return 0
+    fi
+  fi
+  local exe=$VENV/bin/o3d-seqcc header key
+  header=$("$VENV/bin/python" -m meshlab_filters.native header)
+  key=$({ echo "meshlab $version, o3d-seqcc $exe"; echo "$header"; cat "$src_dir"/CMakeLists.txt "$src_dir"/*.cpp \
+          "$src_dir"/*.h; } | sha256sum | cut -d' ' -f1)
+  if [[ -f $cache/stamp && $(cat "$cache/stamp") == "$key" ]] && cmp -s "$cache/build/$PLUGIN_FILE" \
+       "$PLUGIN_INSTALL_DIR/$PLUGIN_FILE"; then
+    return 0
+  fi
+  log "MeshLab plugin: building $src_dir against MeshLab $version (about a minute)"
+  local missing=() p
+  for p in "${PLUGIN_APT_PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [[ ${#missing[@]} -gt 0 ]]; then
+    log "MeshLab plugin: installing the build packages ${missing[*]}"
+    export DEBIAN_FRONTEND=noninteractive
+    $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null \
+      || { $SUDO apt-get update -qq && $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null; }
+  fi
+  local srcroot=$cache/meshlab-$version
+  if [[ ! -f $srcroot/src/common/interfaces.h ]]; then
+    log "MeshLab plugin: fetching the MeshLab $version sources (apt-get source, private source list)"
+    local apt=$cache/apt
+    rm -rf "$apt" "$srcroot" && mkdir -p "$apt/sources" "$apt/lists/partial" "$apt/cache/archives/partial" "$cache/dl"
+    # deb-src twins of the machine's own deb entries (Debian or Ubuntu), in a private list
+    local f
+    for f in /etc/apt/sources.list /etc/apt/sources.list.d/*.list; do
+      [[ -f $f ]] && sed -n 's/^[[:space:]]*deb[[:space:]]/deb-src /p' "$f" >> "$apt/sources/src.list"
+    done
+    for f in /etc/apt/sources.list.d/*.sources; do
+      [[ -f $f ]] && sed 's/^Types:.*/Types: deb-src/' "$f" > "$apt/sources/$(basename "$f")"
+    done
+    local opts=(-o Dir::Etc::sourcelist=/dev/null -o Dir::Etc::sourceparts="$apt/sources" -o Dir::State::Lists="$apt/lists"
+                -o Dir::Cache="$apt/cache" -o APT::Sandbox::User="$(id -un)")
+    apt-get -qq "${opts[@]}" update
+    (cd "$cache/dl" && apt-get -qq "${opts[@]}" source --download-only "meshlab=$version" >/dev/null)
+    dpkg-source --no-check -x "$cache/dl"/meshlab_*.dsc "$srcroot" >/dev/null
+    rm -rf "$cache/dl" "$apt"
+  fi
+  log "MeshLab plugin: compiling (cmake, make)"
+  cmake -S "$src_dir" -B "$cache/build" -DMESHLAB_SRC="$srcroot/src" -DO3D_SEQCC_PYTHON="$VENV/bin/python" \
+        -DO3D_SEQCC_EXECUTABLE="$exe" > "$cache/cmake.log" 2>&1 || { cat "$cache/cmake.log" >&2; exit 1; }
+  local rc=0
+  cmake --build "$cache/build" -j "$(nproc)" 2>&1 | { grep -v "Built target\|Automatic MOC" || true; } >&2 || rc=$?
+  [[ $rc -eq 0 ]] || { log "MeshLab plugin: build failed (see above)"; exit 1; }
+  # atomic: a MeshLab starting meanwhile sees the old plugin or the new one
+  $SUDO install -m 644 "$cache/build/$PLUGIN_FILE" "$PLUGIN_INSTALL_DIR/.$PLUGIN_FILE.tmp"
+  $SUDO mv -f "$PLUGIN_INSTALL_DIR/.$PLUGIN_FILE.tmp" "$PLUGIN_INSTALL_DIR/$PLUGIN_FILE"
+  echo "$key" > "$cache/stamp"
+  log "MeshLab plugin: installed $PLUGIN_INSTALL_DIR/$PLUGIN_FILE in $((SECONDS - t0)) s (runs $exe)"
+}
+
 # pymeshlab's raster filters need an OpenGL context and a Qt platform plugin
 export QT_QPA_PLATFORM=${QT_QPA_PLATFORM:-xcb}
 [[ -d /usr/lib/x86_64-linux-gnu/qt5/plugins ]] && export QT_PLUGIN_PATH=${QT_PLUGIN_PATH:-/usr/lib/x86_64-linux-gnu/qt5/plugins}
@@ -110,8 +187,8 @@ with_display() {
 
 cmd=${1:-help}; shift || true
 case $cmd in
-  setup) setup ;;
+  setup) setup; setup_meshlab_plugin ;;
   demo) setup; with_display "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
-  test) setup; with_display "$VENV/bin/python" -m pytest "$@" ;;
+  test) setup; setup_meshlab_plugin; with_display "$VENV/bin/python" -m pytest "$@" ;;
   *) sed -n '2,12p' "$0"; exit 2 ;;
 esac

@@ -524,7 +524,8 @@ class CorrectionRun:
         output of o3d_seqcc there. Returns ``out``.
         """
         t = time.perf_counter()
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage:
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage, \
+                _stage("export"):
             paths = write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
@@ -578,11 +579,13 @@ def correct_scene(
         resolve_view(sc.names, reference)
     t = time.perf_counter()
     with use_executor(client):
-        maps = compute_mappings(sc, mode=mappings)
+        with _stage("mappings"):
+            maps = compute_mappings(sc, mode=mappings)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
-        res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
-                      seed=seed, graph_weight=graph_weight)
+        with _stage("correction"):
+            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                          seed=seed, graph_weight=graph_weight)
     res.timings["mappings"] = t_map
     names = sc.names
     report: dict[str, Any] = {
@@ -595,7 +598,8 @@ def correct_scene(
     }
     t = time.perf_counter()
     if metrics:
-        report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
+        with _stage("metrics"):
+            report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
     t_metrics = time.perf_counter() - t
     if any(isinstance(tr, LutTransform) for tr in res.transforms):
         luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")

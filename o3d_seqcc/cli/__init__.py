@@ -120,13 +120,15 @@ def main(argv: list[str] | None = None) -> int:
 
         from ..io.files import set_max_image_pixels
         from ..progress import show_progress
+        from .common import progress_from_args
 
         try:
             old = set_max_image_pixels(args.max_image_pixels)
             client = None
             try:
                 bars = sys.stderr.isatty() and not args.quiet
-                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs), show_progress(bars):
+                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs), show_progress(bars), \
+                        progress_from_args(args):
                     client = _client(args.scheduler)
                     with _executor(client):
                         return int(args.func(args) or 0)

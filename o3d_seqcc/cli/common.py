@@ -22,12 +22,14 @@ __all__ = [
     "add_atlas_arguments",
     "add_correction_arguments",
     "add_export_arguments",
+    "add_progress_argument",
     "add_scene_arguments",
     "add_texture_arguments",
     "library_default",
     "prepare_out_dir",
     "print_report_path",
     "print_run_summary",
+    "progress_from_args",
     "save_options_from_args",
     "scene_from_args",
     "texture_settings_from_args",
@@ -201,6 +203,26 @@ def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
     for p in inputs:
         if Path(p).resolve() == target:
             raise InputError(f"{option} {path} is the input {p}: writing there would replace it; choose another file")
+
+
+def add_progress_argument(p: argparse.ArgumentParser) -> None:
+    """``--progress-lines``: machine-readable progress on stderr (``run``, ``texture``, ``correct``)."""
+    from ..progress import LINE_PREFIX
+
+    p.add_argument("--progress-lines", action="store_true",
+                   help=f"write machine-readable progress lines to stderr, '{LINE_PREFIX} PERCENT TEXT' (PERCENT an "
+                   "integer 0-100 that never decreases), for programs that run this command (the MeshLab plugin)")
+
+
+def progress_from_args(args: argparse.Namespace):
+    """The :func:`o3d_seqcc.progress.progress_lines` context of ``--progress-lines`` (a no-op without it),
+    with the command's plan (:data:`o3d_seqcc.progress.PLANS`)."""
+    import sys
+
+    from ..progress import PLANS, progress_lines
+
+    on = getattr(args, "progress_lines", False)
+    return progress_lines(sys.stderr if on else None, PLANS.get(getattr(args, "command", ""), ()))
 
 
 def library_default(fn: Callable) -> dict[str, Any]:
