@@ -184,7 +184,7 @@ def test_mlp_through_load_scene_and_cli(tmp_path, rng, capsys):
     for a, b in zip(back.views, scene.views):
         np.testing.assert_allclose(a.intrinsic, b.intrinsic, atol=1e-9)
         np.testing.assert_allclose(a.extrinsic, b.extrinsic, atol=1e-9)
-    assert main(["info", str(mlp)]) == 0
+    assert main(["info", str(mlp), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["views"] == 2
 
 
