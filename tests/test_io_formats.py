@@ -190,7 +190,7 @@ def test_mlp_through_load_scene_and_cli(tmp_path, rng, capsys):
 
 def test_loader_table_checks(tmp_path, colmap_model):
     _, root, mesh = colmap_model
-    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap"]
+    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap", "openmvs"]
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError) as e:
         load_scene(tmp_path / "empty")

@@ -18,7 +18,7 @@ import numpy as np
 from ..camera_checks import FLIP, check_cameras
 from ..errors import InputError, warn
 from ..scene import Scene, View
-from . import colmap, meshlab, meshroom, rgbd_folder, scene_json
+from . import colmap, meshlab, meshroom, openmvs, rgbd_folder, scene_json
 from .files import find_file
 
 __all__ = ["AXES", "EXTRINSIC_CONVENTIONS", "SCENE_FORMATS", "SceneFormat", "detect_format", "load_scene",
@@ -73,6 +73,7 @@ SCENE_FORMATS: dict[str, SceneFormat] = {
                     rgbd_folder.load, "camera-to-world"),
         SceneFormat("colmap", "a COLMAP model folder (cameras/images .txt or .bin)", colmap.detect, colmap.load,
                     "world-to-camera"),
+        SceneFormat("openmvs", "an OpenMVS interface file (scene.mvs)", openmvs.detect, openmvs.load),
     )
 }
 
