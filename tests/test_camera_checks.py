@@ -126,6 +126,13 @@ def test_camera_to_world_given_as_extrinsic(room, tmp_path):
     assert main(["-q", "run", str(bad), "--out", str(tmp_path / "out")]) == 2
     assert not (tmp_path / "out").exists()
     assert main(["-q", "info", str(bad), "--extrinsic", "camera-to-world"]) == 0
+    # a run states it; report.json records it, so the report can be made again from the folder
+    out = tmp_path / "stated"
+    assert main(["-q", "run", str(bad), "--extrinsic", "camera-to-world", "--out", str(out), "--t-npm", "10",
+                 "--format", "glb", "--no-seams", "--atlas-size", "256"]) == 0
+    assert json.loads((out / "report.json").read_text())["scene_options"] == {"extrinsic": "camera-to-world"}
+    (out / "report.html").unlink()
+    assert main(["-q", "report", str(out)]) == 0 and (out / "report.html").is_file()
 
 
 def test_opengl_axes_given_as_opencv(statue, tmp_path):

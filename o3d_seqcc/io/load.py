@@ -192,7 +192,13 @@ def load_scene(
     views = scene.views if depth_dir is None else _with_depth(scene.views, Path(depth_dir), depth_scale)
     if conv["invert"] or conv["flip"]:
         views = tuple(_restated(v, conv, target) for v in views)
-    scene = Scene(scene.mesh, views, source=target)
+    given = {"format": None if format == "auto" else format, "image_dir": image_dir, "depth_dir": depth_dir,
+             "depth_scale": None if depth_dir is None else float(depth_scale), "extrinsic": extrinsic, "axes": axes,
+             "intrinsic": intrinsic, "check_cameras": None if check_cameras else False}
+    recorded = {k: (str(Path(v).resolve()) if isinstance(v, (str, os.PathLike)) and k.endswith(("_dir", "intrinsic"))
+                    else np.asarray(v, dtype=np.float64).tolist() if k == "intrinsic" else v)
+                for k, v in given.items() if v is not None}
+    scene = Scene(scene.mesh, views, source=target, options=recorded)
     if validate:
         scene.validate()
         if check_cameras:

@@ -154,7 +154,10 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         raise InputError(f"{run_dir / 'report.json'} does not say where the scene is (a scene in memory, or an older "
                          "o3d-seqcc); pass --scene (and --mesh)")
     try:
-        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None))
+        opts = dict(rep.get("scene_options") or {})  # as the run loaded it (a moved scene: its conventions only)
+        if scene is not None:
+            opts = {k: v for k, v in opts.items() if k not in ("image_dir", "depth_dir", "depth_scale")}
+        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None), **opts)
     except InputError as e:
         raise InputError(f"cannot reload the scene {src} named in {run_dir / 'report.json'}: {e}; pass --scene "
                          "(and --mesh) to say where it is now") from None
