@@ -240,3 +240,15 @@ def test_info_prints_text_then_json(room, tmp_path, capsys):
     assert main(["info", str(bad)]) == 2
     cap = capsys.readouterr()
     assert "likely camera mistake: the poses look inverted" in cap.out and "--extrinsic camera-to-world" in cap.err
+
+
+def test_open3d_front_door_checks_the_cameras(statue):
+    """correct_images / texture_mesh with camera-to-world poses where extrinsics belong: an error naming the fix."""
+    scene = load_scene(statue)
+    mesh = o3d.io.read_triangle_mesh(str(statue / "mesh.ply"))
+    images = [v.load_image() for v in scene.views]
+    Ks = [v.intrinsic for v in scene.views]
+    with pytest.raises(InputError, match=r"cameras: the poses look inverted.*numpy\.linalg\.inv"):
+        sc.correct_images(mesh, images, (Ks, [np.linalg.inv(v.extrinsic) for v in scene.views]))
+    with pytest.raises(InputError, match=r"cameras: the cameras look OpenGL.*numpy\.diag"):
+        sc.texture_mesh(mesh, images, (Ks, [FLIP @ v.extrinsic for v in scene.views]))
