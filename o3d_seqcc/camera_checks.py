@@ -183,79 +183,58 @@ class CameraReport:
 
 
 class _Geometry:
-    """The mesh in a local frame, its ray-casting scene, oriented normals and a sample of faces."""
+    """The mesh in a local frame, its ray-casting scene, a sample of faces; normals computed for the faces
+    met only (nothing per face of the whole mesh but Open3D's tree)."""
 
     def __init__(self, mesh, samples: int, seed: int) -> None:
         import open3d as o3d
 
-        X = np.asarray(mesh.vertices, dtype=np.float64)
-        F = np.asarray(mesh.faces, dtype=np.int64)
+        self.X = np.asarray(mesh.vertices, dtype=np.float64)
+        self.F = np.asarray(mesh.faces, dtype=np.int64)
+        vn = getattr(mesh, "vertex_normals", None)
+        self.vn = vn if vn is not None and np.shape(vn) == self.X.shape else None
+        X, F = self.X, self.F
         self.origin = 0.5 * (X.min(0) + X.max(0))
-        self.normals, degenerate, _ = oriented_face_normals(X, F, getattr(mesh, "vertex_normals", None))
         self.rc = o3d.t.geometry.RaycastingScene()
         self.rc.add_triangles(o3d.core.Tensor(np.ascontiguousarray(X - self.origin, dtype=np.float32)),
                               o3d.core.Tensor(np.ascontiguousarray(F, dtype=np.uint32)))
         rng = np.random.default_rng(seed)
-        ok = np.flatnonzero(~degenerate)
-        pick = np.sort(rng.choice(len(ok), size=min(samples, len(ok)), replace=False)) if len(ok) else ok
-        self.ids = ok[pick]
+        ids = np.sort(rng.choice(len(F), size=min(samples, len(F)), replace=False))
+        normals, degenerate = self.normals(ids, with_degenerate=True)
+        self.ids = ids[~degenerate]
+        self.sample_normals = normals[~degenerate]
         a, b, c = (X[F[self.ids, k]] for k in range(3))
         area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
         w = np.minimum(area, np.quantile(area, 0.99)) if len(area) else area
         self.weights = w / w.sum() if len(w) and w.sum() > 0 else np.full(len(w), 1.0 / max(len(w), 1))
         self.centroids = (a + b + c) / 3.0 - self.origin
-        self.sample_normals = self.normals[self.ids]
 
-    def cast(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def normals(self, ids: np.ndarray, *, with_degenerate: bool = False):
+        """(k, 3) unit normals of faces ``ids``, oriented by the vertex normals (as the visibility filters do)."""
+        f = self.F[ids]
+        local, inv = np.unique(f, return_inverse=True)
+        n, degenerate, _ = oriented_face_normals(self.X[local], inv.reshape(f.shape),
+                                                 None if self.vn is None else self.vn[local])
+        return (n, degenerate) if with_degenerate else n
+
+    def cast(self, origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """First hits of rays (one call per :data:`_CHUNK` rays): distances (inf: none) and face ids."""
         import open3d as o3d
 
-        rays = np.empty((len(dirs), 6), dtype=np.float32)
-        rays[:, :3] = origin
-        rays[:, 3:] = dirs
-        ans = self.rc.cast_rays(o3d.core.Tensor(rays))
-        return ans["t_hit"].numpy(), ans["primitive_ids"].numpy().astype(np.int64)
+        th = np.empty(len(dirs), dtype=np.float32)
+        pid = np.empty(len(dirs), dtype=np.int64)
+        for s in range(0, len(dirs), _CHUNK):
+            rays = np.empty((min(_CHUNK, len(dirs) - s), 6), dtype=np.float32)
+            rays[:, :3] = origins[s:s + len(rays)]
+            rays[:, 3:] = dirs[s:s + len(rays)]
+            ans = self.rc.cast_rays(o3d.core.Tensor(rays))
+            th[s:s + len(rays)] = ans["t_hit"].numpy()
+            pid[s:s + len(rays)] = ans["primitive_ids"].numpy()
+        return th, pid
 
 
-def _front_fraction(geo: _Geometry, view, E: np.ndarray, grid: int) -> float:
-    """Share of a coarse grid of the view's rays whose first hit is a front-facing face."""
-    R, t = E[:3, :3], E[:3, 3]
-    C = -R.T @ t - geo.origin
-    gw = max(2, int(grid))
-    gh = max(2, int(round(gw * view.height / view.width)))
-    u = (np.arange(gw) + 0.5) * view.width / gw - 0.5
-    v = (np.arange(gh) + 0.5) * view.height / gh - 0.5
-    uu, vv = np.meshgrid(u, v)
-    pix = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)], axis=1)
-    d = pix @ np.linalg.inv(view.intrinsic).T @ R  # R^T (K^-1 x), as rows
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    th, pid = geo.cast(C, d)
-    hit = np.isfinite(th)
-    front = np.einsum("ij,ij->i", d[hit], geo.normals[pid[hit]]) < 0
-    return float(np.count_nonzero(front)) / len(d)
-
-
-def _seen_samples(geo: _Geometry, view, E: np.ndarray, seen: np.ndarray) -> int:
-    """Mark the sampled faces the view sees (centroid inside, facing it, ray unblocked); returns how many it sees."""
-    R, t = E[:3, :3], E[:3, 3]
-    C = -R.T @ t - geo.origin
-    Xc = geo.centroids @ R.T + (R @ geo.origin + t)
-    z = Xc[:, 2]
-    K = view.intrinsic
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x, y = Xc[:, 0] / z, Xc[:, 1] / z
-        u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
-        v = K[1, 1] * y + K[1, 2]
-        inside = (z > 0) & (u >= -0.5) & (u < view.width - 0.5) & (v >= -0.5) & (v < view.height - 0.5)
-    to_cam = C - geo.centroids
-    facing = np.einsum("ij,ij->i", geo.sample_normals, to_cam) > 0
-    cand = np.flatnonzero(inside & facing)
-    if not len(cand):
-        return 0
-    dist = np.linalg.norm(to_cam[cand], axis=1)
-    th, pid = geo.cast(C, -to_cam[cand] / dist[:, None])
-    vis = cand[(pid == geo.ids[cand]) | (th >= dist * (1.0 - 1e-3))]
-    seen[vis] = True
-    return len(vis)
+#: rays per ray-casting call
+_CHUNK = 1 << 21
 
 
 def _families(name: str) -> set[str]:
@@ -263,15 +242,77 @@ def _families(name: str) -> set[str]:
     return {part.split(":")[0] for part in name.split("+")}
 
 
+def _centre(geo: _Geometry, E: np.ndarray) -> np.ndarray:
+    return -E[:3, :3].T @ E[:3, 3] - geo.origin
+
+
 def _front_fractions(geo: _Geometry, views, checked: np.ndarray, name: str, grid: int) -> np.ndarray:
-    return np.array([_front_fraction(geo, views[i], hypothesis_extrinsic(views[i].extrinsic, name), grid)
-                     for i in checked])
+    """Per checked view, the share of a coarse grid of its rays whose first hit is a front-facing face."""
+    origins, dirs, sizes = [], [], []
+    for i in checked:
+        view = views[i]
+        E = hypothesis_extrinsic(view.extrinsic, name)
+        gw = max(2, int(grid))
+        gh = max(2, int(round(gw * view.height / view.width)))
+        u = (np.arange(gw) + 0.5) * view.width / gw - 0.5
+        v = (np.arange(gh) + 0.5) * view.height / gh - 0.5
+        uu, vv = np.meshgrid(u, v)
+        pix = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)], axis=1)
+        d = pix @ np.linalg.inv(view.intrinsic).T @ E[:3, :3]  # R^T (K^-1 x), as rows
+        dirs.append(d / np.linalg.norm(d, axis=1, keepdims=True))
+        origins.append(np.broadcast_to(_centre(geo, E), d.shape))
+        sizes.append(len(d))
+    d = np.concatenate(dirs)
+    th, pid = geo.cast(np.concatenate(origins), d)
+    hit = np.isfinite(th)
+    front = np.zeros(len(d), dtype=bool)
+    front[hit] = np.einsum("ij,ij->i", d[hit], geo.normals(pid[hit])) < 0
+    return np.array([f.mean() for f in np.split(front, np.cumsum(sizes)[:-1])])
 
 
 def _area_seen(geo: _Geometry, views, name: str) -> tuple[float, np.ndarray]:
-    """Share of the sampled mesh area some view sees, and the number of sampled faces each view sees."""
+    """Share of the sampled mesh area some view sees (centroid inside, facing it, ray unblocked), and the
+    number of sampled faces each view sees; rays cast in batches of about :data:`_CHUNK`."""
     seen = np.zeros(len(geo.ids), dtype=bool)
-    counts = np.array([_seen_samples(geo, v, hypothesis_extrinsic(v.extrinsic, name), seen) for v in views])
+    counts = np.zeros(len(views), dtype=np.int64)
+    batch: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def flush() -> None:
+        if not batch:
+            return
+        cand = np.concatenate([b[1] for b in batch])
+        dist = np.concatenate([b[2] for b in batch])
+        C = np.concatenate([np.broadcast_to(b[3], (len(b[1]), 3)) for b in batch])
+        d = geo.centroids[cand] - C
+        th, pid = geo.cast(C, d / np.maximum(dist, 1e-300)[:, None])
+        vis = (pid == geo.ids[cand]) | (th >= dist * (1.0 - 1e-3))
+        seen[cand[vis]] = True
+        own = np.concatenate([np.full(len(b[1]), b[0]) for b in batch])
+        counts[:] += np.bincount(own[vis], minlength=len(views))
+        batch.clear()
+
+    pending = 0
+    for k, view in enumerate(views):
+        E = hypothesis_extrinsic(view.extrinsic, name)
+        R, t = E[:3, :3], E[:3, 3]
+        C = _centre(geo, E)
+        Xc = geo.centroids @ R.T + (R @ geo.origin + t)
+        z = Xc[:, 2]
+        K = view.intrinsic
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, y = Xc[:, 0] / z, Xc[:, 1] / z
+            u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
+            v = K[1, 1] * y + K[1, 2]
+            inside = (z > 0) & (u >= -0.5) & (u < view.width - 0.5) & (v >= -0.5) & (v < view.height - 0.5)
+        to_cam = C - geo.centroids
+        cand = np.flatnonzero(inside & (np.einsum("ij,ij->i", geo.sample_normals, to_cam) > 0))
+        if len(cand):
+            batch.append((k, cand, np.linalg.norm(to_cam[cand], axis=1), C))
+            pending += len(cand)
+        if pending >= _CHUNK:
+            flush()
+            pending = 0
+    flush()
     return float(geo.weights[seen].sum()), counts
 
 

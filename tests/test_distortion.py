@@ -246,3 +246,19 @@ def test_distorted_scene_textured_like_the_undistorted_one(distorted_runs):
                         for k, v in enumerate(syn.scene.views)])
 
     assert vs_gt(runs["OPENCV", "seqcc-global"]) < vs_gt(ref) + 0.3
+
+
+def test_outputs_of_a_distorted_run(distorted_runs, tmp_path):
+    """The saved photos are the undistorted ones; MeshLab gets pinhole rasters of them, and no project for
+    photos MeshLab cannot undistort."""
+    syn, scenes, runs = distorted_runs
+    res = runs["OPENCV", "seqcc-global"]
+    with pytest.warns(sc.errors.O3dSeqccWarning, match="no MeshLab project written.*opencv lens distortion"):
+        res.save(tmp_path / "a", formats="glb")
+    assert not (tmp_path / "a" / "project.mlp").exists()
+    res.save(tmp_path / "b", formats="glb", save_images=True)
+    back = load_scene(tmp_path / "b" / "project.mlp")
+    assert not any(v.distortion for v in back.views)
+    for u, v in zip(back.views, scenes["OPENCV"].views):
+        np.testing.assert_allclose(u.intrinsic, v.intrinsic, atol=1e-6)
+        assert u.load_image().shape == v.load_image().shape
