@@ -40,6 +40,10 @@ _LAZY: dict[str, str] = {
     "make_synthetic_scene": "synthetic",
     "load_synthetic": "synthetic",
     "perturb_poses": "synthetic",
+    # camera sanity, lens distortion
+    "check_cameras": "camera_checks",
+    "CameraReport": "camera_checks",
+    "Distortion": "distortion",
     # visibility and mappings (paper 3.1-3.2)
     "Visibility": "visibility",
     "compute_visibility": "visibility",
@@ -103,7 +107,7 @@ _LAZY: dict[str, str] = {
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
-    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops",
+    "camera", "camera_checks", "cmf", "correction", "datasets", "demo", "depthmaps", "distortion", "evaluation", "export", "graph", "imageops",
     "images", "io", "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "parallel", "photometric",
     "pipeline", "render", "report", "scene", "seams", "semireal", "synthetic", "texturing", "view_visibility",
     "visibility",

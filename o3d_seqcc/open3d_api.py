@@ -28,6 +28,9 @@ Accepted inputs (checked before any work; a wrong type or size raises
   (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays.
 
 Everything runs in memory (an in-memory :class:`~o3d_seqcc.scene.Scene`): nothing is written.
+The cameras are checked against the mesh first (:func:`~o3d_seqcc.camera_checks.check_cameras`):
+camera-to-world poses given as extrinsics, OpenGL axes or other units than the mesh's raise
+:class:`~o3d_seqcc.errors.InputError` naming the fix.
 """
 
 from __future__ import annotations
@@ -38,8 +41,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import pipeline
+from .camera_checks import check_cameras
 from .correction import DEFAULT_METHOD
-from .errors import InputError
+from .errors import InputError, warn
 from .imageops import img_as_dtype
 from .meshops import vertex_normals
 from .scene import Mesh, Scene, View
@@ -193,7 +197,22 @@ def scene_from_open3d(
                               height=sizes[i][1], **extra))
         except InputError as e:
             raise InputError(f"images[{i}] / cameras[{i}]: {e}") from None
-    return Scene(mesh=_mesh(mesh), views=tuple(views)), [d for _, d in pix]
+    scene = Scene(mesh=_mesh(mesh), views=tuple(views))
+    rep = check_cameras(scene, fix=_CAMERA_FIXES, where="cameras")  # before any work: the likely mistakes
+    for w in rep.warnings:
+        warn(f"cameras: {w}")
+    return scene, [d for _, d in pix]
+
+
+#: the fixes an Open3D user is told (extrinsics are world-to-camera, OpenCV axes, as Open3D's own)
+_CAMERA_FIXES = {
+    "inverse": "give world-to-camera extrinsics, as PinholeCameraParameters.extrinsic and project_images_to_albedo "
+               "take them: extrinsic = numpy.linalg.inv(camera_to_world)",
+    "opengl": "flip the camera axes to OpenCV's (y down, looking down +z): extrinsic = numpy.diag([1, -1, -1, 1]) @ "
+              "extrinsic",
+    "inverse+opengl": "extrinsic = numpy.diag([1, -1, -1, 1]) @ numpy.linalg.inv(camera_to_world) for camera-to-world "
+                      "OpenGL poses",
+}
 
 
 def _like(original: Any, pixels: np.ndarray, dtype: np.dtype) -> Any:

@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .distortion import Distortion
 from .io.files import check_image_file, read_depth, read_image, read_point_cloud
 from .meshops import face_normals
 from .errors import InputError
@@ -144,6 +145,10 @@ class View:
         Depth in metres in memory (0 = missing), instead of a depth file.
     points : (M, 3) float array, optional
         Partial point cloud in memory, instead of a file.
+    distortion : Distortion, optional
+        The photo's lens distortion: the image (and depth map) is undistorted as it is read
+        (:meth:`load_image`, :meth:`load_depth`) to the pinhole camera ``intrinsic`` (same size);
+        see :mod:`o3d_seqcc.distortion`.
     """
 
     name: str
@@ -158,6 +163,7 @@ class View:
     pixels: np.ndarray | None = field(default=None, repr=False)
     depth_map: np.ndarray | None = field(default=None, repr=False)
     points: np.ndarray | None = field(default=None, repr=False)
+    distortion: Distortion | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -189,6 +195,9 @@ class View:
         if not np.isfinite(ds) or ds <= 0:
             raise InputError(f"{where}: depth_scale must be > 0 (units per metre), got {self.depth_scale}")
         object.__setattr__(self, "depth_scale", ds)
+        if self.distortion is not None and not isinstance(self.distortion, Distortion):
+            raise InputError(f"{where}: distortion must be an o3d_seqcc.distortion.Distortion, got "
+                             f"{type(self.distortion).__name__}")
         self._freeze_memory(where)
 
     def _freeze_memory(self, where: str) -> None:
@@ -240,6 +249,7 @@ class View:
             == (other.width, other.height, other.depth, other.depth_scale, other.point_cloud)
             and all(a is b for a, b in zip((self.pixels, self.depth_map, self.points),
                                            (other.pixels, other.depth_map, other.points)))
+            and self.distortion == other.distortion
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -264,25 +274,40 @@ class View:
         """(3,) unit focal axis (camera +z) in world coordinates."""
         return self.rotation[2].copy()
 
+    @property
+    def distorted(self) -> bool:
+        """The photo has lens distortion that :meth:`load_image` removes."""
+        return self.distortion is not None and self.distortion.images and not self.distortion.is_zero
+
     def load_image(self) -> np.ndarray:
-        """Read the image: (H, W, 3) uint8/uint16 RGB; raises if its size is not width x height."""
+        """Read the image: (H, W, 3) uint8/uint16 RGB, undistorted to ``intrinsic`` when the view has a
+        ``distortion``; raises if its size is not width x height."""
         if self.pixels is not None:
-            return self.pixels
-        img = read_image(self.image)
-        if img.shape[:2] != (self.height, self.width):
-            raise InputError(
-                f"view {self.name!r}: image {self.image} is {img.shape[1]}x{img.shape[0]} but the scene says "
-                f"{self.width}x{self.height}; fix width/height (and the intrinsic) or the image"
-            )
+            img = self.pixels
+        else:
+            img = read_image(self.image)
+            if img.shape[:2] != (self.height, self.width):
+                raise InputError(
+                    f"view {self.name!r}: image {self.image} is {img.shape[1]}x{img.shape[0]} but the scene says "
+                    f"{self.width}x{self.height}; fix width/height (and the intrinsic) or the image"
+                )
+        if self.distorted:
+            img = self.distortion.undistort(img, self.intrinsic)
+            img.setflags(write=False)
         return img
 
     def load_depth(self) -> np.ndarray | None:
-        """Read the depth map in metres ((H, W) float64, 0 = missing), or None without one."""
+        """Read the depth map in metres ((H, W) float64, 0 = missing; undistorted, nearest neighbour, when the
+        view has a ``distortion``), or None without one."""
         if self.depth_map is not None:
-            return self.depth_map
-        if self.depth is None:
+            d = self.depth_map
+        elif self.depth is None:
             return None
-        return read_depth(self.depth, self.depth_scale, shape=(self.height, self.width))
+        else:
+            d = read_depth(self.depth, self.depth_scale, shape=(self.height, self.width))
+        if self.distortion is not None and self.distortion.depth and not self.distortion.is_zero:
+            d = self.distortion.undistort(d, self.intrinsic, nearest=True)
+        return d
 
     def load_points(self) -> np.ndarray | None:
         """The partial point cloud ((M, 3) float64 world points), or None without one."""
@@ -393,11 +418,16 @@ class Scene:
     source : pathlib.Path, optional
         The file or folder the scene was read from (set by :func:`~o3d_seqcc.load_scene`; not
         part of equality).
+    options : dict, optional
+        The keyword options :func:`~o3d_seqcc.load_scene` read it with (JSON values: paths as
+        strings), so that it can be read again the same way (``o3d-seqcc report``); not part of
+        equality.
     """
 
     mesh: Path | Mesh
     views: tuple[View, ...] = field(default_factory=tuple)
     source: Path | None = field(default=None, compare=False)
+    options: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.mesh, Mesh):
@@ -456,12 +486,19 @@ class Scene:
         return paths
 
     def replace_images(self, images: Sequence[str | os.PathLike]) -> "Scene":
-        """A copy whose views point at other image files (same cameras)."""
+        """A copy whose views point at other image files (same cameras), taken to be undistorted (pinhole)
+        images: a view's lens distortion then applies to its depth map only."""
         if len(images) != len(self.views):
             raise ValueError("one image per view is needed")
         from dataclasses import replace
 
-        return Scene(self.mesh, tuple(replace(v, image=Path(p)) for v, p in zip(self.views, images)), source=self.source)
+        def undistorted(v: View) -> Distortion | None:  # the new images are the pinhole ones; a depth map is not
+            if v.distortion is None or v.depth is None:
+                return None
+            return replace(v.distortion, images=False)
+
+        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v))
+                                      for v, p in zip(self.views, images)), source=self.source, options=self.options)
 
     def validate(self, *, check_images: bool = True) -> None:
         """Check that every referenced file exists and images have the declared size and type.
@@ -500,6 +537,7 @@ def summarise(scene: Scene) -> dict:
         "image_size": sorted({f"{v.width}x{v.height}" for v in scene.views}),
         "with_depth": sum(v.depth is not None for v in scene.views),
         "with_point_cloud": sum(v.point_cloud is not None for v in scene.views),
+        "distorted": sum(v.distorted for v in scene.views),
         "mesh": "(in memory)" if isinstance(scene.mesh, Mesh) else str(scene.mesh),
         "mesh_vertices": int(len(m.vertices)),
         "mesh_faces": int(len(m.faces)),

@@ -309,9 +309,12 @@ def test_colmap_text_model(tmp_path, rng):
     assert np.allclose(a.translation, [0.1, 0.2, 0.3]) and np.allclose(a.rotation, np.eye(3))
     assert np.allclose(b.rotation, [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
     assert b.intrinsic[0, 0] == b.intrinsic[1, 1] == 90
-    # distortion is refused with the fix
+    # distortion is removed when the images are read; models without an OpenCV form are refused with the fix
     (root / "sparse" / "cameras.txt").write_text("1 OPENCV 64 48 100 100 32 24 0.1 0 0 0\n2 PINHOLE 64 48 1 1 1 1\n")
-    with pytest.raises(InputError, match=r"cameras\.txt: camera line .*camera model OPENCV with distortion.*undistort"):
+    assert load_scene(root / "sparse", mesh=root / "mesh.ply").views[0].distortion.model == "opencv"
+    (root / "sparse" / "cameras.txt").write_text("1 THIN_PRISM_FISHEYE 64 48 100 100 32 24 0.1 0 0 0 0 0 0 0\n"
+                                                 "2 PINHOLE 64 48 1 1 1 1\n")
+    with pytest.raises(InputError, match=r"cameras\.txt: camera line .*THIN_PRISM_FISHEYE is not supported.*undistort"):
         load_scene(root / "sparse", mesh=root / "mesh.ply")
 
 

@@ -32,6 +32,7 @@ __all__ = [
     "progress_from_args",
     "save_options_from_args",
     "scene_from_args",
+    "scene_options_from_args",
     "texture_settings_from_args",
 ]
 
@@ -40,20 +41,43 @@ _DEFAULTS = TextureSettings()
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The scene argument and the loader options every command shares."""
+    from ..io.load import AXES, EXTRINSIC_CONVENTIONS
+
     p.add_argument("scene", help="scene.json (or its folder), a MeshLab .mlp, Meshroom cameras.sfm, an Open3D RGB-D "
-                   "folder, or a COLMAP model folder (text or binary)")
+                   "folder, a COLMAP model folder (text or binary), or an OpenMVS scene.mvs")
     p.add_argument("--mesh", help="mesh file (required for RGB-D folders, COLMAP and Meshroom; overrides the others')")
+    p.add_argument("--image-dir", help="folder of the images (COLMAP, Meshroom, OpenMVS), instead of where the scene "
+                   "file says")
     p.add_argument("--depth-dir", help="folder of depth maps named after the views, for scenes without depth (MeshLab "
                    "projects, COLMAP, Meshroom): turns the depth-consistency filter on")
     p.add_argument("--depth-scale", type=float, default=1000.0,
                    help="depth units per metre of the --depth-dir maps (default 1000: millimetres)")
+    p.add_argument("--extrinsic", choices=EXTRINSIC_CONVENTIONS, default=None,
+                   help="what the scene's pose matrices map (scene.json, COLMAP, RGB-D folders), when not the format's "
+                   "own (scene.json and COLMAP world-to-camera, key.log camera-to-world); default: the format's, "
+                   "checked against the mesh")
+    p.add_argument("--axes", choices=AXES, default=None,
+                   help="the scene's camera axes: opencv (y down, looking down +z; every format's own) or opengl (y up, "
+                   "looking down -z); default opencv, checked against the mesh")
+    p.add_argument("--intrinsic", metavar="FILE",
+                   help="RGB-D folders: the colour camera's intrinsic, Open3D's PinholeCameraIntrinsic JSON (default "
+                   "PrimeSense, for 640x480 images only)")
+    p.add_argument("--no-camera-check", dest="camera_check", action="store_false",
+                   help="skip the check of the cameras against the mesh (camera-to-world, OpenGL axes, other units)")
+
+
+def scene_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword options of :func:`~o3d_seqcc.load_scene` given on the command line (validated)."""
+    if not 0 < args.depth_scale < float("inf"):
+        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
+    return {"mesh": args.mesh, "image_dir": args.image_dir, "depth_dir": args.depth_dir,
+            "depth_scale": args.depth_scale, "extrinsic": args.extrinsic, "axes": args.axes,
+            "intrinsic": args.intrinsic, "check_cameras": args.camera_check}
 
 
 def scene_from_args(args: argparse.Namespace):
-    """The scene named on the command line (validated)."""
-    if not 0 < args.depth_scale < float("inf"):
-        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
-    return load_scene(args.scene, mesh=args.mesh, depth_dir=args.depth_dir, depth_scale=args.depth_scale)
+    """The scene named on the command line (validated, cameras checked)."""
+    return load_scene(args.scene, **scene_options_from_args(args))
 
 
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:

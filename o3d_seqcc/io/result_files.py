@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,13 +51,16 @@ def write_images(folder: Path, views, images) -> list[Path]:
                                               unit="image"))]
 
 
-def scene_paths(scene: Scene) -> dict[str, str]:
-    """Absolute paths of the scene and its mesh files (what ``o3d-seqcc report`` reloads), when on disk."""
+def scene_paths(scene: Scene) -> dict[str, Any]:
+    """Absolute paths of the scene and its mesh files (what ``o3d-seqcc report`` reloads), when on disk,
+    and the options it was loaded with (``scene_options``)."""
     out = {}
     if scene.source is not None:
         out["scene_path"] = str(Path(scene.source).resolve())
     if isinstance(scene.mesh, Path):
         out["mesh"] = str(scene.mesh.resolve())
+    if scene.options:
+        out["scene_options"] = dict(scene.options)  # how load_scene read it (image_dir, extrinsic, ...)
     return out
 
 

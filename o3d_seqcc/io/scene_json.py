@@ -8,10 +8,15 @@
                 "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]],
                 "extrinsic": [[r,r,r,t],[r,r,r,t],[r,r,r,t],[0,0,0,1]],
                 "depth": "depth/v00.png", "depth_scale": 1000.0,
-                "point_cloud": "scans/s0.ply"}]}
+                "point_cloud": "scans/s0.ply",
+                "distortion": {"model": "opencv", "coefficients": [k1, k2, p1, p2],
+                               "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]]}}]}
 
 Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
-1000) and ``point_cloud`` are optional. ``extrinsic`` is world-to-camera in OpenCV axes.
+1000), ``point_cloud`` and ``distortion`` are optional. ``extrinsic`` is world-to-camera in
+OpenCV axes. ``distortion`` (:class:`~o3d_seqcc.distortion.Distortion`: model, coefficients,
+the photo's own intrinsic) says the image is a distorted photo, undistorted when read to the
+pinhole camera ``intrinsic``.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import FORMAT, Scene, View
 from .files import find_file, write_json
@@ -29,7 +35,7 @@ from .files import find_file, write_json
 __all__ = ["FORMAT", "detect", "load", "save"]
 
 _VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
-_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud")
+_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion")
 
 
 def detect(path: Path) -> Path | None:
@@ -127,6 +133,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
                     depth_scale=_number(d, "depth_scale", where) if d.get("depth_scale") is not None else 1000.0,
                     point_cloud=None if d.get("point_cloud") is None
                     else _join(root, d["point_cloud"], f"{where}: 'point_cloud'"),
+                    distortion=None if d.get("distortion") is None else Distortion.from_dict(d["distortion"]),
                 )
             )
         except InputError as e:
@@ -182,5 +189,7 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
             d["depth_scale"] = v.depth_scale
         if v.point_cloud is not None:
             d["point_cloud"] = _rel(v.point_cloud, root)
+        if v.distortion is not None:
+            d["distortion"] = v.distortion.to_dict()
         views.append(d)
     return write_json(path, {"format": FORMAT, "mesh": _rel(scene.mesh, root), "views": views})

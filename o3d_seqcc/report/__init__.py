@@ -140,7 +140,7 @@ def _scene_frame(tm, rep: dict, fmt: str):
     return replace(tm, vertices=tm.vertices @ R, normals=None if tm.normals is None else tm.normals @ R)
 
 
-def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
+def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None) -> PageInputs:
     from ..correction import correct
     from ..io.load import load_scene
     from ..mappings import compute_mappings
@@ -154,7 +154,12 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         raise InputError(f"{run_dir / 'report.json'} does not say where the scene is (a scene in memory, or an older "
                          "o3d-seqcc); pass --scene (and --mesh)")
     try:
-        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None))
+        opts = dict(rep.get("scene_options") or {})  # as the run loaded it (a moved scene: its conventions only)
+        if scene is not None:
+            opts = {k: v for k, v in opts.items() if k not in ("image_dir", "depth_dir", "depth_scale")}
+        if image_dir is not None:
+            opts["image_dir"] = image_dir
+        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None), **opts)
     except InputError as e:
         raise InputError(f"cannot reload the scene {src} named in {run_dir / 'report.json'}: {e}; pass --scene "
                          "(and --mesh) to say where it is now") from None
@@ -196,6 +201,7 @@ def regenerate_report(
     scene: str | os.PathLike | None = None,
     mesh: str | os.PathLike | None = None,
     output: str | os.PathLike | None = None,
+    image_dir: str | os.PathLike | None = None,
     thumb_width: int = 160,
 ) -> Path:
     """Write the HTML report of an output folder of ``run``, ``correct`` or ``texture`` again.
@@ -212,6 +218,8 @@ def regenerate_report(
         The output folder.
     scene, mesh : path-like, optional
         Where the scene (and its mesh) are now, when not where ``report.json`` says.
+    image_dir : path-like, optional
+        Where the images of a COLMAP, Meshroom or OpenMVS scene are now (``load_scene``'s).
     output : path-like, optional
         Write the page there instead of ``run_dir/report.html`` (which is then also listed in
         the folder's manifest).
@@ -230,7 +238,7 @@ def regenerate_report(
     """
     run_dir = Path(run_dir)
     rep = _read_report(run_dir)
-    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh)
+    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh, image_dir=image_dir)
     data = render_page(inp, width=int(thumb_width)).encode("utf-8")
     if output is not None:
         return atomic_write_bytes(output, data)
