@@ -14,7 +14,7 @@ import inspect
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -151,6 +151,7 @@ def run_demo(
                        "mesh_vertices": int(len(mesh.vertices)), "mesh_faces": int(len(mesh.faces))}
     t = time.perf_counter()
     res = run(scene, t_npm=t_npm, settings=settings, **run_options)
+    res = replace(res, source=str(Path(source).resolve()))  # the report names the scene it ran on
     run_dir = out / "run"
     res.save(run_dir, overwrite=True, save_images=True, **(save_options or {}))
     timings["run"] = time.perf_counter() - t

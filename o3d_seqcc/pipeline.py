@@ -52,7 +52,7 @@ from .render import write_selection_picture
 from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
-from .seams import SeamReport, seam_metric
+from .seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility import Visibility, compute_visibility
 
@@ -175,11 +175,14 @@ class RunResult:
     originals: list | None = None
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
-               export: dict[str, Any] | None = None, metrics: dict | None = None) -> dict[str, Any]:
+               export: dict[str, Any] | None = None, metrics: dict | None = None,
+               selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types).
 
         ``export``: the export options :meth:`save` used; ``metrics``: Table 2
-        (:func:`~o3d_seqcc.metrics.before_after`).
+        (:func:`~o3d_seqcc.metrics.before_after`); ``selection_seams``: ``{"photos", "corrected"}``
+        -> :class:`~o3d_seqcc.seams.SelectionSeams` (the colour steps at the selection seams in
+        the photos and in the corrected images).
         """
         s = self.settings
         names = self.scene.names
@@ -210,6 +213,8 @@ class RunResult:
         rep["files"] = dict(files or {})
         if self.seams_original is not None:
             rep["seams_original_images"] = self.seams_original.to_dict()
+        if selection_seams is not None:
+            rep["selection_seams"] = {k: v.summary() for k, v in selection_seams.items()}
         rep["visibility_stats"] = self.visibility.stats
         rep["timings_s"] = {k: round(v, 4) for k, v in self.timings.items()}
         return rep
@@ -316,25 +321,30 @@ class RunResult:
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
                       "orientation": {**orientation, "applies_to": [f for f in fmts]}}
             t = time.perf_counter()
-            metrics = None if prelude is None else prelude.result()
+            metrics, steps = (None, None) if prelude is None else prelude.result()
             if report:
                 written_out["report_html"] = str(Path(out) / REPORT_FILE)
             rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
-                              metrics=metrics)
+                              metrics=metrics, selection_seams=steps)
             if report:
-                write_report(self, stage / REPORT_FILE, report=rep)
+                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps)
                 self.timings["report"] = time.perf_counter() - t
                 rep["timings_s"]["report"] = round(self.timings["report"], 4)
             write_json(stage / "report.json", rep)
         return written_out
 
-    def _report_prelude(self, table2: bool) -> dict | None:
-        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2."""
+    def _report_prelude(self, table2: bool) -> tuple[dict | None, dict | None]:
+        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2, and
+        the colour steps at the selection seams in the photos and the corrected images (after a correction)."""
         warm_up()
         if not table2:
-            return None
-        return before_after(self.originals, self.images, self.mappings, self.correction.paths,
-                            max_per_pair=METRICS_MAX_PER_PAIR)
+            return None, None
+        metrics = before_after(self.originals, self.images, self.mappings, self.correction.paths,
+                               max_per_pair=METRICS_MAX_PER_PAIR)
+        mesh = self.visibility.mesh
+        steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
+                 for k, imgs in (("photos", self.originals), ("corrected", self.images))}
+        return metrics, steps
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):

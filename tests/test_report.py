@@ -6,6 +6,7 @@ import base64
 import json
 import re
 import shutil
+import struct
 import subprocess
 import tempfile
 
@@ -18,6 +19,8 @@ from o3d_seqcc.cli import main
 from o3d_seqcc.io.output import MANIFEST
 from o3d_seqcc.luts import compose_luts
 from o3d_seqcc.report import regenerate_report
+from o3d_seqcc.report.page import MAX_DETAIL_EDGES
+from o3d_seqcc.report.viewer import viewer_bundle
 
 FAST = ["--t-npm", "50", "--atlas-size", "1024", "--format", "glb", "--fallback", "flat"]
 IMG = re.compile(r'<img(?: class="[^"]*")? src="data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)" alt="[^"]*">')
@@ -43,6 +46,12 @@ def _images(fragment: str) -> list[tuple[str, bytes]]:
     return [(kind, base64.b64decode(data)) for kind, data in IMG.findall(fragment)]
 
 
+def _scripts(page: str) -> tuple[str, list[tuple[str, str]]]:
+    """The page without its scripts, and the scripts as (opening tag, content)."""
+    found = re.findall(r"(<script[^>]*>)(.*?)</script>", page, flags=re.S)
+    return re.sub(r"<script[^>]*>.*?</script>", "", page, flags=re.S), found
+
+
 def test_the_report_is_one_self_contained_file(run_dir):
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
@@ -51,18 +60,29 @@ def test_the_report_is_one_self_contained_file(run_dir):
     assert len(imgs) == page.count("<img") > 20
     for kind, data in imgs:
         assert data[:8] == b"\x89PNG\r\n\x1a\n" if kind == "png" else data[:3] == b"\xff\xd8\xff", kind
-    # nothing fetched from anywhere: no URL, no script, no stylesheet link, no CSS url()
-    for bad in ("http://", "https://", "<script", "<link", "url(", "@import", "src=\"/", "src='", "file:"):
-        assert bad not in page, bad
-    assert re.findall(r'src="(?!data:)', page) == [] and re.findall(r'href="(?!#)', page) == []
+    # two scripts, both inline: the viewer's data (JSON) and the viewer, exactly the bundle the package ships
+    rest, scripts = _scripts(page)
+    assert [tag for tag, _ in scripts] == ['<script type="application/json" id="o3d-viewer-data">', "<script>"]
+    assert scripts[1][1] == viewer_bundle()
+    data = json.loads(scripts[0][1])
+    glb = base64.b64decode(data["glb"])
+    assert glb[:4] == b"glTF" and struct.unpack("<I", glb[8:12])[0] == len(glb)
+    for m in data["modes"][1:]:
+        assert m["texture"].startswith("data:image/jpeg;base64,")
+    # nothing fetched from anywhere: no URL, no stylesheet link, no CSS url(), outside the scripts and in the data
+    for bad in ("http://", "https://", "<link", "url(", "@import", "src=\"/", "src='", "file:"):
+        assert bad not in rest and bad not in scripts[0][1], bad
+    assert re.findall(r'src="(?!data:)', rest) == [] and re.findall(r'href="(?!#)', rest) == []
+    # the bundle names no address it could load (three.js's XHTML namespace string is not a request)
+    assert set(re.findall(r"https?://[^\s\"'`)]+", scripts[1][1])) <= {"http://www.w3.org/1999/xhtml"}
 
 
 def test_the_report_shows_this_run(run_dir, scene):
     rep = json.loads((run_dir / "report.json").read_text())
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     sec = _sections(page)
-    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "selection", "renders", "seams", "timings",
-                         "settings"]
+    assert list(sec) == ["model", "correction", "views", "table2", "graph", "jih", "steps", "selection", "renders",
+                         "seams", "timings", "settings"]
     names, ref = scene.scene.names, rep["correction"]["reference"]
     paths = rep["correction"]["paths"]
     n_views = len(names)
@@ -70,8 +90,9 @@ def test_the_report_shows_this_run(run_dir, scene):
     edges = {(p[i], p[i + 1]) for p in paths.values() for i in range(len(p) - 1)}
     assert f"the reference <b>{ref}</b>" in sec["graph"] and len(_images(sec["graph"])) == 1
     assert sec["graph"].count("<tr><td>") == len(edges)
-    # Figures 6-7: one detailed figure, one thumbnail per path edge
-    assert len(_images(sec["jih"])) == 1 + len(edges)
+    # Figures 6-7: three channels of the path's edges (at most MAX_DETAIL_EDGES), one thumbnail per path edge
+    detail = min(max(len(p) for p in paths.values()) - 1, MAX_DETAIL_EDGES)
+    assert len(_images(sec["jih"])) == 3 * detail + len(edges)
     # Figure 8: the longest path, its views above, one step (image + CMF) per edge below
     hops = max(len(p) for p in paths.values()) - 1
     # (+ its corrected image after the joint refinement: the default method refines the sequential estimate)
