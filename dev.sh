@@ -1,29 +1,37 @@
 #!/usr/bin/env bash
 # One-command set-up and tasks for o3d_seqcc on a fresh Debian/Ubuntu machine.
 #
-#   ./dev.sh demo    install everything (once) and run the pipeline on the built-in synthetic scene
+#   ./dev.sh demo    install what the demo needs (once) and run the pipeline on the built-in synthetic scene
 #   ./dev.sh test    install everything (once) and run the test suite
-#   ./dev.sh setup   only install
+#   ./dev.sh setup   only install everything
 #
-# Installs: the system libraries Open3D and pymeshlab need, the MeshLab application and Debian's
-# chromium (the HTML report's rendering test) (apt, when root or with sudo), a virtual environment
-# in .venv with the package and its test extra, and the Khronos glTF validator (npm) into
-# .cache/node. Re-running is cheap: each step is skipped when done.
+# demo installs the system libraries Open3D needs (apt, when root or with sudo) and a virtual
+# environment in .venv with the package and its core dependencies (`pip install -e .`), no more.
+# setup and test add the rest: the MeshLab application, xvfb, Debian's chromium (the HTML report's
+# rendering tests), nodejs/npm (apt), every extra and the test tools (`pip install -e ".[test]"`)
+# and the Khronos glTF validator (npm) into .cache/node. Each step shows its progress, with the
+# time since the start; re-running is cheap: each step is skipped when done.
 set -euo pipefail
 cd "$(dirname "$0")"
 ROOT=$(pwd)
 VENV=${VENV:-$ROOT/.venv}
-APT_PACKAGES=(libusb-1.0-0 libgomp1 libgl1 libegl1 xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
-              libvulkan1 mesa-vulkan-drivers  # Open3D's offscreen renderer (lavapipe)
-              meshlab xdotool imagemagick     # MeshLab opening our output (tests/test_meshlab_app.py)
-              chromium)                       # the HTML report's rendering test (tests/test_report.py)
+# what `import open3d` needs (the demo, and every command)
+APT_CORE=(libusb-1.0-0 libgomp1 libgl1 libegl1)
+# the rest of the test suite's tools
+APT_FULL=("${APT_CORE[@]}" xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
+          libvulkan1 mesa-vulkan-drivers  # Open3D's offscreen renderer (lavapipe)
+          meshlab xdotool imagemagick     # MeshLab opening our output (tests/test_meshlab_app.py)
+          chromium)                       # the HTML report in a browser (tests/test_report*.py)
 
-log() { printf '\033[1m[dev.sh]\033[0m %s\n' "$*" >&2; }
+START=$SECONDS
+log() { printf '\033[1m[dev.sh %d:%02d]\033[0m %s\n' $(((SECONDS - START) / 60)) $(((SECONDS - START) % 60)) "$*" >&2; }
 
+# setup_system core|full: the apt packages of that level that are missing
 setup_system() {
-  local missing=()
+  local missing=() wanted=()
+  if [[ ${1:-full} == core ]]; then wanted=("${APT_CORE[@]}"); else wanted=("${APT_FULL[@]}"); fi
   if command -v dpkg-query >/dev/null 2>&1; then
-    for p in "${APT_PACKAGES[@]}"; do
+    for p in "${wanted[@]}"; do
       # node/npm may come from elsewhere (nvm, the image): only install when absent
       if [[ $p == nodejs && -n $(command -v node || true) ]]; then continue; fi
       if [[ $p == npm && -n $(command -v npm || true) ]]; then continue; fi
@@ -40,8 +48,9 @@ setup_system() {
   fi
   log "installing system packages: ${missing[*]}"
   export DEBIAN_FRONTEND=noninteractive
-  $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  $SUDO apt-get update -q
+  $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+  log "system packages installed"
 }
 
 find_python() {
@@ -54,11 +63,16 @@ find_python() {
   log "Python >= 3.10 not found"; exit 1
 }
 
+# setup_python core|full: the package into $VENV with its core dependencies, or with every extra and the test tools
 setup_python() {
+  local level=${1:-full}
   local stamp="$VENV/.o3d_seqcc-installed"
-  local want
-  want=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
-  if [[ -f $stamp && $(cat "$stamp") == "$want" ]]; then return 0; fi
+  local hash
+  hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
+  # a full install serves the demo too; a core one is completed by setup / test
+  if [[ -f $stamp ]] && { [[ $(cat "$stamp") == "$hash full" ]] || [[ $level == core && $(cat "$stamp") == "$hash core" ]]; }; then
+    return 0
+  fi
   if [[ ! -x $VENV/bin/python ]]; then
     local py; py=$(find_python)
     log "creating $VENV with $py"
@@ -72,11 +86,14 @@ setup_python() {
       "$py" -m venv "$VENV"
     fi
   fi
-  log "installing o3d_seqcc and its dependencies into $VENV"
-  "$VENV/bin/python" -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-  "$VENV/bin/python" -m pip install -q -e ".[test]" 2>&1 | grep -v '^WARNING: Location' || true
-  "$VENV/bin/python" -c "import o3d_seqcc, open3d, pymeshlab, cv2, sklearn, xatlas, distributed" || { log "install failed"; exit 1; }
-  echo "$want" > "$stamp"
+  local spec=. check="import o3d_seqcc, open3d, cv2, sklearn, xatlas, matplotlib"
+  if [[ $level == full ]]; then spec=".[test]"; check="$check, pymeshlab, distributed, pytest"; fi
+  log "installing o3d_seqcc (pip install -e \"$spec\") into $VENV"
+  "$VENV/bin/python" -m pip install --upgrade pip
+  "$VENV/bin/python" -m pip install -e "$spec"
+  "$VENV/bin/python" -c "$check" || { log "install failed"; exit 1; }
+  echo "$hash $level" > "$stamp"
+  log "python packages installed"
 }
 
 setup_node() {
@@ -85,14 +102,15 @@ setup_node() {
   if command -v npm >/dev/null 2>&1; then
     log "installing the Khronos glTF validator (npm gltf-validator) into $dir"
     mkdir -p "$dir"
-    npm install --silent --no-audit --no-fund --prefix "$dir" gltf-validator >/dev/null 2>&1 \
+    npm install --no-audit --no-fund --prefix "$dir" gltf-validator \
       || log "npm install gltf-validator failed: the GLB validation test will be skipped"
   else
     log "npm not found: the GLB validation test will be skipped"
   fi
 }
 
-setup() { setup_system; setup_python; setup_node; }
+setup() { setup_system full; setup_python full; setup_node; }
+setup_demo() { setup_system core; setup_python core; }
 
 # pymeshlab's raster filters need an OpenGL context and a Qt platform plugin
 export QT_QPA_PLATFORM=${QT_QPA_PLATFORM:-xcb}
@@ -111,7 +129,7 @@ with_display() {
 cmd=${1:-help}; shift || true
 case $cmd in
   setup) setup ;;
-  demo) setup; with_display "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
-  test) setup; with_display "$VENV/bin/python" -m pytest "$@" ;;
-  *) sed -n '2,12p' "$0"; exit 2 ;;
+  demo) setup_demo; log "running o3d-seqcc demo"; "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
+  test) setup; log "running the tests"; with_display "$VENV/bin/python" -m pytest "$@" ;;
+  *) sed -n '2,15p' "$0"; exit 2 ;;
 esac
