@@ -24,7 +24,7 @@ from .errors import InputError
 from .io.files import write_json
 from .metrics import image_delta_e
 from .pipeline import RunResult, run
-from .datasets import fountain
+from .datasets import DatasetUnavailable, fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
 from .texturing import TextureSettings
 
@@ -140,7 +140,10 @@ def run_demo(
         summary: dict[str, Any] = {"synthetic": {"folder": str(out / "scene"), "reused": reused}}
         run_options = {"reference": scene.names[0], "mappings": "dense", "compare_original": True}
     else:
-        scene = fountain(data_root)
+        try:
+            scene = fountain(data_root)
+        except DatasetUnavailable as e:
+            raise e.for_python("run_demo(..., data_root=DIR)") from None
         source = scene.source or scene.mesh
         summary = {"dataset": {"name": "fountain", "folder": str(Path(scene.views[0].image).parents[1])}}
         run_options = {"reference": "auto"}

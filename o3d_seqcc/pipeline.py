@@ -49,7 +49,7 @@ from .orientation import UP_AXES, up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
 from .render import write_selection_picture
-from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
+from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric, selection_seams
@@ -263,8 +263,9 @@ class RunResult:
             JPEG / WebP quality (1-100).
         report : bool, default True
             Also write ``report.html`` (:mod:`o3d_seqcc.report`: the paper's figures for this run)
-            and, after a correction, Table 2 in ``report.json`` (``metrics``: scored on at most
-            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` mappings per pair).
+            and, after a correction, Table 2 in ``report.json`` (``metrics``: every mapping up to
+            :data:`~o3d_seqcc.report.METRICS_ALL_UP_TO` in all, else at most
+            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` per pair).
 
         Returns
         -------
@@ -340,7 +341,7 @@ class RunResult:
         if not table2:
             return None, None
         metrics = before_after(self.originals, self.images, self.mappings, self.correction.paths,
-                               max_per_pair=METRICS_MAX_PER_PAIR)
+                               max_per_pair=metrics_sample(self.mappings))
         mesh = self.visibility.mesh
         steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
                  for k, imgs in (("photos", self.originals), ("corrected", self.images))}

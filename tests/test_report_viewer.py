@@ -55,6 +55,15 @@ def test_quiet_demo_prints_nothing_and_writes_the_viewer(demo, capfd):
     assert (out, err) == ("", "")
     page = (demo / "run" / "report.html").read_text(encoding="utf-8")
     assert '<div id="o3d-viewer"' in page and 'id="o3d-viewer-data"' in page
+    # the graph threshold one way everywhere: the setting (vertex units) and its count in the demo's dense mappings
+    rep = json.loads((demo / "run" / "report.json").read_text())
+    eff = rep["correction"]["t_npm"]
+    assert rep["correction"]["settings"]["t_npm"] == 200 and eff != 200
+    assert f"t<sub>npm</sub> = 200 (the setting, in vertex mappings) = {eff} dense mappings" in page
+    assert f"<tr><th>t_npm</th><td>200</td></tr><tr><th>t_npm_effective</th><td>{eff}</td></tr>" in page
+    # the scene it ran on, named in the subtitle and the settings
+    scene = str((demo / "scene" / "scene.json").resolve())
+    assert rep["scene"] == scene and f"<tr><th>scene</th><td>{scene}</td></tr>" in page
 
 
 def _canvas_shot(page) -> np.ndarray:

@@ -62,7 +62,31 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         _add_global_options(p, suppress=True)
         p.set_defaults(func=mod.run)
+    parser.set_defaults(_subparsers=sub.choices)
     return parser
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
+    """Parse ``argv``; an option the command does not know is an error in that command's own usage.
+
+    argparse hands a sub-command's unknown options to the top-level parser, whose usage says
+    nothing about them; here the sub-command's parser reports them, with the closest option it
+    has ("did you mean --t-npm?").
+    """
+    import difflib
+
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        sub = args._subparsers[args.command]
+        known = [o for a in sub._actions for o in a.option_strings]
+        hints = []
+        for word in extra:
+            if word.startswith("-"):
+                close = difflib.get_close_matches(word.split("=", 1)[0], known, n=1, cutoff=0.75)
+                if close:
+                    hints.append(f"{word.split('=', 1)[0]}: did you mean {close[0]}?")
+        sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
+    return args
 
 
 class WarningLog(logging.Handler):
@@ -201,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser()
         try:
-            args = parser.parse_args(argv)
+            args = _parse(parser, argv)
         except SystemExit as e:  # argparse: --help (0) or a usage error (2, message already printed)
             return int(e.code or 0)
         from joblib import parallel_config

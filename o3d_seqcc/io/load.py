@@ -128,6 +128,8 @@ def load_scene(
             raise InputError(f"{p} is not {fmt.description}")
         found = (fmt, hit)
     fmt, target = found
+    if mesh is not None:
+        _check_mesh_path(Path(mesh), target)
     options: dict[str, Any] = {"mesh": mesh}
     accepted = inspect.signature(fmt.load).parameters
     for name, value in (("intrinsic", intrinsic), ("image_dir", image_dir)):
@@ -142,6 +144,17 @@ def load_scene(
     if validate:
         scene.validate()
     return scene
+
+
+def _check_mesh_path(mesh: Path, target: Path) -> None:
+    """A mesh given by the user must exist as typed: from the current folder, or from the scene's folder."""
+    folder = target if target.is_dir() else target.parent
+    if mesh.is_file() or (not mesh.is_absolute() and (folder / mesh).is_file()):
+        return
+    where = ("" if mesh.is_absolute() else
+             f" (a relative path is looked for from the current folder {Path.cwd()} and from the scene's folder {folder})")
+    what = "is a folder, not a mesh file" if mesh.is_dir() else "not found"
+    raise InputError(f"mesh {mesh} {what}{where}; give the path of the mesh file")
 
 
 def _with_depth(views: tuple[View, ...], folder: Path, depth_scale: float) -> tuple[View, ...]:

@@ -24,7 +24,7 @@ from an output folder. Sections, each only when the command produced its data:
 - seam metric, timings and the run's settings.
 
 At run time everything comes from memory. :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
-matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair
+matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
 and measures the selection seams' steps in a thread beside the export; the page then draws the
 figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
 the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
@@ -48,14 +48,21 @@ from ..errors import InputError
 from ..io.files import atomic_write_bytes
 from .page import PageInputs, facts, render_page
 
-__all__ = ["METRICS_MAX_PER_PAIR", "REPORT_FILE", "html_report", "regenerate_report", "write_report"]
+__all__ = ["METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "metrics_sample", "html_report", "regenerate_report", "write_report"]
 
 logger = logging.getLogger(__name__)
 
 #: file name of the report in an output folder
 REPORT_FILE = "report.html"
-#: mappings scored per pair for the Table 2 of ``run`` (evenly spaced; ``correct`` scores them all)
+#: mappings scored per pair for the Table 2 of ``run`` beyond :data:`METRICS_ALL_UP_TO` (evenly spaced)
 METRICS_MAX_PER_PAIR = 200
+#: ``run`` scores every mapping (its Table 2 is then ``correct``'s, number for number) up to this many in all
+METRICS_ALL_UP_TO = 100_000
+
+
+def metrics_sample(mappings) -> int | None:
+    """``max_per_pair`` of ``run``'s Table 2: None (all) up to :data:`METRICS_ALL_UP_TO` mappings, else the cap."""
+    return None if mappings.total <= METRICS_ALL_UP_TO else METRICS_MAX_PER_PAIR
 
 
 def _selection_png(folder: Path | None) -> bytes | None:
@@ -183,7 +190,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         if f["metrics"] is None and f["command"] == "run":
             logger.info("report.json has no metrics (older o3d-seqcc): computing Table 2")
             rep = {**rep, "metrics": before_after(photos, corrected, maps, correction.paths,
-                                                  max_per_pair=METRICS_MAX_PER_PAIR)}
+                                                  max_per_pair=metrics_sample(maps))}
     selection = textured = None
     faces = vis.mesh.faces
     if (run_dir / "selection.npy").is_file():

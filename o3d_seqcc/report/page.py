@@ -316,14 +316,19 @@ def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
 
     method = _esc(inp.correction.method) if inp.correction is not None else "corrected"
     scored = ""
-    if b.get("max_per_pair"):
-        scored = (f'<p class="callout">To get this table from <code>o3d-seqcc correct</code>, give it this run\'s '
-                  f"settings: <code>{_esc(correct_command(inp))}</code> (its defaults, reference auto and vertex "
-                  f"mappings, correct differently and so score differently). It scores all {b['n_mappings']} mappings; "
-                  f"this table, written beside the run, at most {b['max_per_pair']} evenly spaced ones per pair "
-                  f"({b['n_scored']}; the weighted means still weight every pair by its full count), which moves the "
-                  f"means by a few hundredths (measured on the demo room and on Fountain: PSNR by at most 0.05 dB, "
-                  f"CIEDE2000 by at most 0.03).</p>")
+    if inp.rep.get("command") == "run" and inp.correction is not None:
+        cmd = f"<code>{_esc(correct_command(inp))}</code>"
+        if b.get("max_per_pair"):
+            scored = (f'<p class="callout">To get this table from <code>o3d-seqcc correct</code>, give it this run\'s '
+                      f"settings: {cmd} (its defaults, reference auto and vertex mappings, correct differently and so "
+                      f"score differently). It scores all {b['n_mappings']} mappings; this table, written beside the "
+                      f"run, a sample of at most {b['max_per_pair']} evenly spaced ones per pair ({b['n_scored']}; the "
+                      f"weighted means still weight every pair by its full count), so its means differ from correct's "
+                      f"by the sampling error.</p>")
+        else:
+            scored = (f'<p class="callout">{cmd} gives this very table: the same correction, scored on all '
+                      f"{b['n_mappings']} mappings (its defaults, reference auto and vertex mappings, correct "
+                      f"differently and so score differently).</p>")
     return (f'{scored}<table class="t2"><tr><th></th><th colspan="3">PSNR dB (higher: more similar)</th>'
             f'<th colspan="3">CIEDE2000 (lower: more similar)</th><th colspan="2">contrast ratio (~1)</th></tr>'
             f"<tr><th></th>{'<th>mean</th><th>w. mean</th><th>std</th>' * 2}<th>mean</th><th>min</th></tr>"
