@@ -49,7 +49,7 @@ from .orientation import UP_AXES, up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
 from .render import write_selection_picture
-from .report import REPORT_FILE, metrics_sample, write_report
+from .report import REPORT_FILE, cached_images, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric, selection_seams
@@ -264,8 +264,7 @@ class RunResult:
         report : bool, default True
             Also write ``report.html`` (:mod:`o3d_seqcc.report`: the paper's figures for this run)
             and, after a correction, Table 2 in ``report.json`` (``metrics``: every mapping up to
-            :data:`~o3d_seqcc.report.METRICS_ALL_UP_TO` in all, else at most
-            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` per pair).
+            :data:`~o3d_seqcc.report.METRICS_ALL_UP_TO`, else a sample: ``metrics_sample``).
 
         Returns
         -------
@@ -291,7 +290,8 @@ class RunResult:
                 _stage("export"):
             # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
             # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
-            prelude = pool.submit(self._report_prelude, table2) if report else None
+            images = cached_images(*((self.originals, self.images) if self.originals else (self.images, None)))
+            prelude = pool.submit(self._report_prelude, table2, images) if report else None
             picture = None
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
@@ -328,23 +328,22 @@ class RunResult:
             rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
                               metrics=metrics, selection_seams=steps)
             if report:
-                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps)
+                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images)
                 self.timings["report"] = time.perf_counter() - t
                 rep["timings_s"]["report"] = round(self.timings["report"], 4)
             write_json(stage / "report.json", rep)
         return written_out
 
-    def _report_prelude(self, table2: bool) -> tuple[dict | None, dict | None]:
-        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2, and
-        the colour steps at the selection seams in the photos and the corrected images (after a correction)."""
+    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
+        """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
         warm_up()
         if not table2:
             return None, None
-        metrics = before_after(self.originals, self.images, self.mappings, self.correction.paths,
-                               max_per_pair=metrics_sample(self.mappings))
+        (photos, corrected), mpp = images, metrics_sample(self.mappings)
+        metrics = before_after(photos, corrected, self.mappings, self.correction.paths, max_per_pair=mpp)
         mesh = self.visibility.mesh
         steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
-                 for k, imgs in (("photos", self.originals), ("corrected", self.images))}
+                 for k, imgs in (("photos", photos), ("corrected", corrected))}
         return metrics, steps
 
 

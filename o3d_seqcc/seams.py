@@ -405,7 +405,7 @@ def photo_colors(views: Any, points: np.ndarray, view_ids: np.ndarray, *image_se
     import cv2
 
     from .camera import project_points
-    from .imageops import dtype_scale
+    from .imageops import dtype_scale, sample_colors
 
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     vid = np.asarray(view_ids, dtype=np.int64).reshape(-1)
@@ -422,6 +422,9 @@ def photo_colors(views: Any, points: np.ndarray, view_ids: np.ndarray, *image_se
         maps = None
         for images, out in zip(image_sets, outs):
             img = np.asarray(images[v])
+            if n < img.shape[0] * img.shape[1] // 20:  # a few points: numpy, without a float copy of the image
+                out[idx] = sample_colors(img, np.nan_to_num(uv)) / dtype_scale(img.dtype)
+                continue
             if maps is None:
                 h, w = img.shape[:2]
                 x = np.clip(np.nan_to_num(uv[:, 0], nan=0.0), 0.0, w - 1.0).astype(np.float32)
@@ -502,7 +505,8 @@ def selection_seams(
     s = max(int(samples_per_edge), 1)
     t = (np.arange(s) + 0.5) / s
     pts = (p0[:, None] * (1.0 - t)[None, :, None] + p1[:, None] * t[None, :, None]).reshape(-1, 3)
-    ca = photo_colors(views, pts, np.repeat(a[k], s), images)
-    cb = photo_colors(views, pts, np.repeat(b[k], s), images)
+    both = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
+                        images)  # each image read once for both sides
+    ca, cb = both[:len(pts)], both[len(pts):]
     de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
     return SelectionSeams(delta_e=de, segments=np.stack([p0, p1], axis=1), faces=np.stack([fa, fb], axis=1))

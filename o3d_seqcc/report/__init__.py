@@ -48,7 +48,8 @@ from ..errors import InputError
 from ..io.files import atomic_write_bytes
 from .page import PageInputs, facts, render_page
 
-__all__ = ["METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "metrics_sample", "html_report", "regenerate_report", "write_report"]
+__all__ = ["IMAGE_CACHE_BYTES", "METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "cached_images",
+           "metrics_sample", "html_report", "regenerate_report", "write_report"]
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +59,28 @@ REPORT_FILE = "report.html"
 METRICS_MAX_PER_PAIR = 200
 #: ``run`` scores every mapping (its Table 2 is then ``correct``'s, number for number) up to this many in all
 METRICS_ALL_UP_TO = 100_000
+
+
+#: bytes of images a report keeps while it is made (each photo read, and corrected, once while they fit)
+IMAGE_CACHE_BYTES = 256 << 20
+
+
+def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
+    """``photos`` and ``corrected`` read through one shared cache; lazily corrected images from the cached photos.
+
+    What :meth:`~o3d_seqcc.pipeline.RunResult.save` hands to Table 2, the seam steps and the page,
+    so that together they read each photo once (``None`` stays ``None``).
+    """
+    from ..correction.base import CorrectedImages
+    from ..images import CachedImages, LRUCache
+
+    if isinstance(photos, CachedImages):
+        return photos, corrected
+    cache = LRUCache(IMAGE_CACHE_BYTES)
+    p = None if photos is None else CachedImages(photos, cache, "photos")
+    if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
+        corrected = CorrectedImages(p, corrected.transforms)  # the LUTs applied to the cached photos
+    return p, None if corrected is None else CachedImages(corrected, cache, "corrected")
 
 
 def metrics_sample(mappings) -> int | None:
@@ -72,11 +95,13 @@ def _selection_png(folder: Path | None) -> bytes | None:
 
 
 def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
-                        selection_seams: dict | None = None) -> PageInputs:
+                        selection_seams: dict | None = None, images: tuple | None = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
         photos = result.originals if result.correction is not None else result.images
+        if images is not None:
+            photos, corrected = images
         return PageInputs(
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
@@ -115,17 +140,18 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
-                 selection_seams: dict | None = None) -> Path:
+                 selection_seams: dict | None = None, images: tuple | None = None) -> Path:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
     (``report["selection"]["picture_view"]``, as :meth:`~o3d_seqcc.pipeline.RunResult.save`
     writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
     (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
-    not given) are the colour steps the page shows.
+    not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
+    result's (e.g. :func:`cached_images` shared with whoever read them before).
     """
     path = Path(path)
-    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams)
+    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
     return atomic_write_bytes(path, render_page(inp, width=int(thumb_width)).encode("utf-8"))
 
 

@@ -19,7 +19,6 @@ import numpy as np
 from ..imageops import dtype_scale, img_as_uint8, sample_colors
 from ..metrics import thin_indices
 from ..render import render_selection, render_textured, resized_view, selection_palette
-from ..images import LRUCache
 from ..scene import Scene
 from ..seams import selection_seams
 from .comparison import correction_section
@@ -38,8 +37,6 @@ JIH_BITS = 7
 JIH_MAX_MAPPINGS = 2000
 #: width in pixels of the selection picture drawn when the folder holds no selection.png of the same view (reused as is)
 SELECTION_WIDTH = 640
-#: bytes of images the page keeps while it is drawn (each photo is read once, not once per figure)
-IMAGE_CACHE_BYTES = 256 << 20
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
 MAX_DETAIL_EDGES = 3
 
@@ -63,19 +60,6 @@ class PageInputs:
 
 
 _esc, _img, _num = esc, img, num
-
-
-class _Cached:
-    """A sequence of images read through a shared least-recently-used cache (the page reads photos repeatedly)."""
-
-    def __init__(self, seq, cache: LRUCache, key: str) -> None:
-        self._seq, self._cache, self._key = seq, cache, key
-
-    def __len__(self) -> int:
-        return len(self._seq)
-
-    def __getitem__(self, v):
-        return self._cache.get((self._key, int(v)), lambda: self._seq[int(v)])
 
 
 def _selection_seams(inp: PageInputs) -> dict:
@@ -588,9 +572,10 @@ def render_page(inp: PageInputs, *, width: int = 160) -> str:
     from .. import __version__
 
     f = facts(inp.rep)
-    cache = LRUCache(IMAGE_CACHE_BYTES)
-    inp = replace(inp, photos=None if inp.photos is None else _Cached(inp.photos, cache, "photos"),
-                  corrected=None if inp.corrected is None else _Cached(inp.corrected, cache, "corrected"))
+    from . import cached_images
+
+    photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
+    inp = replace(inp, photos=photos, corrected=corrected)
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
             and inp.corrected is not None and inp.selection_seams is None:
         inp = replace(inp, selection_seams=_selection_seams(inp))  # the cards and two sections show them
