@@ -86,12 +86,14 @@ setup_python() {
       "$py" -m venv "$VENV"
     fi
   fi
-  local spec=. check="import o3d_seqcc, open3d, cv2, sklearn, xatlas, matplotlib"
-  if [[ $level == full ]]; then spec=".[test]"; check="$check, pymeshlab, distributed, pytest"; fi
+  local spec=. mods="o3d_seqcc open3d cv2 sklearn xatlas matplotlib"
+  if [[ $level == full ]]; then spec=".[test]"; mods="$mods pymeshlab distributed pytest"; fi
   log "installing o3d_seqcc (pip install -e \"$spec\") into $VENV"
-  "$VENV/bin/python" -m pip install --upgrade pip
+  # pip's own output is the progress (downloads, then the install); it stops the script when it fails
   "$VENV/bin/python" -m pip install -e "$spec"
-  "$VENV/bin/python" -c "$check" || { log "install failed"; exit 1; }
+  # present, without paying for importing them (open3d alone takes seconds; the command imports what it needs)
+  "$VENV/bin/python" -c "import importlib.util as u, sys; m = [n for n in sys.argv[1:] if u.find_spec(n) is None]; \
+sys.exit(f'missing after the install: {m}' if m else 0)" $mods || { log "install failed"; exit 1; }
   echo "$hash $level" > "$stamp"
   log "python packages installed"
 }

@@ -255,3 +255,23 @@ def test_the_selection_legend_colours_are_told_apart_and_the_seam_steps_are_repo
     assert f"{a['mean']:.2f} → {b['mean']:.2f}" in page  # the summary card
     assert f"<td>{a['p90']:.2f}</td><td>{b['p90']:.2f}</td>" in sec["correction"]
     assert len(_images(sec["correction"])) == 5
+
+
+def test_a_model_too_big_to_embed_is_said_so(run_dir, scene):
+    from o3d_seqcc.report.viewer import model_section
+    from o3d_seqcc.texturing import load_textured_mesh
+
+    tm = load_textured_mesh(run_dir / "mesh.glb")
+    html_ = model_section(tm, scene.scene.views[0], scene.scene, None, None, max_faces=len(tm.faces) - 1)
+    assert "<canvas" not in html_ and f"has {len(tm.faces)} faces, more than this page embeds" in html_
+    assert "mesh.glb" in html_
+
+
+def test_texture_writes_the_viewer_without_the_correction_sections(scene, tmp_path):
+    out = tmp_path / "t"
+    assert main(["-q", "texture", str(scene.root / "scene.json"), "--out", str(out), *FAST[2:]]) == 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    sec = _sections(page)
+    assert list(sec)[:1] == ["model"] and "correction" not in sec and "table2" not in sec
+    data = json.loads(_scripts(page)[1][0][1])
+    assert [m["key"] for m in data["modes"]] == ["result", "photos"]

@@ -30,13 +30,14 @@ def _print_summary(res) -> None:
           f"textured from the photos, atlas {run_['atlas']['atlas_size']}^2 with {run_['atlas']['charts']} charts "
           f"({100 * run_['atlas']['coverage']:.0f}% covered); "
           f"outputs in {res.out / 'run'}: {', '.join(run_['outputs'])}")
-    seams, seams0 = run_["seams"], run_["seams_original"]
+    steps, seams = run_.get("selection_seams"), run_["seams"]
+    if steps:
+        a, b = steps["photos"], steps["corrected"]
+        print(f"  colour step at the {a['n_edges']} seams between photos (CIEDE2000 mean / share > 5): "
+              f"{a['mean']:.2f} / {a['frac_above_5']:.3f} as taken -> {b['mean']:.2f} / {b['frac_above_5']:.3f} corrected")
     if seams:
-        line = f"  seam CIEDE2000 mean / p99 / share > 5: {seams['mean']:.2f} / {seams['p99']:.2f} / {seams['frac_above_5']:.3f}"
-        if seams0:
-            line += (f"  (uncorrected images: {seams0['mean']:.2f} / {seams0['p99']:.2f} / "
-                     f"{seams0['frac_above_5']:.3f})")
-        print(line)
+        print(f"  seam CIEDE2000 of the texture after seam leveling, mean / p99 / share > 5: {seams['mean']:.2f} / "
+              f"{seams['p99']:.2f} / {seams['frac_above_5']:.3f}")
     if "ground_truth" in s:
         gt = s["ground_truth"]
         print("mean CIEDE2000 to the ground-truth renders (covered pixels), per view before -> after:")

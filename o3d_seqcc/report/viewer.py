@@ -181,7 +181,7 @@ def model_section(tm: Any, view: View, scene, photos, corrected, *, method: str 
     except InputError:
         rotation = np.eye(3)
     small = viewer_model(tm)
-    have_views = small.face_view is not None and len(small.face_view) == n
+    have_views = small.face_view is not None and len(small.face_view) == n and photos is not None
     sets = {} if not have_views else ({"photos": photos} if corrected is None else
                                       {"corrected": corrected, "photos": photos})
     tex = viewer_textures(small, scene.views, sets) if sets else {}
