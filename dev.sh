@@ -26,6 +26,21 @@ APT_FULL=("${APT_CORE[@]}" xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 no
 START=$SECONDS
 log() { printf '\033[1m[dev.sh %d:%02d]\033[0m %s\n' $(((SECONDS - START) / 60)) $(((SECONDS - START) % 60)) "$*" >&2; }
 
+# with_ticker CMD...: run CMD; every 20 s meanwhile say how far the venv has grown (pip prints nothing while it
+# unpacks and byte-compiles, about a minute for Open3D alone)
+with_ticker() {
+  "$@" &
+  local pid=$! n=0
+  while kill -0 "$pid" 2>/dev/null; do
+    sleep 1
+    n=$((n + 1))
+    if ((n % 20 == 0)) && kill -0 "$pid" 2>/dev/null; then
+      log "... pip still working: $(du -sm "$VENV" 2>/dev/null | cut -f1) MB in $VENV"
+    fi
+  done
+  wait "$pid"
+}
+
 # setup_system core|full: the apt packages of that level that are missing
 setup_system() {
   local missing=() wanted=()
@@ -90,7 +105,7 @@ setup_python() {
   if [[ $level == full ]]; then spec=".[test]"; mods="$mods pymeshlab distributed pytest"; fi
   log "installing o3d_seqcc (pip install -e \"$spec\") into $VENV"
   # pip's own output is the progress (downloads, then the install); it stops the script when it fails
-  "$VENV/bin/python" -m pip install -e "$spec"
+  with_ticker "$VENV/bin/python" -m pip install -e "$spec"
   # present, without paying for importing them (open3d alone takes seconds; the command imports what it needs)
   "$VENV/bin/python" -c "import importlib.util as u, sys; m = [n for n in sys.argv[1:] if u.find_spec(n) is None]; \
 sys.exit(f'missing after the install: {m}' if m else 0)" $mods || { log "install failed"; exit 1; }

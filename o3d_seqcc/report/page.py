@@ -91,9 +91,9 @@ def facts(rep: dict) -> dict[str, Any]:
             "timings": rep.get("timings", {}), "correction_timings": {}, "metrics": rep.get("metrics")}
 
 
-def t_npm_text(f: dict, *, html_sub: bool = True) -> str:
-    """The graph threshold one way everywhere: the setting, and the count it means in this run's mappings."""
-    name = "t<sub>npm</sub>" if html_sub else "t_npm"
+def t_npm_text(f: dict) -> str:
+    """The graph threshold one way everywhere (HTML): the setting, and the count it means in this run's mappings."""
+    name = "t<sub>npm</sub>"
     setting, eff = f.get("t_npm"), f.get("t_npm_effective")
     if eff is None or str(eff) == str(setting):
         return f"{name} = {_esc(setting)} mappings"
@@ -121,8 +121,8 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     cap = (f"Colour-correction graph (paper Figures 4-5). One node per view, numbered by index and placed by its "
            f"camera position (seen from above: the two main axes of the camera centres); the reference "
            f"<b>{_esc(names[ref])}</b> (#{ref}) in red. An edge joins two views sharing at least "
-           f"{t_npm_text({**f, 't_npm_effective': c.t_npm})}: its width grows with the number of mappings n, its colour is its "
-           f"weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
+           f"{t_npm_text({**f, 't_npm_effective': c.t_npm})}: its width grows with the number of mappings n, its "
+           f"colour is its weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
            f"Unreachable views (grey): {unreach}.")
     by_pair = {(e["a"], e["b"]): e for e in c.graph_edges}
     rows = "".join(
