@@ -43,10 +43,35 @@ def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
                    help=f"refuse images with more pixels than N before decoding them (default {MAX_IMAGE_PIXELS})")
 
 
+class _Parser(argparse.ArgumentParser):
+    """The top-level parser: an option the command does not know is an error in that command's own usage.
+
+    argparse hands a sub-command's unknown options to the top-level parser, whose usage says
+    nothing about them; here the sub-command's parser reports them, with the closest option it
+    has ("did you mean --t-npm?").
+    """
+
+    def parse_args(self, args=None, namespace=None):  # noqa: D102 - argparse's
+        import difflib
+
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            sub = ns._subparsers[ns.command]
+            known = [o for a in sub._actions for o in a.option_strings]
+            hints = []
+            for word in extra:
+                if word.startswith("-"):
+                    close = difflib.get_close_matches(word.split("=", 1)[0], known, n=1, cutoff=0.75)
+                    if close:
+                        hints.append(f"{word.split('=', 1)[0]}: did you mean {close[0]}?")
+            sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
+        return ns
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="o3d-seqcc",
         description="Sequential pairwise colour correction and texture mapping of registered photos onto a mesh.",
     )
@@ -64,29 +89,6 @@ def build_parser() -> argparse.ArgumentParser:
         p.set_defaults(func=mod.run)
     parser.set_defaults(_subparsers=sub.choices)
     return parser
-
-
-def _parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
-    """Parse ``argv``; an option the command does not know is an error in that command's own usage.
-
-    argparse hands a sub-command's unknown options to the top-level parser, whose usage says
-    nothing about them; here the sub-command's parser reports them, with the closest option it
-    has ("did you mean --t-npm?").
-    """
-    import difflib
-
-    args, extra = parser.parse_known_args(argv)
-    if extra:
-        sub = args._subparsers[args.command]
-        known = [o for a in sub._actions for o in a.option_strings]
-        hints = []
-        for word in extra:
-            if word.startswith("-"):
-                close = difflib.get_close_matches(word.split("=", 1)[0], known, n=1, cutoff=0.75)
-                if close:
-                    hints.append(f"{word.split('=', 1)[0]}: did you mean {close[0]}?")
-        sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
-    return args
 
 
 class WarningLog(logging.Handler):
@@ -225,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser()
         try:
-            args = _parse(parser, argv)
+            args = parser.parse_args(argv)
         except SystemExit as e:  # argparse: --help (0) or a usage error (2, message already printed)
             return int(e.code or 0)
         from joblib import parallel_config
