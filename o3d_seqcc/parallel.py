@@ -33,7 +33,7 @@ import uuid
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator, Sequence
 
-from .errors import InputError
+from .errors import InputError, require
 from .progress import track
 
 __all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "connect", "current", "use"]
@@ -206,7 +206,7 @@ def connect(address: str, *, timeout: float = 10.0, option: str = "--scheduler")
     """
     import socket
 
-    from distributed import Client
+    Client = require("distributed", extra="dask", what=f"{option} (a Dask cluster)").Client
     from distributed.comm.addressing import parse_address, parse_host_port
 
     address = str(address).strip()

@@ -49,10 +49,10 @@ from .orientation import UP_AXES, up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
 from .render import write_selection_picture
-from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
+from .report import REPORT_FILE, cached_images, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
-from .seams import SeamReport, seam_metric
+from .seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility import Visibility, compute_visibility
 
@@ -175,11 +175,14 @@ class RunResult:
     originals: list | None = None
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
-               export: dict[str, Any] | None = None, metrics: dict | None = None) -> dict[str, Any]:
+               export: dict[str, Any] | None = None, metrics: dict | None = None,
+               selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types).
 
         ``export``: the export options :meth:`save` used; ``metrics``: Table 2
-        (:func:`~o3d_seqcc.metrics.before_after`).
+        (:func:`~o3d_seqcc.metrics.before_after`); ``selection_seams``: ``{"photos", "corrected"}``
+        -> :class:`~o3d_seqcc.seams.SelectionSeams` (the colour steps at the selection seams in
+        the photos and in the corrected images).
         """
         s = self.settings
         names = self.scene.names
@@ -210,6 +213,8 @@ class RunResult:
         rep["files"] = dict(files or {})
         if self.seams_original is not None:
             rep["seams_original_images"] = self.seams_original.to_dict()
+        if selection_seams is not None:
+            rep["selection_seams"] = {k: v.summary() for k, v in selection_seams.items()}
         rep["visibility_stats"] = self.visibility.stats
         rep["timings_s"] = {k: round(v, 4) for k, v in self.timings.items()}
         return rep
@@ -258,8 +263,8 @@ class RunResult:
             JPEG / WebP quality (1-100).
         report : bool, default True
             Also write ``report.html`` (:mod:`o3d_seqcc.report`: the paper's figures for this run)
-            and, after a correction, Table 2 in ``report.json`` (``metrics``: scored on at most
-            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` mappings per pair).
+            and, after a correction, Table 2 in ``report.json`` (``metrics``: every mapping up to
+            :data:`~o3d_seqcc.report.METRICS_ALL_UP_TO`, else a sample: ``metrics_sample``).
 
         Returns
         -------
@@ -285,7 +290,8 @@ class RunResult:
                 _stage("export"):
             # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
             # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
-            prelude = pool.submit(self._report_prelude, table2) if report else None
+            images = cached_images(*((self.originals, self.images) if self.originals else (self.images, None)))
+            prelude = pool.submit(self._report_prelude, table2, images) if report else None
             picture = None
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
@@ -316,25 +322,29 @@ class RunResult:
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
                       "orientation": {**orientation, "applies_to": [f for f in fmts]}}
             t = time.perf_counter()
-            metrics = None if prelude is None else prelude.result()
+            metrics, steps = (None, None) if prelude is None else prelude.result()
             if report:
                 written_out["report_html"] = str(Path(out) / REPORT_FILE)
             rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
-                              metrics=metrics)
+                              metrics=metrics, selection_seams=steps)
             if report:
-                write_report(self, stage / REPORT_FILE, report=rep)
+                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images)
                 self.timings["report"] = time.perf_counter() - t
                 rep["timings_s"]["report"] = round(self.timings["report"], 4)
             write_json(stage / "report.json", rep)
         return written_out
 
-    def _report_prelude(self, table2: bool) -> dict | None:
-        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2."""
+    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
+        """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
         warm_up()
         if not table2:
-            return None
-        return before_after(self.originals, self.images, self.mappings, self.correction.paths,
-                            max_per_pair=METRICS_MAX_PER_PAIR)
+            return None, None
+        (photos, corrected), mpp = images, metrics_sample(self.mappings)
+        metrics = before_after(photos, corrected, self.mappings, self.correction.paths, max_per_pair=mpp)
+        mesh = self.visibility.mesh
+        steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
+                 for k, imgs in (("photos", photos), ("corrected", corrected))}
+        return metrics, steps
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):

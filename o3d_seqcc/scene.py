@@ -515,11 +515,35 @@ class Scene:
                 raise InputError(f"view {v.name!r}: point cloud not found: {v.point_cloud}")
 
 
+def near_miss(path: Path) -> str:
+    """``"; found NAME beside it: did you mean it?"`` for a missing file with a near namesake, else ``""``.
+
+    A near namesake is a file in the same folder whose name differs only in case or in the
+    extension (``img00.jpg`` for ``img00.png``, as COLMAP models written before a conversion
+    name them); a missing folder is said as such.
+    """
+    folder = Path(path).parent
+    if not folder.is_dir():
+        return f"; the folder {folder} does not exist"
+    name, stem = Path(path).name.lower(), Path(path).stem.lower()
+    try:
+        entries = [e for e in os.scandir(folder) if e.is_file()]
+    except OSError:
+        return ""
+    same = [e.name for e in entries if e.name.lower() == name]
+    other = sorted(e.name for e in entries if Path(e.name).stem.lower() == stem and e.name.lower() != name)
+    found = same or other
+    if not found:
+        return ""
+    return f"; found {found[0]} beside it: did you mean it?"
+
+
 def _check_image_header(v: View) -> None:
     try:
         size = check_image_file(v.image)[:2]
     except InputError as e:
-        raise InputError(f"view {v.name!r}: {e}") from None
+        hint = near_miss(v.image) if not v.image.is_file() else ""
+        raise InputError(f"view {v.name!r}: {e}{hint}") from None
     if size != (v.width, v.height):
         raise InputError(
             f"view {v.name!r}: image {v.image} is {size[0]}x{size[1]} but the scene says {v.width}x{v.height}; "

@@ -180,6 +180,8 @@ def load_scene(
     fmt, target = detect_format(path, format)
     p = Path(path)
     conv = _conventions(fmt, p, extrinsic, axes)
+    if mesh is not None:
+        _check_mesh_path(Path(mesh), target)
     options: dict[str, Any] = {"mesh": mesh}
     accepted = inspect.signature(fmt.load).parameters
     for name, value in (("intrinsic", intrinsic), ("image_dir", image_dir)):
@@ -261,6 +263,19 @@ def run_camera_check(scene: Scene, fmt: SceneFormat, target: Path, *, extrinsic:
     for w in rep.warnings:
         warn(f"{target}: {w}")
     return rep
+
+
+def _check_mesh_path(mesh: Path, target: Path) -> None:
+    """A mesh given by the user must exist as typed: from the current folder, or from the scene's folder."""
+    folder = target if target.is_dir() else target.parent
+    if mesh.is_file() or (not mesh.is_absolute() and (folder / mesh).is_file()):
+        return
+    where = ("" if mesh.is_absolute() else
+             f" (a relative path is looked for from the current folder {Path.cwd()} and from the scene's folder {folder})")
+    what = "is a folder, not a mesh file" if mesh.is_dir() else "not found"
+    raise InputError(f"mesh {mesh} {what}{where}; give the path of the mesh file")
+
+
 def _with_depth(views: tuple[View, ...], folder: Path, depth_scale: float) -> tuple[View, ...]:
     """The views with a depth map from ``folder`` where they have none (named after the view or its image)."""
     if not folder.is_dir():

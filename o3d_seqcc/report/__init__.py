@@ -5,6 +5,12 @@ works offline) that ``run``, ``correct`` and ``texture`` (and so ``demo``) write
 output folder, and that :func:`regenerate_report` (``o3d-seqcc report RUN_DIR``) writes again
 from an output folder. Sections, each only when the command produced its data:
 
+- the textured model in an interactive 3D viewer (:mod:`o3d_seqcc.report.viewer`: the GLB
+  inline, three.js bundled into the page; orbit, zoom, the texture corrected / as taken / the
+  selection colours);
+- what the correction changes (:mod:`o3d_seqcc.report.comparison`): one close-up of the model
+  as written, with each face its photo corrected and as taken, and the selection seams on a
+  colour scale of their step;
 - the colour-correction graph with edge weights and the Dijkstra paths, reference marked
   (paper Figures 4-5), and the path edges as a table;
 - the joint image histograms (JIH) and fitted colour mapping functions (CMF) of every path edge
@@ -17,11 +23,11 @@ from an output folder. Sections, each only when the command produced its data:
 - renders of the textured mesh from two views beside the photos (Figures 12-13);
 - seam metric, timings and the run's settings.
 
-At run time everything comes from memory. On fountain (33 views, 16k faces) the report costs
-about 1.3 s of CPU on one core: importing matplotlib's Figure 0.2 s, Table 2 on at most
-:data:`METRICS_MAX_PER_PAIR` mappings per pair 0.5 s (all 3.9 M mappings: 11 s), the page 0.6 s
-(figures, thumbnails, two small ray-cast renders; selection.png is reused);
-:meth:`~o3d_seqcc.pipeline.RunResult.save` runs the first two in a thread beside the export.
+At run time everything comes from memory. :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
+matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
+and measures the selection seams' steps in a thread beside the export; the page then draws the
+figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
+the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
 :func:`regenerate_report` reloads the scene, recomputes the visibility, mappings and correction
 with the settings ``report.json`` recorded (the per-edge CMFs are not saved) and reads the
 selection, the textured mesh and the numbers from the folder.
@@ -42,14 +48,44 @@ from ..errors import InputError
 from ..io.files import atomic_write_bytes
 from .page import PageInputs, facts, render_page
 
-__all__ = ["METRICS_MAX_PER_PAIR", "REPORT_FILE", "html_report", "regenerate_report", "write_report"]
+__all__ = ["IMAGE_CACHE_BYTES", "METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "cached_images",
+           "metrics_sample", "html_report", "regenerate_report", "write_report"]
 
 logger = logging.getLogger(__name__)
 
 #: file name of the report in an output folder
 REPORT_FILE = "report.html"
-#: mappings scored per pair for the Table 2 of ``run`` (evenly spaced; ``correct`` scores them all)
+#: mappings scored per pair for the Table 2 of ``run`` beyond :data:`METRICS_ALL_UP_TO` (evenly spaced)
 METRICS_MAX_PER_PAIR = 200
+#: ``run`` scores every mapping (its Table 2 is then ``correct``'s, number for number) up to this many in all
+METRICS_ALL_UP_TO = 100_000
+
+
+#: bytes of images a report keeps while it is made (each photo read, and corrected, once while they fit)
+IMAGE_CACHE_BYTES = 256 << 20
+
+
+def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
+    """``photos`` and ``corrected`` read through one shared cache; lazily corrected images from the cached photos.
+
+    What :meth:`~o3d_seqcc.pipeline.RunResult.save` hands to Table 2, the seam steps and the page,
+    so that together they read each photo once (``None`` stays ``None``).
+    """
+    from ..correction.base import CorrectedImages
+    from ..images import CachedImages, LRUCache
+
+    if isinstance(photos, CachedImages):
+        return photos, corrected
+    cache = LRUCache(IMAGE_CACHE_BYTES)
+    p = None if photos is None else CachedImages(photos, cache, "photos")
+    if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
+        corrected = CorrectedImages(p, corrected.transforms)  # the LUTs applied to the cached photos
+    return p, None if corrected is None else CachedImages(corrected, cache, "corrected")
+
+
+def metrics_sample(mappings) -> int | None:
+    """``max_per_pair`` of ``run``'s Table 2: None (all) up to :data:`METRICS_ALL_UP_TO` mappings, else the cap."""
+    return None if mappings.total <= METRICS_ALL_UP_TO else METRICS_MAX_PER_PAIR
 
 
 def _selection_png(folder: Path | None) -> bytes | None:
@@ -58,16 +94,19 @@ def _selection_png(folder: Path | None) -> bytes | None:
     return p.read_bytes() if p is not None and p.is_file() else None
 
 
-def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None) -> PageInputs:
+def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
+                        selection_seams: dict | None = None, images: tuple | None = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
         photos = result.originals if result.correction is not None else result.images
+        if images is not None:
+            photos, corrected = images
         return PageInputs(
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
-            usable=vis.usable_counts(), selection_png=_selection_png(folder))
+            usable=vis.usable_counts(), selection_png=_selection_png(folder), selection_seams=selection_seams)
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
@@ -100,15 +139,19 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
     return render_page(_inputs_from_result(result, report), width=int(thumb_width))
 
 
-def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160) -> Path:
+def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
+                 selection_seams: dict | None = None, images: tuple | None = None) -> Path:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
     (``report["selection"]["picture_view"]``, as :meth:`~o3d_seqcc.pipeline.RunResult.save`
-    writes it) is embedded as Figure 9 instead of being rendered again.
+    writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
+    (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
+    not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
+    result's (e.g. :func:`cached_images` shared with whoever read them before).
     """
     path = Path(path)
-    inp = _inputs_from_result(result, report, folder=path.parent)
+    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
     return atomic_write_bytes(path, render_page(inp, width=int(thumb_width)).encode("utf-8"))
 
 
@@ -178,7 +221,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
         if f["metrics"] is None and f["command"] == "run":
             logger.info("report.json has no metrics (older o3d-seqcc): computing Table 2")
             rep = {**rep, "metrics": before_after(photos, corrected, maps, correction.paths,
-                                                  max_per_pair=METRICS_MAX_PER_PAIR)}
+                                                  max_per_pair=metrics_sample(maps))}
     selection = textured = None
     faces = vis.mesh.faces
     if (run_dir / "selection.npy").is_file():
@@ -190,6 +233,9 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
     tm_path = next((run_dir / n for n in ("mesh.glb", "mesh.obj", "mesh.ply") if (run_dir / n).is_file()), None)
     if tm_path is not None and selection is not None:
         textured = _scene_frame(load_textured_mesh(tm_path), rep, tm_path.suffix.lstrip("."))
+        if textured.face_view is None and len(textured.faces) == len(selection) \
+                and int((rep.get("atlas") or {}).get("pages", 1)) == 1:  # one page: the file keeps the faces' order
+            textured = replace(textured, face_view=np.where(selection >= 0, selection, -1))
     return PageInputs(rep=rep, scene=sc, photos=photos, corrected=corrected, correction=correction, mappings=maps,
                    selection=selection, mesh=(vis.mesh.vertices, faces), textured=textured,
                    usable=vis.usable_counts(), selection_png=_selection_png(run_dir))
