@@ -104,10 +104,8 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
 
 
 def _import_in_background(*modules: str) -> None:
-    """Import slow third-party modules in a daemon thread while this one works (scikit-learn takes
-    about a second; Python's import locks make the later ``import`` wait for it, never run it twice)."""
-    import importlib
-    import threading
+    """Import slow third-party modules in a daemon thread while this one works (scikit-learn: ~1 s)."""
+    import importlib, threading  # noqa: E401
 
     def load() -> None:
         for m in modules:
@@ -179,10 +177,8 @@ class RunResult:
                selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types).
 
-        ``export``: the export options :meth:`save` used; ``metrics``: Table 2
-        (:func:`~o3d_seqcc.metrics.before_after`); ``selection_seams``: ``{"photos", "corrected"}``
-        -> :class:`~o3d_seqcc.seams.SelectionSeams` (the colour steps at the selection seams in
-        the photos and in the corrected images).
+        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.metrics.before_after`);
+        ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`.
         """
         s = self.settings
         names = self.scene.names
