@@ -1,4 +1,4 @@
-"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient correlation, mapping plots.
+"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient similarity, mapping plots.
 
 Paper Figures 2-3 (pairwise mappings, :func:`plot_pair`), 9 (per-face image selection coloured
 by image) and 12-13 (textured mesh from chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
@@ -27,7 +27,7 @@ from .texturing.textured_mesh import load_textured_mesh, sample_texture
 
 __all__ = [
     "RayHits",
-    "gradient_correlation",
+    "gradient_similarity",
     "plot_pair",
     "raycast",
     "render_selection",
@@ -337,33 +337,36 @@ def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int =
     return float(np.var(lap[m]))
 
 
-def gradient_correlation(
+def gradient_similarity(
     image: np.ndarray,
     reference: np.ndarray,
     mask: np.ndarray | None = None,
     *,
     erode: int = 2,
     window: int = 24,
-    max_shift: float = 2.0,
+    max_shift: int = 3,
 ) -> float:
-    """How much of a reference's detail an image holds, in place: locally registered gradient correlation.
+    """How much of a reference's detail an image holds, in place: locally registered gradient similarity.
 
     :func:`sharpness` rewards any high frequency, including edges that are not in the photo: a
     texture that shows an edge twice (two photos misregistered across a seam), aliasing or noise
     raises the variance of the Laplacian. This measure does not. The grey-level gradient fields
-    (3 x 3 Sobel) of ``image`` and ``reference`` are compared in ``window`` x ``window`` tiles:
-    each tile's score is the cosine between the two fields (x and y components pooled) at the
-    best shift of ``image`` within ``max_shift`` pixels (half-pixel steps), and the result is
-    the mean of the tiles' scores weighted by the reference's gradient energy in each (strong
-    edges weigh most, as they do for the eye).
+    (3 x 3 Sobel) ``g`` of the image and ``h`` of the reference are compared in ``window`` x
+    ``window`` tiles, each tile by the SSIM form applied to gradient vectors,
+    ``2 <g, h> / (|g|^2 + |h|^2)`` (summed over the tile): 1 only when the image has the
+    reference's gradients, same directions and strengths; lower for weaker ones (blur, a faint
+    blend), misplaced ones (a doubled edge, a wrong photo) and extra ones (aliasing, noise). The
+    image is shifted per tile to its best match within ``max_shift`` pixels (integer steps, then
+    half-pixel steps on a 2x cubic upsampling of both), and the result is the mean of the tiles'
+    scores weighted by the reference's gradient energy in each (strong edges weigh most, as
+    they do for the eye).
 
     The shift search forgives what is not the texture's fault: a render of a real scan from a
-    photo's camera is misregistered with that photo by a pixel or two (pose and geometry error),
-    differently in different places. What it does not forgive: lost gradients (blur), edges the
-    reference does not have (a doubled edge, aliasing, noise), misplaced by more than
-    ``max_shift``, or two parts of a tile shifted apart (a seam between misregistered photos). The
-    photo itself scores 1, so does any positive gain or offset of it (per tile: a brightness or
-    contrast change leaves it at 1).
+    photo's camera is misregistered with that photo by a few pixels (pose and geometry error),
+    differently in different places. Not forgiven: edges misplaced by more, and two parts of a
+    tile shifted apart (a seam between misregistered photos). The photo itself scores 1 (and so
+    does any offset of it); a gain ``k`` on its contrast scores ``2k / (1 + k^2)`` (0.995 for
+    k = 1.1).
 
     Parameters
     ----------
@@ -373,11 +376,11 @@ def gradient_correlation(
         Pixels to use (e.g. where the render sees the mesh); default all. Tiles less than half
         inside the (eroded) mask, or where the reference is flat, do not count.
     erode : int, default 2
-        Erode the mask by this many pixels (plus ``ceil(max_shift)``) so its border does not count.
+        Erode the mask by this many pixels (plus ``max_shift + 1``) so its border does not count.
     window : int, default 24
         Tile side in pixels: the scale at which misregistration is forgiven.
-    max_shift : float, default 2.0
-        Largest shift searched per tile, pixels (0: no search, the tiles' plain correlation).
+    max_shift : int, default 3
+        Largest shift searched per tile, pixels (0: no search, the tiles compared in place).
 
     Returns
     -------
@@ -391,57 +394,87 @@ def gradient_correlation(
         gradients in the reference, or a bad ``window`` / ``max_shift``.
     """
 
-    def grey(a: np.ndarray) -> np.ndarray:
-        a = np.asarray(a)
-        f = a.astype(np.float32) / np.float32(dtype_scale(a.dtype))
+    def grey(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x)
+        f = x.astype(np.float32) / np.float32(dtype_scale(x.dtype))
         return (cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) if f.ndim == 3 else f).astype(np.float32)
+
+    def grads(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
 
     a, b = grey(image), grey(reference)
     if a.shape != b.shape:
-        raise InputError(f"gradient_correlation: image {a.shape} and reference {b.shape} differ in size")
-    if int(window) < 4 or not 0 <= float(max_shift) <= 16:
-        raise InputError(f"gradient_correlation: window must be >= 4 and max_shift in [0, 16], got {window}, {max_shift}")
+        raise InputError(f"gradient_similarity: image {a.shape} and reference {b.shape} differ in size")
+    w, r = int(window), int(max_shift)
+    if w < 4 or not 0 <= r <= 16 or r != max_shift:
+        raise InputError(f"gradient_similarity: window must be >= 4 and max_shift an integer in 0..16, got {window}, {max_shift}")
     m = np.ones(a.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     if m.shape != a.shape:
         raise InputError(f"mask shape {m.shape} does not match the image {a.shape}")
-    e = int(erode) + int(np.ceil(max_shift))
+    e = int(erode) + (r + 1 if r else 0)
     if e > 0:
         m = cv2.erode(m.astype(np.uint8), np.ones((2 * e + 1, 2 * e + 1), np.uint8), borderValue=0).astype(bool)
-    s, w = (2, 2 * int(window)) if max_shift > 0 else (1, int(window))
-    if s > 1:  # half-pixel steps: both images through the same 2x cubic upsampling
-        size = (a.shape[1] * s, a.shape[0] * s)
-        a, b = (cv2.resize(x, size, interpolation=cv2.INTER_CUBIC) for x in (a, b))
-        m = cv2.resize(m.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
-    r = int(round(s * float(max_shift)))
-    nh, nw = a.shape[0] // w, a.shape[1] // w
+    H, W = a.shape
+    nh, nw = H // w, W // w
     if nh == 0 or nw == 0:
-        raise InputError(f"gradient_correlation: the image is smaller than one {window} px tile")
+        raise InputError(f"gradient_similarity: the image is smaller than one {w} px tile")
 
-    def tiles(x: np.ndarray) -> np.ndarray:
-        return x[:nh * w, :nw * w].reshape(nh, w, nw, w).sum(axis=(1, 3)).astype(np.float64)
+    def tiles(x: np.ndarray, s: int = 1) -> np.ndarray:
+        return x[:nh * w * s, :nw * w * s].reshape(nh, w * s, nw, w * s).sum(axis=(1, 3)).astype(np.float64)
 
     mf = m.astype(np.float32)
-    bx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) * mf
-    by = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) * mf
+    (ax, ay), (bx, by) = grads(a), grads(b)
+    bx, by = bx * mf, by * mf
     eb = tiles(bx * bx + by * by)
     valid = (tiles(mf) >= 0.5 * w * w) & (eb > 1e-12)
     if not valid.any():
-        raise InputError("gradient_correlation: no tile inside the (eroded) mask where the reference has gradients")
+        raise InputError("gradient_similarity: no tile inside the (eroded) mask where the reference has gradients")
+    if r == 0:
+        with np.errstate(divide="ignore", invalid="ignore"):  # tiles outside the mask: 0 / 0, not counted
+            sim = 2.0 * tiles(ax * bx + ay * by) / (tiles((ax * ax + ay * ay) * mf) + eb)
+        return float(np.clip((eb[valid] * sim[valid]).sum() / eb[valid].sum(), -1.0, 1.0))
+    # 1. integer shifts: the best per tile (a loop over (2r + 1)^2 shifts, each a few whole-image operations)
     pad = ((r, r), (r, r))
-    ax = np.pad(cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3), pad, mode="edge")
-    ay = np.pad(cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3), pad, mode="edge")
-    a2 = ax * ax + ay * ay
-    H, W = a.shape
+    axp, ayp = np.pad(ax, pad, mode="edge"), np.pad(ay, pad, mode="edge")
+    a2p = axp * axp + ayp * ayp
     best = np.full(eb.shape, -np.inf)
-    for dy in range(-r, r + 1):  # a loop over the (2r + 1)^2 shifts; each a few whole-image operations
+    arg = np.zeros(eb.shape + (2,), dtype=np.int64)
+    for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
             win = (slice(r + dy, r + dy + H), slice(r + dx, r + dx + W))
-            dot = tiles(ax[win] * bx + ay[win] * by)
-            ea = tiles(a2[win] * mf)
             with np.errstate(divide="ignore", invalid="ignore"):
-                c = np.where(ea > 0, dot / np.sqrt(ea * eb), 0.0)
-            np.maximum(best, c, out=best)
-    return float(np.clip((eb[valid] * best[valid]).sum() / eb[valid].sum(), -1.0, 1.0))
+                sim = 2.0 * tiles(axp[win] * bx + ayp[win] * by) / (tiles(a2p[win] * mf) + eb)
+            better = sim > best
+            best[better] = sim[better]
+            arg[better] = (dy, dx)
+    # 2. half-pixel steps around it, on both images upsampled 2x (cubic): gathered per tile
+    size = (2 * W, 2 * H)
+    (AX, AY), (BX, BY) = grads(cv2.resize(a, size, interpolation=cv2.INTER_CUBIC)), \
+        grads(cv2.resize(b, size, interpolation=cv2.INTER_CUBIC))
+    M = cv2.resize(mf, size, interpolation=cv2.INTER_NEAREST)
+    P = 2 * r + 1
+    AXp, AYp = np.pad(AX, P, mode="edge"), np.pad(AY, P, mode="edge")
+    ti, tj = np.nonzero(valid)
+
+    def tile_stack(x: np.ndarray) -> np.ndarray:  # (T, 2w, 2w): the valid tiles of a 2x image
+        return x[:nh * 2 * w, :nw * 2 * w].reshape(nh, 2 * w, nw, 2 * w).transpose(0, 2, 1, 3)[ti, tj]
+
+    Mt = tile_stack(M)
+    BXt, BYt = tile_stack(BX) * Mt, tile_stack(BY) * Mt
+    EB = (BXt * BXt + BYt * BYt).sum(axis=(1, 2), dtype=np.float64)
+    k = np.arange(2 * w)
+    refined = np.full(len(ti), -np.inf)
+    for ey in (-1, 0, 1):
+        for ex in (-1, 0, 1):
+            ys = P + 2 * w * ti[:, None] + 2 * arg[ti, tj, 0][:, None] + ey + k[None, :]
+            xs = P + 2 * w * tj[:, None] + 2 * arg[ti, tj, 1][:, None] + ex + k[None, :]
+            gx, gy = AXp[ys[:, :, None], xs[:, None, :]], AYp[ys[:, :, None], xs[:, None, :]]
+            dot = (gx * BXt + gy * BYt).sum(axis=(1, 2), dtype=np.float64)
+            ea = ((gx * gx + gy * gy) * Mt).sum(axis=(1, 2), dtype=np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                refined = np.maximum(refined, np.where(EB > 0, 2.0 * dot / (ea + EB), 0.0))
+    keep = EB > 1e-12
+    return float(np.clip((EB[keep] * refined[keep]).sum() / EB[keep].sum(), -1.0, 1.0))
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
