@@ -130,7 +130,7 @@ def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, siz
 
     Where a render is "sharper than the photo" the extra high frequency is either detail from a
     sharper photo or an artefact (doubled edges at a misregistered seam, aliasing). Of the
-    ``candidates`` non-overlapping windows (mostly on the mesh) where the render's Laplacian
+    ``candidates`` non-overlapping windows (on the common mask) where the render's Laplacian
     energy most exceeds the photo's, this returns the one least like the photo
     (:func:`o3d_seqcc.render.gradient_similarity` of the window): the place to crop to show it.
     """
@@ -146,7 +146,7 @@ def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, siz
     box = cv2.boxFilter(excess, -1, (w, h), normalize=False, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
     cover = cv2.boxFilter(m, -1, (w, h), normalize=False, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
     H, W = mask.shape
-    box[cover < 0.9 * w * h] = -np.inf  # windows mostly on the mesh
+    box[cover < 0.99 * w * h] = -np.inf  # windows on the mesh (every tool covers them)
     box[H - h + 1:, :] = -np.inf
     box[:, W - w + 1:] = -np.inf
     picks = []

@@ -700,9 +700,9 @@ def texrecon_cam(view: Any, *, align_texels: bool = True) -> str:
     texture half a texel (half a photo pixel) up and left of the photo. Measured on Fountain 16k,
     over the faces texrecon textured from the photo rendered (13 photos with >= 15k such pixels),
     gradient similarity with the photo with no shift forgiven
-    (``o3d_seqcc.render.gradient_similarity(..., max_shift=0)``): exact principal point 0.76-0.92
-    at the photo's camera, 0.973-0.982 with the render's camera moved by (-0.5, -0.5) px; with
-    this compensation 0.973-0.981 at the camera, 0.77-0.86 moved by -0.5 or +0.5 px.
+    (``o3d_seqcc.render.gradient_similarity(..., max_shift=0)``): exact principal point 0.63-0.86
+    at the photo's camera, 0.947-0.965 with the render's camera moved by (-0.5, -0.5) px; with
+    this compensation 0.951-0.965 at the camera, 0.65-0.79 moved by -0.5 or +0.5 px.
     ``align_texels=True`` gives texrecon the principal point half a pixel
     further (``ppx = (cx + 1) / W``, ``ppy = (cy + 1) / H``), so its texture coordinates are
     where readers look (its visibility and data terms then see the camera half a pixel off,
@@ -1003,6 +1003,7 @@ DEFAULT_VIEWS = (0, 5, 10, 15, 17, 20, 25, 30)
 CROPS = (
     ("16k", 17, 215, 50, 220, 70, '"HAROLD HATCH" lettering'),
     ("16k", 0, 150, 150, 220, 70, "lettering under the ship"),
+    ("16k", 10, 224, 73, 220, 70, "the basin: a ghost of the faucet (an occluder seen from another photo)"),
     ("300k", 17, 215, 50, 220, 70, '"HAROLD HATCH" lettering'),
     ("300k", 10, 200, 40, 220, 70, "basin rim and tiles"),
 )
@@ -1023,7 +1024,8 @@ def _error_line(text: str) -> str:
 
     lines = [ln.strip() for ln in re.sub(r"\x1b\[[0-9;]*m", "", text).splitlines() if ln.strip()] or ["failed"]
     named = [ln for ln in lines if "rror" in ln or "refuse" in ln]
-    return (named or lines)[-1][:300]
+    line = (named or lines)[-1]
+    return line if len(line) <= 300 else line[:80] + " ... " + line[-200:]
 
 
 def _fmt(x: float | None, spec: str = ".2f") -> str:

@@ -391,90 +391,75 @@ def gradient_similarity(
     ------
     InputError
         Different sizes, a mask of another shape, no tile inside the (eroded) mask with
-        gradients in the reference, or a bad ``window`` / ``max_shift``.
+        gradients in the reference (or the image smaller than a tile), a bad ``window`` /
+        ``max_shift``.
     """
 
     def grey(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x)
-        f = x.astype(np.float32) / np.float32(dtype_scale(x.dtype))
+        f = np.asarray(x).astype(np.float32) / np.float32(dtype_scale(np.asarray(x).dtype))
         return (cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) if f.ndim == 3 else f).astype(np.float32)
 
     def grads(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
 
     a, b = grey(image), grey(reference)
-    if a.shape != b.shape:
-        raise InputError(f"gradient_similarity: image {a.shape} and reference {b.shape} differ in size")
     w, r = int(window), int(max_shift)
-    if w < 4 or not 0 <= r <= 16 or r != max_shift:
-        raise InputError(f"gradient_similarity: window must be >= 4 and max_shift an integer in 0..16, got {window}, {max_shift}")
+    if a.shape != b.shape or w < 4 or not 0 <= r <= 16 or r != max_shift:
+        raise InputError(f"gradient_similarity: image {a.shape} and reference {b.shape} must have one size, window "
+                         f"be >= 4 and max_shift an integer in 0..16 (got {window}, {max_shift})")
     m = np.ones(a.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     if m.shape != a.shape:
         raise InputError(f"mask shape {m.shape} does not match the image {a.shape}")
     e = int(erode) + (r + 1 if r else 0)
     if e > 0:
         m = cv2.erode(m.astype(np.uint8), np.ones((2 * e + 1, 2 * e + 1), np.uint8), borderValue=0).astype(bool)
-    H, W = a.shape
+    (H, W), mf = a.shape, m.astype(np.float32)
     nh, nw = H // w, W // w
-    if nh == 0 or nw == 0:
-        raise InputError(f"gradient_similarity: the image is smaller than one {w} px tile")
 
-    def tiles(x: np.ndarray, s: int = 1) -> np.ndarray:
-        return x[:nh * w * s, :nw * w * s].reshape(nh, w * s, nw, w * s).sum(axis=(1, 3)).astype(np.float64)
+    def tiles(x: np.ndarray) -> np.ndarray:
+        return x[:nh * w, :nw * w].reshape(nh, w, nw, w).sum(axis=(1, 3)).astype(np.float64)
 
-    mf = m.astype(np.float32)
     (ax, ay), (bx, by) = grads(a), grads(b)
     bx, by = bx * mf, by * mf
     eb = tiles(bx * bx + by * by)
     valid = (tiles(mf) >= 0.5 * w * w) & (eb > 1e-12)
     if not valid.any():
         raise InputError("gradient_similarity: no tile inside the (eroded) mask where the reference has gradients")
-    if r == 0:
-        with np.errstate(divide="ignore", invalid="ignore"):  # tiles outside the mask: 0 / 0, not counted
-            sim = 2.0 * tiles(ax * bx + ay * by) / (tiles((ax * ax + ay * ay) * mf) + eb)
-        return float(np.clip((eb[valid] * sim[valid]).sum() / eb[valid].sum(), -1.0, 1.0))
     # 1. integer shifts: the best per tile (a loop over (2r + 1)^2 shifts, each a few whole-image operations)
-    pad = ((r, r), (r, r))
-    axp, ayp = np.pad(ax, pad, mode="edge"), np.pad(ay, pad, mode="edge")
+    axp, ayp = np.pad(ax, r, mode="edge"), np.pad(ay, r, mode="edge")
     a2p = axp * axp + ayp * ayp
-    best = np.full(eb.shape, -np.inf)
-    arg = np.zeros(eb.shape + (2,), dtype=np.int64)
+    best, arg = np.full(eb.shape, -np.inf), np.zeros(eb.shape + (2,), dtype=np.int64)
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
             win = (slice(r + dy, r + dy + H), slice(r + dx, r + dx + W))
-            with np.errstate(divide="ignore", invalid="ignore"):
+            with np.errstate(divide="ignore", invalid="ignore"):  # tiles outside the mask: 0 / 0, not counted
                 sim = 2.0 * tiles(axp[win] * bx + ayp[win] * by) / (tiles(a2p[win] * mf) + eb)
             better = sim > best
-            best[better] = sim[better]
-            arg[better] = (dy, dx)
-    # 2. half-pixel steps around it, on both images upsampled 2x (cubic): gathered per tile
+            best[better], arg[better] = sim[better], (dy, dx)
+    # 2. scored on both images upsampled 2x (cubic), the tiles gathered at twice their best shift and, when
+    # searching, half a pixel around it
     size = (2 * W, 2 * H)
-    (AX, AY), (BX, BY) = grads(cv2.resize(a, size, interpolation=cv2.INTER_CUBIC)), \
-        grads(cv2.resize(b, size, interpolation=cv2.INTER_CUBIC))
-    M = cv2.resize(mf, size, interpolation=cv2.INTER_NEAREST)
-    P = 2 * r + 1
+    (AX, AY), (BX, BY) = (grads(cv2.resize(x, size, interpolation=cv2.INTER_CUBIC)) for x in (a, b))
+    P, ti, tj = 2 * r + 1, *np.nonzero(valid)
     AXp, AYp = np.pad(AX, P, mode="edge"), np.pad(AY, P, mode="edge")
-    ti, tj = np.nonzero(valid)
 
-    def tile_stack(x: np.ndarray) -> np.ndarray:  # (T, 2w, 2w): the valid tiles of a 2x image
+    def stack(x: np.ndarray) -> np.ndarray:  # (T, 2w, 2w): the valid tiles of a 2x image
         return x[:nh * 2 * w, :nw * 2 * w].reshape(nh, 2 * w, nw, 2 * w).transpose(0, 2, 1, 3)[ti, tj]
 
-    Mt = tile_stack(M)
-    BXt, BYt = tile_stack(BX) * Mt, tile_stack(BY) * Mt
+    Mt = stack(cv2.resize(mf, size, interpolation=cv2.INTER_NEAREST))
+    BXt, BYt = stack(BX) * Mt, stack(BY) * Mt
     EB = (BXt * BXt + BYt * BYt).sum(axis=(1, 2), dtype=np.float64)
-    k = np.arange(2 * w)
-    refined = np.full(len(ti), -np.inf)
-    for ey in (-1, 0, 1):
-        for ex in (-1, 0, 1):
-            ys = P + 2 * w * ti[:, None] + 2 * arg[ti, tj, 0][:, None] + ey + k[None, :]
-            xs = P + 2 * w * tj[:, None] + 2 * arg[ti, tj, 1][:, None] + ex + k[None, :]
-            gx, gy = AXp[ys[:, :, None], xs[:, None, :]], AYp[ys[:, :, None], xs[:, None, :]]
-            dot = (gx * BXt + gy * BYt).sum(axis=(1, 2), dtype=np.float64)
-            ea = ((gx * gx + gy * gy) * Mt).sum(axis=(1, 2), dtype=np.float64)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                refined = np.maximum(refined, np.where(EB > 0, 2.0 * dot / (ea + EB), 0.0))
+    k, score = np.arange(2 * w), np.full(len(ti), -np.inf)
+    for ey, ex in [(y, x) for y in (-1, 0, 1) for x in (-1, 0, 1)] if r else [(0, 0)]:
+        ys = (P + 2 * w * ti + 2 * arg[ti, tj, 0] + ey)[:, None] + k
+        xs = (P + 2 * w * tj + 2 * arg[ti, tj, 1] + ex)[:, None] + k
+        gx, gy = AXp[ys[:, :, None], xs[:, None, :]], AYp[ys[:, :, None], xs[:, None, :]]
+        dot = (gx * BXt + gy * BYt).sum(axis=(1, 2), dtype=np.float64)
+        ea = ((gx * gx + gy * gy) * Mt).sum(axis=(1, 2), dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            score = np.maximum(score, np.where(EB > 0, 2.0 * dot / (ea + EB), 0.0))
     keep = EB > 1e-12
-    return float(np.clip((EB[keep] * refined[keep]).sum() / EB[keep].sum(), -1.0, 1.0))
+    return float(np.clip((EB[keep] * score[keep]).sum() / EB[keep].sum(), -1.0, 1.0))
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:

@@ -166,7 +166,7 @@ def test_gradient_similarity_mask_and_errors():
     # only the masked pixels count: the seam's right half is outside the mask
     assert gradient_similarity(seam, img, left) == pytest.approx(1.0, abs=1e-9)
     assert gradient_similarity(seam, img) < 0.8
-    with pytest.raises(InputError, match="size"):
+    with pytest.raises(InputError, match="one size"):
         gradient_similarity(img[:, :100], img)
     with pytest.raises(InputError, match="mask shape"):
         gradient_similarity(img, img, left[:, :100])
