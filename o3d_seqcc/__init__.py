@@ -93,8 +93,8 @@ _LAZY: dict[str, str] = {
     "seam_metric": "seams",
     "render_textured": "render",
     "render_selection": "render",
-    "sharpness": "render",
-    "gradient_similarity": "render",
+    "sharpness": "sharpness",
+    "gradient_similarity": "sharpness",
     "plot_pair": "render",
     # Open3D front door
     "correct_images": "open3d_api",
