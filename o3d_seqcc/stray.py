@@ -4,20 +4,25 @@ Scans carry floating junk: a triangle or a sheet kilometres away, a reconstructi
 Nothing can texture it, and left in it would set the scene's scale (tolerances taken from the
 mesh's extent) and take the texture atlas (a 200 m sheet as a fallback chart shrank a room's
 texels 16-fold). :func:`stray_faces` finds it: connected components (faces sharing vertices)
-with no face usable in any view whose every face lies outside the box of the usable faces grown
-by that box's diagonal on every side. :func:`drop_faces` removes such faces from a mesh and its
-visibility records (ids renumbered); :func:`~o3d_seqcc.visibility.compute_visibility` does both
-and warns with the count.
+with no face usable in any view whose every face lies outside the box of the usable faces and
+the cameras, grown by :data:`FAR` (10) times that box's diagonal on every side. :func:`drop_faces`
+removes such faces from a mesh and its visibility records (ids renumbered);
+:func:`~o3d_seqcc.visibility.compute_visibility` does both and warns with the count.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["drop_faces", "stray_faces"]
+__all__ = ["FAR", "drop_faces", "stray_faces"]
 
 
-def stray_faces(vertices: np.ndarray, faces: np.ndarray, records) -> np.ndarray:
+#: a component is far when it lies outside the box of the usable faces and the cameras grown by this many
+#: times the box's diagonal on every side (100 km from a room; a room's unseen furniture is never far)
+FAR = 10.0
+
+
+def stray_faces(vertices: np.ndarray, faces: np.ndarray, records, centers: np.ndarray | None = None) -> np.ndarray:
     """(F,) bool: faces of far-away components that no view can use.
 
     Parameters
@@ -26,6 +31,8 @@ def stray_faces(vertices: np.ndarray, faces: np.ndarray, records) -> np.ndarray:
     faces : (F, 3) int64
     records : sequence of ViewRecord
         Per view, the ids of its valid faces and their filter bits (0 = usable).
+    centers : (V, 3) float64, optional
+        Camera centres (part of the region the photos see).
 
     Returns
     -------
@@ -41,8 +48,9 @@ def stray_faces(vertices: np.ndarray, faces: np.ndarray, records) -> np.ndarray:
     vseen = np.zeros(len(vertices), dtype=bool)
     for k in range(3):
         vseen[faces[usable, k]] = True
-    lo, hi = vertices[vseen].min(axis=0), vertices[vseen].max(axis=0)
-    grow = float(np.linalg.norm(hi - lo))
+    pts = vertices[vseen] if centers is None else np.vstack([vertices[vseen], np.asarray(centers, np.float64)])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    grow = FAR * float(np.linalg.norm(hi - lo))
     lo, hi = lo - grow, hi + grow
     out_v = ((vertices < lo) | (vertices > hi)).any(axis=1)
     if not out_v.any():  # the usual case: nothing far at all

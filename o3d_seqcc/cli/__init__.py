@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     if problem:
         print(f"o3d-seqcc: error: {problem}", file=sys.stderr)
         return 2
-    from ..io.output import Terminated, interruptible
+    from ..interrupts import Terminated, interruptible
 
     try:
         with interruptible():  # SIGTERM / SIGHUP clean up like Ctrl-C
@@ -144,7 +144,7 @@ def _environment_problem() -> str | None:
 
 
 def _main(argv: list[str] | None) -> int:
-    from ..io.output import Terminated
+    from ..interrupts import Terminated
 
     try:
         parser = build_parser()

@@ -41,14 +41,13 @@ import logging
 import os
 import re
 import shutil
-import signal
 import stat
-import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable, Iterator
 
 from ..errors import InputError, warn
+from ..interrupts import Terminated, interruptible
 from .files import atomic_path, atomic_write_bytes, default_mode
 
 __all__ = ["MANIFEST", "Terminated", "add_output_file", "check_output", "check_output_file", "interruptible",
@@ -62,45 +61,6 @@ MANIFEST_FORMAT = "o3d_seqcc.output/1"
 #: refuse to start when the output disk has less free space than this (MB)
 MIN_FREE_MB = 64
 _LOCK_NAME = re.compile(r"^\..+\.o3d_seqcc\.lock$")
-
-
-# ------------------------------------------------------------------------------------------ signals
-class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP, raised in the main thread like Ctrl-C's KeyboardInterrupt (``signum`` says which)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = int(signum)
-
-    @property
-    def name(self) -> str:
-        return signal.Signals(self.signum).name
-
-
-def _raise_terminated(signum: int, frame) -> None:
-    raise Terminated(signum)
-
-
-@contextmanager
-def interruptible() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise :class:`Terminated` (a KeyboardInterrupt) inside the block, so that what
-    cleans up after Ctrl-C (the staging folder, the lock) cleans up after them too.
-
-    Only in the main thread, and only for signals whose handler is the default one (a SIGHUP that
-    ``nohup`` ignores stays ignored; a program's own handlers are kept). Re-entrant.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    saved = {}
-    for sig in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)):
-        if sig is not None and signal.getsignal(sig) is signal.SIG_DFL:
-            saved[sig] = signal.signal(sig, _raise_terminated)
-    try:
-        yield
-    finally:
-        for sig, old in saved.items():
-            signal.signal(sig, old)
 
 
 # ------------------------------------------------------------------------------------------ checks
@@ -190,6 +150,7 @@ def check_output(out: str | os.PathLike, *, overwrite: bool = False, inputs: Ite
                 f"--out {given} contains the input {p}: writing the result there would replace the input; "
                 "choose an output folder outside the scene's files"
             )
+    _refuse_nested(target, given)
     existing = next(p for p in [target, *target.parents] if p.exists())
     if not os.access(existing, os.W_OK):
         raise InputError(f"--out {given}: cannot write into {existing} (read-only or no permission); choose another "
@@ -290,6 +251,14 @@ def _nested_run(target: Path) -> tuple[Path, str] | None:
     return None
 
 
+def _refuse_nested(target: Path, out) -> None:
+    nested = _nested_run(target)
+    if nested is not None:
+        raise InputError(f"another o3d-seqcc run (pid {nested[1]}) is writing {nested[0]}, which "
+                         f"{'holds' if _is_within(target, nested[0]) else 'lies inside'} {out}; wait for it or choose "
+                         "another output")
+
+
 def _make_parents(folder: Path) -> list[Path]:
     """Create ``folder`` and its missing parents; the ones created, outermost first."""
     missing = []
@@ -351,11 +320,7 @@ def _locked(target: Path, out) -> Iterator[None]:
             lock.truncate()
             lock.write(str(os.getpid()))
             lock.flush()
-            nested = _nested_run(target)
-            if nested is not None:
-                raise InputError(f"another o3d-seqcc run (pid {nested[1]}) is writing {nested[0]}, which "
-                                 f"{'holds' if _is_within(target, nested[0]) else 'lies inside'} {out}; wait for it "
-                                 "or choose another output")
+            _refuse_nested(target, out)
             yield
             ok = True
         finally:
@@ -573,6 +538,7 @@ def check_output_file(path: str | os.PathLike, *, option: str = "--output", inpu
         if rel == MANIFEST or rel in (_own_files(folder) or set()):
             raise InputError(f"{option} {given} is a file of the o3d-seqcc output folder {folder} (written by its "
                              "command); choose a file outside it, or run that command again")
+    _refuse_nested(target, given)
     existing = next(p for p in target.parents if p.exists())
     if not os.access(existing, os.W_OK):
         raise InputError(f"{option} {given}: cannot write into {existing} (read-only or no permission)")
