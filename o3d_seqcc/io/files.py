@@ -1,4 +1,4 @@
-"""The one file layer: every image, depth map, mesh and point cloud is read here; every write is atomic.
+"""The one file layer: every image, depth map, mesh and point cloud is read through it; writes are atomic.
 
 Reading (:func:`read_image`, :func:`check_image_file`, :func:`read_depth`,
 :func:`~o3d_seqcc.io.mesh_files.read_mesh`, :func:`~o3d_seqcc.io.mesh_files.read_point_cloud`) follows the same steps for every file, before any decoder sees it:
@@ -17,10 +17,8 @@ Reading (:func:`read_image`, :func:`check_image_file`, :func:`read_depth`,
 5. **sane values**: mesh vertices finite and within :data:`MAX_COORDINATE`; point-cloud points
    that are not are dropped with a warning; depth that is not finite is "missing".
 
-Images are returned as RGB (never BGR) numpy arrays of shape (H, W, 3), dtype uint8 or uint16,
-with their pixels as stored: the EXIF orientation tag is not applied (cameras are registered on
-the stored pixels, as COLMAP, MeshLab and OpenCV's ``IMREAD_UNCHANGED`` read them); a photo whose
-tag asks for a rotation or mirror gets a warning naming it.
+Images are RGB (never BGR) arrays (H, W, 3) uint8 or uint16, the pixels as stored: EXIF orientation
+is not applied (cameras are registered on the stored pixels), a photo whose tag asks for it is warned about.
 """
 
 from __future__ import annotations
@@ -137,7 +135,7 @@ _ALPHA_MODES = ("RGBA", "RGBa", "LA", "PA")
 _ORIENTATIONS = {2: "mirror left-right", 3: "rotate 180", 4: "mirror top-bottom", 5: "transpose",
                  6: "rotate 90 clockwise", 7: "transverse", 8: "rotate 90 counter-clockwise"}
 _warned: set = set()
-_warned_lock = threading.Lock()
+_warned_lock, _pillow_lock = threading.Lock(), threading.Lock()
 
 
 def set_max_image_pixels(n: int) -> int:
@@ -150,11 +148,9 @@ def set_max_image_pixels(n: int) -> int:
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")):
-        if test(mode):
-            return name
-    return "not a regular file"
+    kinds = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+             (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder"))
+    return next((name for test, name in kinds if test(mode)), "not a regular file")
 
 
 def open_regular(path: str | os.PathLike, what: str = "file") -> BinaryIO:
@@ -277,11 +273,9 @@ def _image_header(path: Path, f: BinaryIO, size: int, *, what: str = "image", fu
 
     if size == 0:
         raise InputError(f"{what} {path} is an empty file (0 bytes); copy or export it again")
-    pillow_limit = Image.MAX_IMAGE_PIXELS
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _pillow_headers():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            Image.MAX_IMAGE_PIXELS = None  # only the header is read here; our own budget is checked below
             f.seek(0)
             with Image.open(f) as im:
                 (w, h), mode = im.size, im.mode
@@ -289,11 +283,22 @@ def _image_header(path: Path, f: BinaryIO, size: int, *, what: str = "image", fu
                     _warn_orientation(path, im)
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError, struct.error) as e:
         raise InputError(f"cannot read {what} {path}: {e}; re-save it as PNG or JPEG") from None
-    finally:
-        Image.MAX_IMAGE_PIXELS = pillow_limit
     over_budget(path, what, w, h)
     check_complete(path, f, size, what=what, full=full)
     return int(w), int(h), str(mode)
+
+
+@contextmanager
+def _pillow_headers() -> Iterator[None]:
+    """Pillow's own pixel limit off while a header is read (ours is checked after), one thread at a time."""
+    from PIL import Image
+
+    with _pillow_lock:
+        limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            yield
+        finally:
+            Image.MAX_IMAGE_PIXELS = limit
 
 
 def _check_colour(path: Path, mode: str) -> None:
@@ -430,17 +435,14 @@ def _depth_header(path: Path, f: BinaryIO, shape: tuple[int, int] | None) -> Non
     f.seek(0)
     size = headers.exr_size(f.read(65536))
     if size is None:
-        limit = Image.MAX_IMAGE_PIXELS
         try:
-            Image.MAX_IMAGE_PIXELS = None  # the header only; our budget below
-            f.seek(0)
-            with Image.open(f) as im:
-                size = im.size
+            with _pillow_headers():
+                f.seek(0)
+                with Image.open(f) as im:
+                    size = im.size
         except (UnidentifiedImageError, OSError, ValueError, SyntaxError, struct.error):
             raise InputError(f"cannot read depth map {path} (expected a single-channel 16-bit PNG, or a float TIFF / "
                              "EXR)") from None
-        finally:
-            Image.MAX_IMAGE_PIXELS = limit
     w, h = size
     over_budget(path, "depth map", w, h)
     if shape is not None and (h, w) != tuple(shape):
