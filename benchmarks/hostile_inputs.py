@@ -1225,7 +1225,7 @@ def run_case(cs: Case, scene: Path, root: Path, index: int) -> tuple[bool, str]:
         before = listing(d)
         if cs.kind == "custom":
             ok, msg, *cats = cs.run(c)
-            cats = set(cats[0]) if cats else (set() if ok else {"other"})
+            cats = set(cats[0]) if cats else (set() if ok else {_category(msg.lower())})
             if checksums(c.S) != inputs:
                 ok, msg = False, "INPUT CHANGED; " + msg
                 cats.add("damage")
