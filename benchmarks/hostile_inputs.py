@@ -26,12 +26,13 @@ report pages holding markup a case injected (unsafe HTML).
 Prints one line per case (group, name, handled yes/no, the message's first line), totals per group
 and overall, and what went wrong by kind (tracebacks, crashes, hangs, damage, files beside the
 output, unsafe HTML, inputs not named). Always exits 0: it is a report, not a test
-(``tests/test_reliability.py`` and ``tests/test_hostile.py`` are the tests). Takes about 12 minutes
+(``tests/test_reliability.py`` and ``tests/test_hostile.py`` are the tests). Takes about 15 minutes
 on a 2-core machine (two cases at a time; the kill, concurrency and signal cases alone).
 
 Not a case, a note: 8 small photos on a 2.2M-face mesh took 118 s and 5.6 GB (heavy but bounded).
-Known unhandled: Ctrl-C in the first ~0.3 s, while Python imports the ``o3d_seqcc`` package itself
-(before ``main`` runs), still prints Python's KeyboardInterrupt traceback (exit -2).
+Known limit: ``import o3d_seqcc`` is now cheap (the scene model is imported on first use), so Ctrl-C
+0.25 s after the start reaches ``main``'s handler; on a machine so loaded (load 8-10 on 2 cores) that
+Python's own start-up takes longer, a Ctrl-C before ``main`` still prints Python's traceback (exit -2).
 """
 
 from __future__ import annotations
