@@ -28,13 +28,15 @@ import importlib
 from typing import Any
 
 from .errors import InputError
-from .io.load import load_scene, save_scene
-from .scene import FORMAT, PRIMESENSE_INTRINSIC, Mesh, Scene, View, load_mesh
 
 __version__ = "0.1.0"
 
 # public name -> module that defines it
 _LAZY: dict[str, str] = {
+    # the scene model and its loading (numpy, OpenCV): imported on first use too, so that the command line's
+    # own handlers are in place before anything slow runs (Ctrl-C while `python -m o3d_seqcc` starts)
+    **dict.fromkeys(("FORMAT", "PRIMESENSE_INTRINSIC", "Mesh", "Scene", "View", "load_mesh"), "scene"),
+    **dict.fromkeys(("load_scene", "save_scene"), "io.load"),
     # synthetic test / demo scenes
     "SyntheticScene": "synthetic",
     "make_synthetic_scene": "synthetic",
@@ -115,16 +117,8 @@ _SUBMODULES = frozenset({
 })
 
 __all__ = [
-    "FORMAT",
-    "PRIMESENSE_INTRINSIC",
     "InputError",
-    "Mesh",
-    "Scene",
-    "View",
     "__version__",
-    "load_mesh",
-    "load_scene",
-    "save_scene",
     *_LAZY,
 ]
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .io.files import write_json
+from .io.output import write_output_json
 from .metrics import image_delta_e
 from .pipeline import RunResult, run
 from .datasets import DatasetUnavailable, fountain
@@ -179,7 +179,8 @@ def run_demo(
         summary.update(_ground_truth(syn, res))
         timings["ground_truth"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
-    write_json(out / "demo_summary.json", {"summary": summary, "timings": timings})
+    write_output_json(out / "demo_summary.json", {"summary": summary, "timings": timings}, option="--out",
+                      inputs=scene.input_paths())
     return DemoResult(out=out, synthetic=syn, result=res, summary=summary, timings=timings)
 
 

@@ -34,13 +34,14 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
 from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
 from .images import SceneImages
 from .io.files import atomic_write_bytes, write_json
 from .io.load import load_scene, save_scene
-from .io.result_files import meshlab_project, scene_paths, write_images
+from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
 from .mappings import MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
@@ -90,12 +91,14 @@ def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpe
 
 
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
+    check_scene_argument(scene, mesh)
     if isinstance(scene, Scene):
         return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
     return load_scene(scene, mesh=mesh)
 
 
 def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> TextureSettings:
+    check_type("settings", settings, TextureSettings)
     s = settings or TextureSettings()
     s = s.updated(**options) if options else s
     if s.selection not in SELECTION_METHODS:
@@ -400,9 +403,7 @@ def texture(
     if images is None:
         imgs = SceneImages(sc.views)  # read when the bake needs them
     else:
-        imgs = list(images)
-        if len(imgs) != len(sc.views):
-            raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
+        imgs = check_images_argument(images, sc.views)
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc)
@@ -535,9 +536,10 @@ class CorrectionRun:
             paths = write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
+            scene = with_mesh_file(self.scene, stage / "mesh.ply")  # a mesh in memory is written beside them
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
-            save_scene(self.scene.replace_images(paths), stage / "scene.json")
-            meshlab_project(self.scene, stage, mesh=None, images=paths)
+            save_scene(scene.replace_images(paths), stage / "scene.json")
+            meshlab_project(scene, stage, mesh=None, images=paths)
             if report:
                 t = time.perf_counter()
                 write_report(self, stage / REPORT_FILE, report=rep)

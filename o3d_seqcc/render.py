@@ -221,7 +221,9 @@ def resized_view(view: View, width: int, height: int | None = None) -> View:
     K[0, 2] = sx * (view.intrinsic[0, 2] + 0.5) - 0.5
     K[1, 2] = sy * (view.intrinsic[1, 2] + 0.5) - 0.5
     K[2] = [0.0, 0.0, 1.0]
-    return replace(view, intrinsic=K, width=width, height=height)
+    # a camera only: in-memory pixels or depth of the original size do not belong to it (never read)
+    return replace(view, intrinsic=K, width=width, height=height, image=view.image or Path(f"{view.name}.png"),
+                   pixels=None, depth_map=None, points=None)
 
 
 def supersampled_view(view: View, s: int) -> View:

@@ -20,7 +20,8 @@ from typing import Sequence
 import numpy as np
 
 from .distortion import Distortion
-from .io.files import check_image_file, read_depth, read_image, read_point_cloud
+from .io.files import check_depth_file, check_image_file, open_regular, read_depth, read_image
+from .io.mesh_files import read_mesh, read_point_cloud
 from .meshops import face_normals
 from .errors import InputError
 
@@ -352,36 +353,23 @@ class Mesh:
         """This mesh as ``open3d.geometry.TriangleMesh`` (legacy)."""
         import open3d as o3d
 
-        m = o3d.geometry.TriangleMesh(
-            o3d.utility.Vector3dVector(self.vertices), o3d.utility.Vector3iVector(self.faces.astype(np.int32))
+        m = o3d.geometry.TriangleMesh(  # copies: Open3D needs writeable buffers, ours are read-only
+            o3d.utility.Vector3dVector(np.array(self.vertices)), o3d.utility.Vector3iVector(self.faces.astype(np.int32))
         )
-        m.vertex_normals = o3d.utility.Vector3dVector(self.vertex_normals)
+        m.vertex_normals = o3d.utility.Vector3dVector(np.array(self.vertex_normals))
         return m
 
 
 @lru_cache(maxsize=4)
 def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> Mesh:
-    import open3d as o3d
-
     p = Path(path)
-    mesh = o3d.io.read_triangle_mesh(str(p), enable_post_processing=False, print_progress=False)
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    f = np.asarray(mesh.triangles, dtype=np.int64)
-    if len(f) == 0:
-        raise InputError(
-            f"mesh {p} has no triangles (is it a point cloud or a non-triangle mesh?); "
-            "give a triangle mesh (PLY/OBJ/OFF/GLB), triangulate polygons first (MeshLab: Filters > "
-            "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh)"
-        )
-    if not np.all(np.isfinite(v)):
-        raise InputError(f"mesh {p} has non-finite vertex coordinates; clean it (remove NaN vertices)")
-    if f.min() < 0 or f.max() >= len(v):
-        raise InputError(f"mesh {p} has face indices outside the vertex array")
-    if mesh.has_vertex_normals():
-        n = np.asarray(mesh.vertex_normals, dtype=np.float64)
-    else:
-        mesh.compute_vertex_normals()
-        n = np.asarray(mesh.vertex_normals, dtype=np.float64)
+    v, f, n = read_mesh(p)  # the file layer: regular file, header counts, finite and sane vertices
+    if n is None:
+        import open3d as o3d
+
+        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v), o3d.utility.Vector3iVector(f.astype(np.int32)))
+        m.compute_vertex_normals()
+        n = np.asarray(m.vertex_normals, dtype=np.float64)
         logger.info("mesh %s has no vertex normals: computed them", p)
     for a in (v, f, n):
         a.setflags(write=False)
@@ -397,8 +385,10 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         Missing file, no triangles, non-finite vertices.
     """
     p = Path(path).resolve()
-    if not p.is_file():
+    if not p.exists():
         raise InputError(f"mesh not found: {path} (check the 'mesh' entry or pass mesh=...)")
+    if not p.is_file():
+        open_regular(p, "mesh").close()  # raises, naming what it is (a FIFO, a folder, ...)
     st = p.stat()
     if st.st_size == 0:
         raise InputError(f"mesh {path} is an empty file")
@@ -492,12 +482,13 @@ class Scene:
             raise ValueError("one image per view is needed")
         from dataclasses import replace
 
+        # the views' pixels in memory (if any) give way to the files
         def undistorted(v: View) -> Distortion | None:  # the new images are the pinhole ones; a depth map is not
             if v.distortion is None or v.depth is None:
                 return None
             return replace(v.distortion, images=False)
 
-        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v))
+        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v), pixels=None)
                                       for v, p in zip(self.views, images)), source=self.source, options=self.options)
 
     def validate(self, *, check_images: bool = True) -> None:
@@ -509,10 +500,13 @@ class Scene:
         for v in self.views:
             if check_images and not v.in_memory:
                 _check_image_header(v)
-            if v.depth is not None and not v.depth.is_file():
-                raise InputError(f"view {v.name!r}: depth map not found: {v.depth}")
-            if v.point_cloud is not None and not v.point_cloud.is_file():
-                raise InputError(f"view {v.name!r}: point cloud not found: {v.point_cloud}")
+            try:
+                if v.depth is not None:  # the header only: size and pixel budget before any decoding
+                    check_depth_file(v.depth, shape=(v.height, v.width))
+                if v.point_cloud is not None:
+                    open_regular(v.point_cloud, "point cloud").close()
+            except InputError as e:
+                raise InputError(f"view {v.name!r}: {e}") from None
 
 
 def near_miss(path: Path) -> str:

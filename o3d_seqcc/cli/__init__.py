@@ -224,6 +224,42 @@ def _executor(client):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
+    problem = _environment_problem()
+    if problem:
+        print(f"o3d-seqcc: error: {problem}", file=sys.stderr)
+        return 2
+    from ..interrupts import Terminated, interruptible
+
+    try:
+        with interruptible():  # SIGTERM / SIGHUP clean up like Ctrl-C
+            return _main(argv)
+    except Terminated as e:
+        print(f"o3d-seqcc: terminated ({e.name})", file=sys.stderr)
+        return 128 + e.signum
+    except KeyboardInterrupt:
+        print("o3d-seqcc: interrupted", file=sys.stderr)
+        return 130
+
+
+def _environment_problem() -> str | None:
+    """What makes any run fail before it starts (a deleted working directory), as a message; also lets
+    paths whose bytes are not UTF-8 print as they are (like ``ls``) instead of failing."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="surrogateescape")
+    try:
+        os.getcwd()
+    except (FileNotFoundError, PermissionError, OSError):
+        return ("the current working directory no longer exists (deleted or moved, or not readable); change to an "
+                "existing folder (cd) and run the command again")
+    return None
+
+
+def _main(argv: list[str] | None) -> int:
+    from ..interrupts import Terminated
+
     try:
         parser = build_parser()
         try:
@@ -256,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
             return 1
+    except Terminated:
+        raise
     except KeyboardInterrupt:
         print("o3d-seqcc: interrupted", file=sys.stderr)
         return 130

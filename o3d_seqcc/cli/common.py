@@ -12,7 +12,7 @@ from ..correction import DEFAULT_METHOD, available_methods
 from ..errors import InputError
 from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
-from ..io.output import check_output
+from ..io.output import check_output, check_output_file
 from ..mappings import MODES
 from ..orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
@@ -207,26 +207,15 @@ def texture_job_from_args(args: argparse.Namespace) -> tuple[TextureSettings, di
 
 
 def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
-    """Refuse an output file path that is one of the inputs (it would be replaced by the result).
-
-    Parameters
-    ----------
-    path : str or Path
-        The output file given on the command line.
-    inputs : iterable of path-like
-        Every file the command reads.
-    option : str
-        The option's name, for the message.
+    """Check an output file path before any work (:func:`o3d_seqcc.io.output.check_output_file`): never one
+    of the inputs (links resolved), a folder, a FIFO or device, or a file of an o3d-seqcc output folder.
 
     Raises
     ------
     InputError
-        ``path`` resolves to one of ``inputs``.
+        The message names ``option`` and what ``path`` is.
     """
-    target = Path(path).resolve()
-    for p in inputs:
-        if Path(p).resolve() == target:
-            raise InputError(f"{option} {path} is the input {p}: writing there would replace it; choose another file")
+    check_output_file(path, option=option, inputs=inputs)
 
 
 def add_progress_argument(p: argparse.ArgumentParser) -> None:

@@ -44,7 +44,7 @@ import numpy as np
 from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
-from .files import atomic_write_bytes
+from .files import atomic_write_bytes, join_path
 
 __all__ = [
     "CENTER_SHIFT",
@@ -367,7 +367,7 @@ def load_mlp(
             raise InputError(f"{path}: the project has no mesh; pass mesh=...")
         if len(meshes) > 1:
             logger.warning("%s: %d meshes in the project, using the first (%s)", path, len(meshes), meshes[0].get("filename"))
-        mesh_path = Path(os.path.normpath(root / meshes[0].get("filename", "")))
+        mesh_path = join_path(root, meshes[0].get("filename", ""))
         mat = meshes[0].find("MLMatrix44")
         if mat is not None and mat.text and mat.text.split():
             try:
@@ -385,7 +385,7 @@ def load_mlp(
         plane = r.find("Plane")
         if cam is None or plane is None or not plane.get("fileName"):
             raise InputError(f"{path}: raster {i} lacks a VCGCamera or an image (Plane fileName)")
-        img = Path(os.path.normpath(root / plane.get("fileName")))
+        img = join_path(root, plane.get("fileName"))
         name = r.get("label") or img.stem
         if name in names or any(ch in name for ch in '/\\:*?"<>|'):
             name = f"{img.stem}_{i}" if name in names else img.stem

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import PRIMESENSE_INTRINSIC, Scene, View
+from .files import check_image_file
 
 __all__ = ["IMAGE_EXTENSIONS", "detect", "load", "read_intrinsic", "read_log_trajectory"]
 
@@ -195,13 +196,7 @@ def load(
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = root / mesh_path
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        with Image.open(images[0]) as im:
-            w, h = im.size
-    except (UnidentifiedImageError, OSError) as e:
-        raise InputError(f"cannot read image {images[0]}: {e}") from None
+    w, h, _ = check_image_file(images[0])  # the file layer: regular files only, pixel budget, header only
     if np.shape(K) == (3, 3):
         _check_intrinsic_size(K, size, w, h, intrinsic, root)
     views = []

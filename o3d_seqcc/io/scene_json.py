@@ -21,7 +21,6 @@ pinhole camera ``intrinsic``.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -30,7 +29,7 @@ import numpy as np
 from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import FORMAT, Scene, View
-from .files import find_file, write_json
+from .files import find_file, join_path, parse_json, write_json
 
 __all__ = ["FORMAT", "detect", "load", "save"]
 
@@ -46,7 +45,7 @@ def detect(path: Path) -> Path | None:
 def _join(root: Path, rel: object, where: str) -> Path:
     if not isinstance(rel, str) or not rel or "\x00" in rel:
         raise InputError(f"{where} must be a non-empty relative or absolute path string, got {rel!r}")
-    return Path(os.path.normpath(root / rel))
+    return join_path(root, rel)
 
 
 def _number(d: dict, key: str, where: str) -> float | int:
@@ -89,10 +88,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
         raise InputError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save the manifest as UTF-8") from None
     except OSError as e:
         raise InputError(f"{path}: cannot read the manifest ({e.strerror})") from None
-    try:
-        data = json.loads(text)
-    except (json.JSONDecodeError, RecursionError) as e:
-        raise InputError(f"{path}: not valid JSON ({e})") from None
+    data = parse_json(text, path)  # not valid JSON, or a key twice in one object: an InputError
     if not isinstance(data, dict):
         raise InputError(f"{path}: expected a JSON object with 'format', 'mesh' and 'views'")
     fmt = data.get("format")

@@ -46,7 +46,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.files import atomic_write_bytes
+from ..io.output import add_output_file, check_output_file, write_output_file
 from .page import PageInputs, facts, render_page
+from .validate import page_bytes, read_report_json, read_selection
 
 __all__ = ["IMAGE_CACHE_BYTES", "METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "cached_images",
            "metrics_sample", "html_report", "regenerate_report", "write_report"]
@@ -152,24 +154,7 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     """
     path = Path(path)
     inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
-    return atomic_write_bytes(path, render_page(inp, width=int(thumb_width)).encode("utf-8"))
-
-
-def _read_report(run_dir: Path) -> dict:
-    if not run_dir.is_dir():
-        raise InputError(f"{run_dir} is not a folder; give the output folder (--out) of o3d-seqcc run, correct or "
-                         "texture")
-    rj = run_dir / "report.json"
-    if not rj.is_file():
-        raise InputError(f"{run_dir} is not an o3d-seqcc output folder (no report.json); give the --out folder of "
-                         "o3d-seqcc run, correct or texture")
-    try:
-        rep = json.loads(rj.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise InputError(f"{rj} is not readable JSON ({e}); run the command again to rewrite the folder") from None
-    if not isinstance(rep, dict):
-        raise InputError(f"{rj} is not an o3d-seqcc report (not a JSON object); run the command again")
-    return rep
+    return atomic_write_bytes(path, page_bytes(render_page(inp, width=int(thumb_width))))
 
 
 def _scene_frame(tm, rep: dict, fmt: str):
@@ -183,7 +168,12 @@ def _scene_frame(tm, rep: dict, fmt: str):
     return replace(tm, vertices=tm.vertices @ R, normals=None if tm.normals is None else tm.normals @ R)
 
 
-def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None) -> PageInputs:
+def _run_files(run_dir: Path) -> list[Path]:
+    """The files of an output folder the report reads."""
+    return [run_dir / n for n in ("report.json", "selection.npy", "selection.png", "mesh.glb", "mesh.obj", "mesh.ply")]
+
+
+def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None, output=None) -> PageInputs:
     from ..correction import correct
     from ..io.load import load_scene
     from ..mappings import compute_mappings
@@ -206,6 +196,8 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
     except InputError as e:
         raise InputError(f"cannot reload the scene {src} named in {run_dir / 'report.json'}: {e}; pass --scene "
                          "(and --mesh) to say where it is now") from None
+    if output is not None:  # before any work: the page may not replace a file the report reads
+        check_output_file(output, option="--output", inputs=[*sc.input_paths(), *_run_files(run_dir)])
     vis = compute_visibility(sc)
     photos = [v.load_image() for v in sc.views]
     correction = maps = corrected = None
@@ -224,12 +216,8 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
                                                   max_per_pair=metrics_sample(maps))}
     selection = textured = None
     faces = vis.mesh.faces
-    if (run_dir / "selection.npy").is_file():
-        selection = np.load(run_dir / "selection.npy", allow_pickle=False)
-        if selection.shape != (len(faces),):
-            logger.warning("selection.npy has %s entries for %d faces: the selection is left out", selection.shape,
-                           len(faces))
-            selection = None
+    if os.path.lexists(run_dir / "selection.npy"):
+        selection = read_selection(run_dir / "selection.npy", len(faces), len(sc.views))
     tm_path = next((run_dir / n for n in ("mesh.glb", "mesh.obj", "mesh.ply") if (run_dir / n).is_file()), None)
     if tm_path is not None and selection is not None:
         textured = _scene_frame(load_textured_mesh(tm_path), rep, tm_path.suffix.lstrip("."))
@@ -283,11 +271,15 @@ def regenerate_report(
         be found (the message says to pass ``scene``).
     """
     run_dir = Path(run_dir)
-    rep = _read_report(run_dir)
-    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh, image_dir=image_dir)
-    data = render_page(inp, width=int(thumb_width)).encode("utf-8")
+    rep = read_report_json(run_dir)
+    if output is not None and os.path.realpath(output) == os.path.realpath(run_dir / REPORT_FILE):
+        output = None  # the folder's own page: listed in its manifest as before
+    if output is not None:  # before any work (again with the scene's files once it is loaded)
+        check_output_file(output, option="--output", inputs=[p for p in (rep.get("scene_path"), rep.get("mesh"),
+                                                                         scene, mesh) if p] + _run_files(run_dir))
+    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh, image_dir=image_dir, output=output)
+    data = page_bytes(render_page(inp, width=int(thumb_width)))
     if output is not None:
-        return atomic_write_bytes(output, data)
-    from ..io.output import add_output_file
-
+        return write_output_file(output, data, option="--output",
+                                 inputs=[*inp.scene.input_paths(), *_run_files(run_dir)])
     return add_output_file(run_dir, REPORT_FILE, data)
