@@ -612,11 +612,8 @@ def correct_scene(
     if any(isinstance(tr, LutTransform) for tr in res.transforms):
         luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")
                 for v, tr in enumerate(res.transforms) if isinstance(tr, (LutTransform, IdentityTransform))}
-        report["lookup_tables"] = {
-            "note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced inputs in [0, 1], "
-            "or 'identity' (reference, unreachable views)",
-            "tables": luts,
-        }
+        report["lookup_tables"] = {"note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced "
+                                   "inputs in [0, 1], or 'identity' (reference, unreachable views)", "tables": luts}
     report["timings"] = {**{k: round(float(v), 4) for k, v in res.timings.items()}, "metrics": round(t_metrics, 4)}
     report["graph_weight"] = graph_weight
     return CorrectionRun(scene=sc, result=res, mappings=maps, originals=originals, report=report)
