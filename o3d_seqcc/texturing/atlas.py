@@ -139,8 +139,11 @@ def bake_texture(
     TexturedMesh
         UVs in the OBJ convention (origin bottom-left); with several pages, ``texture`` holds
         them stacked vertically (``pages``). ``stats``: ``atlas_size`` (page side),
-        ``requested_atlas_size``, ``pages``, ``texels_per_pixel``, ``density_scale`` (< 1 when
-        the budget lowered the density), ``coverage`` (triangle texels / atlas texels),
+        ``requested_atlas_size``, ``pages``, ``texels_per_pixel`` (atlas texels per photo pixel),
+        ``face_texels_per_pixel`` (per seen face, the square root of its texel area over its
+        area in its photo: ``min``, ``p1``, ``median`` and the share ``below_1`` below
+        ``texels_per_pixel``; tiny charts merged into a neighbour's parametrisation may be
+        smaller), ``density_scale`` (< 1 when the budget lowered the density), ``coverage`` (triangle texels / atlas texels),
         ``utilization`` (texels written: faces and their gutters / atlas texels), ``charts``
         (image charts), ``fallback_charts``, ``absorbed_faces``, ``merged_tiny_charts``,
         ``unseen_faces``, ``vertices_in``, ``vertices_out``, ``packer``, ``pack_log``,
@@ -203,7 +206,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
                       merge_faces=int(s.merge_charts))
     t_charts = time.perf_counter()
     step("pack")
-    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=int(s.atlas_size), texels_per_pixel=s.texels_per_pixel,
+    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=s.atlas_size, texels_per_pixel=s.texels_per_pixel,
                      overflow=s.overflow, padding=int(s.padding), power_of_two=bool(s.power_of_two))
     S, P = pk.size, pk.pages
     H = P * S
@@ -281,9 +284,16 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])
                        - (p2[:, 2, 0] - p2[:, 0, 0]) * (p2[:, 1, 1] - p2[:, 0, 1]))
+    own = 0.5 * np.abs((fuv[:, 1, 0] - fuv[:, 0, 0]) * (fuv[:, 2, 1] - fuv[:, 0, 1])
+                       - (fuv[:, 2, 0] - fuv[:, 0, 0]) * (fuv[:, 1, 1] - fuv[:, 0, 1]))
+    sized = seen & (own > 1e-6)
+    face_tpp = np.sqrt(tri[sized] / own[sized]) if sized.any() else np.ones(1)
     stats = {
-        "atlas_size": S, "requested_atlas_size": int(s.atlas_size), "pages": P,
+        "atlas_size": S, "requested_atlas_size": s.atlas_size, "pages": P,
         "texels_per_pixel": pk.texels_per_pixel, "density_scale": pk.scale, "padding": int(s.padding),
+        "face_texels_per_pixel": {"min": float(face_tpp.min()), "p1": float(np.percentile(face_tpp, 1)),
+                                  "median": float(np.median(face_tpp)),
+                                  "below_1": float(np.mean(face_tpp < 0.999 * pk.texels_per_pixel))},
         "coverage": float(tri.sum() / (P * S * S)), "utilization": float(len(idx) / (P * S * S)),
         "charts": int(cs.n_image), "fallback_charts": int(cs.stats["fallback_charts"]),
         "absorbed_faces": int(cs.stats["absorbed_faces"]), "merged_tiny_charts": int(cs.stats["merged_tiny_charts"]),
