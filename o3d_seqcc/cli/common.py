@@ -85,8 +85,9 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
                    help=f"mrf: what makes a photo good for a face (default {d.data_term}: its gradient magnitude "
                    "integrated over the face's projection, large and sharp; area: the projected area alone)")
     p.add_argument("--outlier-removal", default=d.outlier_removal, choices=OUTLIER_REMOVALS,
-                   help=f"per face, drop (gauss-clamping) or down-weight (gauss-damping) the photos whose colour of it "
-                   f"is far from the others' (passers-by, cars the mesh lacks; default {d.outlier_removal})")
+                   help=f"per face, drop the photos whose colour of it is far from the others' (passers-by, cars the "
+                   f"mesh lacks; default {d.outlier_removal}: far from the median of its photos; gauss-clamping / "
+                   "gauss-damping: texrecon's Gaussian test)")
     add_atlas_arguments(p)
     p.add_argument("--no-leveling", dest="leveling", action="store_false",
                    help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "

@@ -1,4 +1,4 @@
-"""Texture-atlas baking: charts, xatlas packing, sampling bake, seam leveling (paper 3.8, issue 13).
+"""Texture-atlas baking: charts, xatlas packing, sampling bake, seam leveling (paper 3.8, issues 13, 19).
 
 :func:`bake_texture` turns a per-face view selection into a textured mesh, in stages:
 
@@ -7,12 +7,16 @@
    footprint, as the paper crops each face's projection from its selected photo); unseen faces
    welded into a neighbouring chart or into one shared fallback region; tiny charts merged
    into a neighbour's parametrisation;
-2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas packs the charts (rotated, at
-   ``padding`` texels from each other) into the smallest power-of-two atlas within the
-   ``atlas_size`` budget at the photos' resolution or above; when even the budget cannot hold
-   them, the density is scaled down (logged with the factor) or several pages are written;
+2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas places the charts (turned by 90
+   degrees at most, at ``padding`` texels from each other) in the smallest power-of-two page that
+   holds them at the photos' resolution (``atlas_size="auto"``: up to 8192 x 8192, then more
+   pages; an integer is a budget: when it cannot hold them, the density is scaled down, logged
+   with the factor, or several pages are written); every chart's texel grid is its photo's
+   pixel grid, moved by whole texels;
 3. **bake by sampling** (:mod:`~o3d_seqcc.texturing.bake`): every texel inside a face samples
-   the face's own view at the same barycentric point of its projection; gutter texels continue
+   the face's own view at the same barycentric point of its projection (at one texel per pixel
+   a pixel centre, so the texel is a copy of the photo's pixel; Lanczos, clamped, in tiny charts
+   merged into a neighbour's parametrisation and at other densities); gutter texels continue
    the nearest face's map (real photo content around every chart, so bilinear filtering and
    mip levels 1-2 read no foreign colour); faces seen by no view get their fallback colours
    (:mod:`~o3d_seqcc.texturing.fallback`);
@@ -126,8 +130,8 @@ def bake_texture(
         From :func:`~o3d_seqcc.texturing.select_views`; -1 = unseen face (fallback colour).
     settings : TextureSettings, optional
         Atlas, leveling and fallback options; default :class:`TextureSettings` (the command
-        line's defaults: at most 2048 x 2048, the photos' resolution or above, 4 texels of
-        padding, global and local seam leveling on).
+        line's defaults: sized to the charts at the photos' resolution, 4 texels of padding,
+        global and local seam leveling on).
     adjacency : (E, 2) int array, optional
         Face adjacency (:func:`o3d_seqcc.meshops.face_adjacency`), computed when omitted.
     **options

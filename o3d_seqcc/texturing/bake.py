@@ -1,10 +1,14 @@
-"""Baking an atlas by sampling (issue 13): texel -> face -> barycentric -> source pixel.
+"""Baking an atlas by sampling (issues 13, 19): texel -> face -> barycentric -> source pixel.
 
-The packed charts may be rotated and scaled, so the atlas is not assembled from copied pixel
-rectangles but *sampled*: every texel whose centre lies in a face's UV triangle
+The atlas is *sampled*: every texel whose centre lies in a face's UV triangle
 (:func:`rasterize_faces`) takes the colour of the face's own view at the point with the same
-barycentric coordinates in the face's projection (:func:`sample_image`; the projection is
-affine over a face, as the texture mapping of a renderer). Texels of a chart's gutter
+barycentric coordinates in the face's projection (:func:`sample_image`: Lanczos, clamped to
+the neighbouring pixels' range; the projection is affine over a face, as the texture mapping
+of a renderer). The packing puts every chart's texels on its photo's pixel grid
+(:mod:`~o3d_seqcc.texturing.packing`), so at one texel per pixel that point is a pixel centre
+and the texel a copy of the pixel: nothing is resampled, and a render from the photo's camera
+gives the photo back. Faces of tiny charts merged into a neighbour's parametrisation, atlases
+at another density and the fallback region are resampled. Texels of a chart's gutter
 (:func:`gutter_texels`: within ``reach`` texels of a face) continue the nearest face's affine
 map outside the triangle, so that they hold the photo's real content around the chart and
 bilinear filtering and the first mip levels read nothing foreign; texels further away are
@@ -18,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "row_spans", "sample_image"]
+__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "row_spans",
+           "sample_image"]
 
 
 def _area2(p: np.ndarray) -> np.ndarray:

@@ -12,11 +12,12 @@ photos and the sparse usable (view, face) incidences of a
   along its scanline spans (:func:`~o3d_seqcc.texturing.bake.row_spans`), so the cost is the
   number of projected rows, not pixels;
 - :func:`photometric_outliers`: per face, the views whose mean colour is far from the
-  consensus of the others (texrecon's ``--outlier_removal``: an iterated multivariate Gaussian
-  of the faces' YCbCr colours; ``"gauss-clamping"`` drops the views below its rejection
-  threshold, ``"gauss-damping"`` scales their quality by the Gaussian), so that a pedestrian or
-  a car the mesh does not hold, seen in one or two photos, does not texture the wall behind it.
-  Vectorised over all faces at once (segment sums over the incidences sorted by face);
+  consensus of the others, so that a pedestrian or a car the mesh does not hold, seen in one or
+  two photos, does not texture the wall behind it: ``"median"`` (robust: the distance to the
+  per-channel median of the face's CIE Lab colours) or texrecon's ``--outlier_removal`` (an
+  iterated multivariate Gaussian of the faces' YCbCr colours; ``"gauss-clamping"`` drops the
+  views below its rejection threshold, ``"gauss-damping"`` scales their quality by the
+  Gaussian). Vectorised over all faces at once (segment sums and sorts over the incidences);
 - :class:`ScoredVisibility`: a visibility whose usable incidences carry that quality and lack
   the outliers, what the selection methods read (:mod:`~o3d_seqcc.texturing.selection`).
 
@@ -33,7 +34,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import img_as_float, img_as_uint8, sample_bilinear
+from ..imageops import img_as_float, img_as_uint8, rgb_to_lab, sample_bilinear
 from .bake import row_spans
 from .settings import DATA_TERMS, OUTLIER_REMOVALS
 
@@ -51,6 +52,10 @@ OUTLIER_ITERATIONS = 10
 MIN_INLIERS = 4
 #: gauss-damping widens the final Gaussian by 1 / this (texrecon's 0.2)
 DAMPING_FACTOR = 0.2
+#: "median": a view's colour of a face is an outlier beyond this CIE Lab distance from the median of its views ...
+MEDIAN_MIN_DELTA_E = 20.0
+#: ... and beyond this many times the face's median distance
+MEDIAN_MAD_FACTOR = 3.0
 #: integer scale of the channels summed exactly in int32 (values in [0, 6) -> < 2^16 per pixel)
 _QUANT = 10000.0
 
@@ -166,18 +171,52 @@ def _mahalanobis2(d: np.ndarray, inv: np.ndarray, seg: np.ndarray) -> np.ndarray
     return out
 
 
-def photometric_outliers(face: np.ndarray, colour: np.ndarray, *, method: str = "gauss-clamping"
+def _median_outliers(seg: np.ndarray, lab: np.ndarray, nf: int) -> np.ndarray:
+    """Incidences whose Lab colour is more than max(:data:`MEDIAN_MIN_DELTA_E`, :data:`MEDIAN_MAD_FACTOR`
+    x the face's median distance) from the per-channel median of the face's views (faces of >= 3 views)."""
+    m = len(seg)
+    order = np.lexsort((np.arange(m), seg))
+    s = seg[order]
+    start = np.r_[0, np.flatnonzero(s[1:] != s[:-1]) + 1]
+    n = np.diff(np.r_[start, m])
+    med = np.zeros((nf, 3))
+    for c in range(3):  # per-channel medians: sort within faces, average the middle one or two
+        o = np.lexsort((lab[order, c], s))
+        vals = lab[order, c][o]
+        lo = start + (n - 1) // 2
+        hi = start + n // 2
+        med[s[start], c] = 0.5 * (vals[lo] + vals[hi])
+    d = np.linalg.norm(lab - med[seg], axis=1)
+    dmed = np.zeros(nf)
+    o = np.lexsort((d[order], s))
+    dv = d[order][o]
+    dmed[s[start]] = 0.5 * (dv[start + (n - 1) // 2] + dv[start + n // 2])
+    many = np.zeros(nf, dtype=bool)
+    many[s[start]] = n >= 3
+    return many[seg] & (d > np.maximum(MEDIAN_MIN_DELTA_E, MEDIAN_MAD_FACTOR * dmed[seg]))
+
+
+def photometric_outliers(face: np.ndarray, colour: np.ndarray, *, method: str = "median"
                          ) -> tuple[np.ndarray, dict[str, Any]]:
     """Per-incidence weight from the consensus of each face's colours (texrecon's outlier removal).
 
-    Per face with at least :data:`MIN_INLIERS` views: starting from all of them, the inliers'
+    ``"median"``: per face seen by at least 3 views, the per-channel median of their CIE Lab
+    colours is the consensus, and a view is dropped when its colour is more than
+    :data:`MEDIAN_MIN_DELTA_E` from it and more than :data:`MEDIAN_MAD_FACTOR` times the face's
+    median distance (robust: a passer-by in 2 of 5 photos is dropped, where the Gaussian of all
+    five is wide enough to keep it).
+
+    texrecon's ``"gauss-clamping"`` / ``"gauss-damping"``: per face with at least
+    :data:`MIN_INLIERS` views: starting from all of them, the inliers'
     mean and covariance (YCbCr) define an unnormalised Gaussian; the views where it is at least
     :data:`GAUSS_REJECTION` are the next inliers; :data:`OUTLIER_ITERATIONS` times, stopping
     early when fewer than :data:`MIN_INLIERS` remain or the covariance is singular (the face is
     left as it is) or when every covariance entry is below :data:`MIN_COVARIANCE` (the
     non-inliers are dropped). Then ``"gauss-clamping"`` drops the views below the threshold and
     ``"gauss-damping"`` multiplies each view's quality by the Gaussian widened by
-    1 / :data:`DAMPING_FACTOR`.
+    1 / :data:`DAMPING_FACTOR`. The sample covariance bounds a view's squared Mahalanobis
+    distance by (n - 1)^2 / n, so with fewer than 12 views (threshold 2 ln(1 / 6e-3) = 10.2) not
+    even a single outlier is found: the reason for ``"median"``.
 
     Parameters
     ----------
@@ -185,7 +224,7 @@ def photometric_outliers(face: np.ndarray, colour: np.ndarray, *, method: str = 
         Face of every incidence.
     colour : (m, 3) float
         Mean RGB in [0, 1] of the face in the incidence's view.
-    method : {"gauss-clamping", "gauss-damping"}
+    method : {"median", "gauss-clamping", "gauss-damping"}
 
     Returns
     -------
@@ -195,16 +234,23 @@ def photometric_outliers(face: np.ndarray, colour: np.ndarray, *, method: str = 
         ``faces_tested``, ``incidences_dropped``, ``faces_with_outliers``.
     """
     if method not in OUTLIER_REMOVALS or method == "none":
-        raise ValueError(f"unknown outlier removal {method!r}; valid: 'gauss-clamping', 'gauss-damping'")
+        raise ValueError(f"unknown outlier removal {method!r}; valid: "
+                         f"{', '.join(repr(m) for m in OUTLIER_REMOVALS if m != 'none')}")
     face = np.asarray(face, dtype=np.int64)
     m = len(face)
     weight = np.ones(m)
     if m == 0:
         return weight, {"faces_tested": 0, "incidences_dropped": 0, "faces_with_outliers": 0}
-    x = _rgb_to_ycbcr(np.asarray(colour, dtype=np.float64))
     _, seg = np.unique(face, return_inverse=True)
     seg = seg.reshape(-1)
     nf = int(seg.max()) + 1
+    if method == "median":
+        drop = _median_outliers(seg, rgb_to_lab(np.clip(np.asarray(colour, dtype=np.float64), 0.0, 1.0)), nf)
+        weight[drop] = 0.0
+        return weight, {"faces_tested": int(np.count_nonzero(np.bincount(seg, minlength=nf) >= 3)),
+                        "incidences_dropped": int(drop.sum()),
+                        "faces_with_outliers": int(len(np.unique(seg[drop]))) if drop.any() else 0}
+    x = _rgb_to_ycbcr(np.asarray(colour, dtype=np.float64))
     inl = np.ones(m, dtype=bool)
     active = np.bincount(seg, minlength=nf) >= MIN_INLIERS  # faces still iterating
     tested = active.copy()
@@ -304,7 +350,7 @@ def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, da
     data_term : {"area", "area-cos", "gmi"}
         Quality of an incidence: projected area (px^2), area x cosine of the viewing angle, or
         GMI (:func:`face_view_statistics`).
-    outlier_removal : {"none", "gauss-clamping", "gauss-damping"}
+    outlier_removal : {"none", "median", "gauss-clamping", "gauss-damping"}
 
     Returns
     -------

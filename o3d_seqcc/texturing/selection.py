@@ -372,7 +372,7 @@ def select_views(
     seed: int = 0,
     images: Sequence[np.ndarray] | None = None,
     data_term: str | None = None,
-    outlier_removal: str = TextureSettings.outlier_removal,
+    outlier_removal: str | None = None,
     **options: Any,
 ) -> np.ndarray:
     """Choose one view per face for texturing.
@@ -396,9 +396,11 @@ def select_views(
         photo's gradient magnitude integrated over the face's projection: detail, not only
         size). Default :attr:`TextureSettings.data_term` (``"gmi"``) when ``images`` are given,
         else ``"area"``.
-    outlier_removal : {"none", "gauss-clamping", "gauss-damping"}, default :attr:`TextureSettings.outlier_removal`
-        Drop (clamping) or down-weight (damping, ``"mrf"`` only) the views whose colour of a face
-        is far from the consensus of its other views (every method); needs ``images``.
+    outlier_removal : {"median", "none", "gauss-clamping", "gauss-damping"}, optional
+        Drop (damping: down-weight, ``"mrf"`` only) the views whose colour of a face is far from
+        the consensus of its other views (every method; :func:`~o3d_seqcc.texturing.data_costs.photometric_outliers`).
+        Default :attr:`TextureSettings.outlier_removal` (``"median"``) when ``images`` are
+        given, else ``"none"``.
     **options
         Method options (``"mrf"``: ``smoothness``, ``max_data_cost``, ``n_sweeps``,
         ``adjacency``, ``mesh``); unknown ones raise ``TypeError``.
@@ -423,6 +425,8 @@ def select_views(
         raise ValueError(f"unknown selection method {method!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
     term = (TextureSettings.data_term if images is not None else "area") if data_term is None else data_term
     term = {"log-area": "area", "log-area-cos": "area-cos"}.get(term, term)
+    if outlier_removal is None:
+        outlier_removal = TextureSettings.outlier_removal if images is not None else "none"
     n_usable = (int(visibility.usable_counts().sum()) if hasattr(visibility, "usable_counts")
                 else len(_entries(visibility).faces))
     if visibility.n_faces == 0 or not n_usable:

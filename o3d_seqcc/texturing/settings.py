@@ -26,7 +26,7 @@ FALLBACKS = ("smooth", "flat")
 #: data terms of the "mrf" selection (:mod:`~o3d_seqcc.texturing.data_costs`)
 DATA_TERMS = ("area", "area-cos", "gmi")
 #: photometric outlier removal of the selection (texrecon's --outlier_removal)
-OUTLIER_REMOVALS = ("none", "gauss-clamping", "gauss-damping")
+OUTLIER_REMOVALS = ("none", "median", "gauss-clamping", "gauss-damping")
 #: what to do when the charts do not fit the atlas at the asked density
 OVERFLOWS = ("scale", "pages")
 
@@ -63,11 +63,14 @@ class TextureSettings:
         integrated over the face's projection (Waechter et al. 2014: large *and* sharp, so a
         blurred photo loses to a sharp one of the same size), on the corrected photos;
         ``"area"``, the projected area alone; ``"area-cos"``, area x cosine of the viewing angle.
-    outlier_removal : {"none", "gauss-clamping", "gauss-damping"}, default "none"
-        Per face, drop (``"gauss-clamping"``) or down-weight (``"gauss-damping"``) the photos
-        whose colour of it is far from the consensus of the others (texrecon's
-        ``--outlier_removal``), so that a passer-by or a car the mesh does not hold is not
-        textured in; faces seen by fewer than 4 photos are left as they are.
+    outlier_removal : {"median", "none", "gauss-clamping", "gauss-damping"}, default "median"
+        Per face, drop the photos whose colour of it is far from the consensus of the others
+        (on the corrected photos), so that a passer-by or a car the mesh does not hold is not
+        textured in: ``"median"``, more than 20 CIE Lab units and 3 x the face's median distance
+        from the per-channel median of its photos (faces seen by at least 3; robust to 2
+        outliers in 5); texrecon's ``--outlier_removal`` ``"gauss-clamping"`` (drop) and
+        ``"gauss-damping"`` (down-weight) test an iterated Gaussian of the colours (faces seen
+        by at least 4; a minority of 2 in 5 is not found).
     atlas_size : int or "auto", default "auto"
         ``"auto"``: the atlas is sized to the charts at the photos' own resolution: one square
         page, the smallest power of two that holds them, up to 8192 x 8192, and more pages of
@@ -112,7 +115,7 @@ class TextureSettings:
     smoothness: float = MRF_SMOOTHNESS
     seed: int = 0
     data_term: str = "gmi"
-    outlier_removal: str = "none"
+    outlier_removal: str = "median"
     atlas_size: int | str = "auto"
     texels_per_pixel: float | str = "auto"
     overflow: str = "scale"
