@@ -90,6 +90,7 @@ _LAZY: dict[str, str] = {
     "render_textured": "render",
     "render_selection": "render",
     "sharpness": "render",
+    "gradient_correlation": "render",
     "plot_pair": "render",
     # Open3D front door
     "correct_images": "open3d_api",

@@ -1,4 +1,4 @@
-"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, mapping plots.
+"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient correlation, mapping plots.
 
 Paper Figures 2-3 (pairwise mappings, :func:`plot_pair`), 9 (per-face image selection coloured
 by image) and 12-13 (textured mesh from chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
@@ -27,6 +27,7 @@ from .texturing.textured_mesh import load_textured_mesh, sample_texture
 
 __all__ = [
     "RayHits",
+    "gradient_correlation",
     "plot_pair",
     "raycast",
     "render_selection",
@@ -334,6 +335,113 @@ def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int =
     if not m.any():
         raise InputError("sharpness: the (eroded) mask is empty")
     return float(np.var(lap[m]))
+
+
+def gradient_correlation(
+    image: np.ndarray,
+    reference: np.ndarray,
+    mask: np.ndarray | None = None,
+    *,
+    erode: int = 2,
+    window: int = 24,
+    max_shift: float = 2.0,
+) -> float:
+    """How much of a reference's detail an image holds, in place: locally registered gradient correlation.
+
+    :func:`sharpness` rewards any high frequency, including edges that are not in the photo: a
+    texture that shows an edge twice (two photos misregistered across a seam), aliasing or noise
+    raises the variance of the Laplacian. This measure does not. The grey-level gradient fields
+    (3 x 3 Sobel) of ``image`` and ``reference`` are compared in ``window`` x ``window`` tiles:
+    each tile's score is the cosine between the two fields (x and y components pooled) at the
+    best shift of ``image`` within ``max_shift`` pixels (half-pixel steps), and the result is
+    the mean of the tiles' scores weighted by the reference's gradient energy in each (strong
+    edges weigh most, as they do for the eye).
+
+    The shift search forgives what is not the texture's fault: a render of a real scan from a
+    photo's camera is misregistered with that photo by a pixel or two (pose and geometry error),
+    differently in different places. What it does not forgive: lost gradients (blur), edges the
+    reference does not have (a doubled edge, aliasing, noise), misplaced by more than
+    ``max_shift``, or two parts of a tile shifted apart (a seam between misregistered photos). The
+    photo itself scores 1, so does any positive gain or offset of it (per tile: a brightness or
+    contrast change leaves it at 1).
+
+    Parameters
+    ----------
+    image, reference : (H, W, 3) or (H, W) uint8 / uint16 / float arrays
+        The render and the photo it is compared with, same size; integers are scaled to [0, 1].
+    mask : (H, W) bool array, optional
+        Pixels to use (e.g. where the render sees the mesh); default all. Tiles less than half
+        inside the (eroded) mask, or where the reference is flat, do not count.
+    erode : int, default 2
+        Erode the mask by this many pixels (plus ``ceil(max_shift)``) so its border does not count.
+    window : int, default 24
+        Tile side in pixels: the scale at which misregistration is forgiven.
+    max_shift : float, default 2.0
+        Largest shift searched per tile, pixels (0: no search, the tiles' plain correlation).
+
+    Returns
+    -------
+    float
+        In [-1, 1]; 0 when ``image`` is flat.
+
+    Raises
+    ------
+    InputError
+        Different sizes, a mask of another shape, no tile inside the (eroded) mask with
+        gradients in the reference, or a bad ``window`` / ``max_shift``.
+    """
+
+    def grey(a: np.ndarray) -> np.ndarray:
+        a = np.asarray(a)
+        f = a.astype(np.float32) / np.float32(dtype_scale(a.dtype))
+        return (cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) if f.ndim == 3 else f).astype(np.float32)
+
+    a, b = grey(image), grey(reference)
+    if a.shape != b.shape:
+        raise InputError(f"gradient_correlation: image {a.shape} and reference {b.shape} differ in size")
+    if int(window) < 4 or not 0 <= float(max_shift) <= 16:
+        raise InputError(f"gradient_correlation: window must be >= 4 and max_shift in [0, 16], got {window}, {max_shift}")
+    m = np.ones(a.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if m.shape != a.shape:
+        raise InputError(f"mask shape {m.shape} does not match the image {a.shape}")
+    e = int(erode) + int(np.ceil(max_shift))
+    if e > 0:
+        m = cv2.erode(m.astype(np.uint8), np.ones((2 * e + 1, 2 * e + 1), np.uint8), borderValue=0).astype(bool)
+    s, w = (2, 2 * int(window)) if max_shift > 0 else (1, int(window))
+    if s > 1:  # half-pixel steps: both images through the same 2x cubic upsampling
+        size = (a.shape[1] * s, a.shape[0] * s)
+        a, b = (cv2.resize(x, size, interpolation=cv2.INTER_CUBIC) for x in (a, b))
+        m = cv2.resize(m.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
+    r = int(round(s * float(max_shift)))
+    nh, nw = a.shape[0] // w, a.shape[1] // w
+    if nh == 0 or nw == 0:
+        raise InputError(f"gradient_correlation: the image is smaller than one {window} px tile")
+
+    def tiles(x: np.ndarray) -> np.ndarray:
+        return x[:nh * w, :nw * w].reshape(nh, w, nw, w).sum(axis=(1, 3)).astype(np.float64)
+
+    mf = m.astype(np.float32)
+    bx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) * mf
+    by = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) * mf
+    eb = tiles(bx * bx + by * by)
+    valid = (tiles(mf) >= 0.5 * w * w) & (eb > 1e-12)
+    if not valid.any():
+        raise InputError("gradient_correlation: no tile inside the (eroded) mask where the reference has gradients")
+    pad = ((r, r), (r, r))
+    ax = np.pad(cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3), pad, mode="edge")
+    ay = np.pad(cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3), pad, mode="edge")
+    a2 = ax * ax + ay * ay
+    H, W = a.shape
+    best = np.full(eb.shape, -np.inf)
+    for dy in range(-r, r + 1):  # a loop over the (2r + 1)^2 shifts; each a few whole-image operations
+        for dx in range(-r, r + 1):
+            win = (slice(r + dy, r + dy + H), slice(r + dx, r + dx + W))
+            dot = tiles(ax[win] * bx + ay[win] * by)
+            ea = tiles(a2[win] * mf)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c = np.where(ea > 0, dot / np.sqrt(ea * eb), 0.0)
+            np.maximum(best, c, out=best)
+    return float(np.clip((eb[valid] * best[valid]).sum() / eb[valid].sum(), -1.0, 1.0))
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
