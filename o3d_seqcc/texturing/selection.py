@@ -175,9 +175,10 @@ def _quality(e: _Entries, data_term: str) -> np.ndarray:
 
 
 #: "gmi" data cost of a view without detail: texrecon's 1 - q / q_99.5 scaled so that the Potts weight
-#: MRF_SMOOTHNESS (4) trades as texrecon's weight 0.25: measured on Fountain 16k / 300k (issue 19), the
-#: sharpness of texrecon's renders with seams below a third of its
-GMI_COST = 16.0
+#: MRF_SMOOTHNESS (4) is texrecon's weight 1. Measured on Fountain (issue 19): 4x weaker smoothness
+#: (16) renders with a higher variance of the Laplacian than texrecon's, but splits the "HAROLD HATCH"
+#: lettering at misregistered seams (doubled edges count as detail); this balance keeps it whole.
+GMI_COST = 4.0
 
 
 def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
