@@ -10,11 +10,11 @@ texrecon's multi-material OBJ keeps its pages texel for texel) and measured the 
 - ``sharpness``: variance of the Laplacian of the render over the photo's
   (``o3d_seqcc.render.sharpness``; 1 = as sharp; it rewards any high frequency, doubled edges
   included);
-- ``gc``: gradient correlation with the photo (``o3d_seqcc.render.gradient_correlation``: per
-  24-px tile, the cosine between the render's and the photo's gradient fields at the best shift
-  within 2 px, weighted by the photo's gradient energy; 1 = the photo's gradients in place; a
-  misregistration of the scan within 2 px is forgiven, blur, doubled edges, edges misplaced by
-  more and noise are not);
+- ``gsim``: gradient similarity with the photo (``o3d_seqcc.render.gradient_similarity``: per
+  24-px tile, ``2 <g, h> / (|g|^2 + |h|^2)`` of the render's and the photo's gradient fields at
+  the best shift within 3 px, weighted by the photo's gradient energy; 1 = the photo's gradients
+  in place; the scan's misregistration within 3 px is forgiven, blur, faint blends, doubled edges,
+  edges misplaced by more and noise are not);
 - seams: ``o3d_seqcc.seams.seam_metric`` mean and share of edges > 5 (CIEDE2000);
 - holes: input faces missing from the output and the share of the input's surface area the
   output lacks (texrecon deletes the faces no photo sees; MeshLab and Open3D drop
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from o3d_seqcc.render import gradient_correlation, raycast, render_textured, sharpness
+from o3d_seqcc.render import gradient_similarity, raycast, render_textured, sharpness
 from o3d_seqcc.seams import seam_metric
 from o3d_seqcc.texturing import TexturedMesh, load_textured_mesh
 
@@ -102,11 +102,11 @@ def measure_tool(tm: TexturedMesh, mesh_in, views, hits: dict, masks: dict, phot
     rep = seam_metric(tm)
     out = {"seam_mean": rep.mean, "seam_gt5": rep.frac_above_5, "seam_edges": rep.n_edges, **holes(tm, mesh_in)}
     tpp = []
-    out["sharpness"], out["gc"] = {}, {}
+    out["sharpness"], out["gsim"] = {}, {}
     for k, view in views.items():
         m, ph, img = masks[k], photos[k], renders[k]
         out["sharpness"][k] = sharpness(img, m) / sharpness(ph, m)
-        out["gc"][k] = gradient_correlation(img, ph, m)
+        out["gsim"][k] = gradient_similarity(img, ph, m)
         h = hits[k]
         sel = m[h.mask]
         tpp.append(texels_per_pixel(tm, view, h)[sel])
@@ -124,11 +124,15 @@ def render_views(tm: TexturedMesh, views: dict, supersample: int) -> tuple[dict,
     return renders, hits
 
 
-def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
-    """Top-left corner of the ``size`` (w, h) window where the render's Laplacian energy most exceeds the photo's.
+def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, size: tuple[int, int],
+                    candidates: int = 12) -> tuple[int, int]:
+    """Top-left corner of a ``size`` (w, h) window showing a render's artefacts, if it has any.
 
-    Where a render is "sharper than the photo" the extra high frequency is an artefact (doubled
-    edges at a misregistered seam, aliasing): this finds the place to crop to show it.
+    Where a render is "sharper than the photo" the extra high frequency is either detail from a
+    sharper photo or an artefact (doubled edges at a misregistered seam, aliasing). Of the
+    ``candidates`` non-overlapping windows (on the common mask) where the render's Laplacian
+    energy most exceeds the photo's, this returns the one least like the photo
+    (:func:`o3d_seqcc.render.gradient_similarity` of the window): the place to crop to show it.
     """
     import cv2
 
@@ -142,11 +146,27 @@ def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, siz
     box = cv2.boxFilter(excess, -1, (w, h), normalize=False, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
     cover = cv2.boxFilter(m, -1, (w, h), normalize=False, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
     H, W = mask.shape
-    box[cover < 0.9 * w * h] = -np.inf  # windows mostly on the mesh
+    box[cover < 0.99 * w * h] = -np.inf  # windows on the mesh (every tool covers them)
     box[H - h + 1:, :] = -np.inf
     box[:, W - w + 1:] = -np.inf
-    y, x = np.unravel_index(int(np.argmax(box)), box.shape)
-    return int(x), int(y)
+    picks = []
+    for _ in range(int(candidates)):  # greedy: the best window, then none overlapping it
+        y, x = np.unravel_index(int(np.argmax(box)), box.shape)
+        if not np.isfinite(box[y, x]):
+            break
+        picks.append((int(x), int(y)))
+        box[max(0, y - h + 1):y + h, max(0, x - w + 1):x + w] = -np.inf
+    if not picks:
+        return 0, 0
+
+    def sim(x, y):
+        sl = (slice(y, y + h), slice(x, x + w))
+        try:
+            return gradient_similarity(render[sl], photo[sl], mask[sl])
+        except Exception:  # a window without gradients in the photo: nothing to show
+            return np.inf
+
+    return min(picks, key=lambda p: sim(*p))
 
 
 def label(img: np.ndarray, text: str, scale: float = 0.5) -> np.ndarray:

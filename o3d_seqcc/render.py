@@ -1,4 +1,4 @@
-"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient correlation, mapping plots.
+"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient similarity, mapping plots.
 
 Paper Figures 2-3 (pairwise mappings, :func:`plot_pair`), 9 (per-face image selection coloured
 by image) and 12-13 (textured mesh from chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
@@ -9,6 +9,7 @@ mip-mapping: a render from a view's own camera is directly comparable with that 
 
 from __future__ import annotations
 
+import functools
 import io
 import logging
 import os
@@ -16,18 +17,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-import cv2
 import numpy as np
 
 from .errors import InputError
-from .imageops import dtype_scale
 from .io.files import atomic_write_bytes, write_image
 from .scene import View
+from .sharpness import gradient_similarity, sharpness  # noqa: F401 - public here too
 from .texturing.textured_mesh import load_textured_mesh, sample_texture
 
 __all__ = [
     "RayHits",
-    "gradient_correlation",
+    "gradient_similarity",
     "plot_pair",
     "raycast",
     "render_selection",
@@ -221,7 +221,9 @@ def resized_view(view: View, width: int, height: int | None = None) -> View:
     K[0, 2] = sx * (view.intrinsic[0, 2] + 0.5) - 0.5
     K[1, 2] = sy * (view.intrinsic[1, 2] + 0.5) - 0.5
     K[2] = [0.0, 0.0, 1.0]
-    return replace(view, intrinsic=K, width=width, height=height)
+    # a camera only: in-memory pixels or depth of the original size do not belong to it (never read)
+    return replace(view, intrinsic=K, width=width, height=height, image=view.image or Path(f"{view.name}.png"),
+                   pixels=None, depth_map=None, points=None)
 
 
 def supersampled_view(view: View, s: int) -> View:
@@ -235,13 +237,50 @@ def supersampled_view(view: View, s: int) -> View:
     return resized_view(view, view.width * s, view.height * s)
 
 
-def selection_palette(n: int, *, cmap: str = "tab20") -> np.ndarray:
-    """(n, 3) uint8 qualitative colours, one per image index (cycled through ``cmap``)."""
+#: distinct colours of the selection palette (more views repeat them)
+_PALETTE_MAX = 64
+#: colours the selection palette keeps clear of: the background, unseen faces (dark grey) and greys
+_PALETTE_AVOID = ((255, 255, 255), (40, 40, 40))
+
+
+@functools.lru_cache(maxsize=16)
+def _distinct_palette(n: int) -> np.ndarray:
+    """n colours, each the sRGB grid colour farthest (CIEDE2000) from the background, grey and those chosen before."""
+    from .imageops import ciede2000, rgb_to_lab
+
+    g = np.linspace(0.0, 1.0, 18)
+    rgb = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    lab = rgb_to_lab(rgb)
+    # coloured (greys read as shading), neither too dark nor too light (the shading darkens by up to 45 %)
+    ok = (lab[:, 0] > 30) & (lab[:, 0] < 88) & (np.hypot(lab[:, 1], lab[:, 2]) > 30)
+    rgb, lab = rgb[ok], lab[ok]
+    avoid = rgb_to_lab(np.array(_PALETTE_AVOID, dtype=np.float64) / 255.0)
+    dist = ciede2000(lab[:, None], avoid[None]).min(axis=1)
+    out = np.empty(n, dtype=np.int64)
+    for k in range(n):  # O(n x grid) CIEDE2000 evaluations, once per n (cached)
+        out[k] = int(np.argmax(dist))
+        dist = np.minimum(dist, ciede2000(lab, lab[out[k]][None]))
+    return np.clip(np.rint(rgb[out] * 255), 0, 255).astype(np.uint8)
+
+
+def selection_palette(n: int, *, cmap: str | None = None) -> np.ndarray:
+    """(n, 3) uint8 colours, one per image index, as distinct from each other as possible.
+
+    By default a greedy farthest-point choice (CIEDE2000) among coloured sRGB values that stay
+    clear of white (the background), of the dark grey of unseen faces and of greys (which read
+    as shading): every colour is the one farthest from all before it, so the smallest
+    difference between two of them is about 30 for 8 colours, 22 for 16 and 16 for 33; beyond
+    64 the colours repeat. With ``cmap``, a matplotlib colormap's
+    colours instead (listed maps are cycled, darker on the second cycle).
+    """
+    n = max(int(n), 0)
+    if cmap is None:  # beyond 64 views no palette keeps them apart: the 64 colours repeat
+        return np.resize(_distinct_palette(min(n, _PALETTE_MAX)), (n, 3))
     import matplotlib
 
     cm = matplotlib.colormaps[cmap]
     k = getattr(cm, "N", 20)
-    idx = np.arange(max(int(n), 0))
+    idx = np.arange(n)
     if k <= 32:  # listed (qualitative) map: cycle its entries, alternate darker on the 2nd cycle
         rgb = np.asarray(cm(idx % k))[:, :3] * np.where((idx // k) % 2 == 1, 0.6, 1.0)[:, None]
     else:
@@ -258,7 +297,7 @@ def render_selection(
     background: Sequence[int] = (255, 255, 255),
     unseen_color: Sequence[int] = (40, 40, 40),
     shade: bool = True,
-    cmap: str = "tab20",
+    cmap: str | None = None,
     hits: RayHits | None = None,
 ) -> np.ndarray:
     """Render the per-face image selection, each face coloured by its selected image (Fig. 9a/d).
@@ -276,8 +315,8 @@ def render_selection(
         Colours of empty pixels and of faces with no selected image.
     shade : bool, default True
         Darken faces by the angle to the camera (0.55 + 0.45 |cos|) so geometry stays readable.
-    cmap : str, default "tab20"
-        Matplotlib qualitative colormap.
+    cmap : str, optional
+        Matplotlib colormap; default :func:`selection_palette`'s distinct colours.
     hits : RayHits, optional
         Reuse a previous :func:`raycast`.
 
@@ -303,145 +342,6 @@ def render_selection(
         col = col * (0.55 + 0.45 * np.abs(hits.cos_angle[m]))[:, None]
     out[m] = col
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
-
-
-def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int = 2) -> float:
-    """Variance of the Laplacian of the grey image inside a mask (a focus / detail measure).
-
-    Parameters
-    ----------
-    image : (H, W, 3) or (H, W) uint8 / uint16 / float array
-        RGB image; integers are scaled to [0, 1] first so 8- and 16-bit images compare.
-    mask : (H, W) bool array, optional
-        Pixels to use (e.g. the mesh silhouette of a render); default all.
-    erode : int, default 2
-        Erode the mask by this many pixels so its border (e.g. the silhouette edge against the
-        background) does not count.
-
-    Returns
-    -------
-    float
-        Variance of ``cv2.Laplacian`` (3x3) of the grey image over the mask, in [0,1]^2 units.
-    """
-    img = np.asarray(image)
-    img = img.astype(np.float32) / np.float32(dtype_scale(img.dtype))
-    grey = (cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img).astype(np.float64)
-    lap = cv2.Laplacian(grey, cv2.CV_64F, ksize=1)
-    m = np.ones(grey.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    if m.shape != grey.shape:
-        raise InputError(f"mask shape {m.shape} does not match the image {grey.shape}")
-    if erode > 0:
-        m = cv2.erode(m.astype(np.uint8), np.ones((2 * erode + 1, 2 * erode + 1), np.uint8), borderValue=0).astype(bool)
-    if not m.any():
-        raise InputError("sharpness: the (eroded) mask is empty")
-    return float(np.var(lap[m]))
-
-
-def gradient_correlation(
-    image: np.ndarray,
-    reference: np.ndarray,
-    mask: np.ndarray | None = None,
-    *,
-    erode: int = 2,
-    window: int = 24,
-    max_shift: float = 2.0,
-) -> float:
-    """How much of a reference's detail an image holds, in place: locally registered gradient correlation.
-
-    :func:`sharpness` rewards any high frequency, including edges that are not in the photo: a
-    texture that shows an edge twice (two photos misregistered across a seam), aliasing or noise
-    raises the variance of the Laplacian. This measure does not. The grey-level gradient fields
-    (3 x 3 Sobel) of ``image`` and ``reference`` are compared in ``window`` x ``window`` tiles:
-    each tile's score is the cosine between the two fields (x and y components pooled) at the
-    best shift of ``image`` within ``max_shift`` pixels (half-pixel steps), and the result is
-    the mean of the tiles' scores weighted by the reference's gradient energy in each (strong
-    edges weigh most, as they do for the eye).
-
-    The shift search forgives what is not the texture's fault: a render of a real scan from a
-    photo's camera is misregistered with that photo by a pixel or two (pose and geometry error),
-    differently in different places. What it does not forgive: lost gradients (blur), edges the
-    reference does not have (a doubled edge, aliasing, noise), misplaced by more than
-    ``max_shift``, or two parts of a tile shifted apart (a seam between misregistered photos). The
-    photo itself scores 1, so does any positive gain or offset of it (per tile: a brightness or
-    contrast change leaves it at 1).
-
-    Parameters
-    ----------
-    image, reference : (H, W, 3) or (H, W) uint8 / uint16 / float arrays
-        The render and the photo it is compared with, same size; integers are scaled to [0, 1].
-    mask : (H, W) bool array, optional
-        Pixels to use (e.g. where the render sees the mesh); default all. Tiles less than half
-        inside the (eroded) mask, or where the reference is flat, do not count.
-    erode : int, default 2
-        Erode the mask by this many pixels (plus ``ceil(max_shift)``) so its border does not count.
-    window : int, default 24
-        Tile side in pixels: the scale at which misregistration is forgiven.
-    max_shift : float, default 2.0
-        Largest shift searched per tile, pixels (0: no search, the tiles' plain correlation).
-
-    Returns
-    -------
-    float
-        In [-1, 1]; 0 when ``image`` is flat.
-
-    Raises
-    ------
-    InputError
-        Different sizes, a mask of another shape, no tile inside the (eroded) mask with
-        gradients in the reference, or a bad ``window`` / ``max_shift``.
-    """
-
-    def grey(a: np.ndarray) -> np.ndarray:
-        a = np.asarray(a)
-        f = a.astype(np.float32) / np.float32(dtype_scale(a.dtype))
-        return (cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) if f.ndim == 3 else f).astype(np.float32)
-
-    a, b = grey(image), grey(reference)
-    if a.shape != b.shape:
-        raise InputError(f"gradient_correlation: image {a.shape} and reference {b.shape} differ in size")
-    if int(window) < 4 or not 0 <= float(max_shift) <= 16:
-        raise InputError(f"gradient_correlation: window must be >= 4 and max_shift in [0, 16], got {window}, {max_shift}")
-    m = np.ones(a.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    if m.shape != a.shape:
-        raise InputError(f"mask shape {m.shape} does not match the image {a.shape}")
-    e = int(erode) + int(np.ceil(max_shift))
-    if e > 0:
-        m = cv2.erode(m.astype(np.uint8), np.ones((2 * e + 1, 2 * e + 1), np.uint8), borderValue=0).astype(bool)
-    s, w = (2, 2 * int(window)) if max_shift > 0 else (1, int(window))
-    if s > 1:  # half-pixel steps: both images through the same 2x cubic upsampling
-        size = (a.shape[1] * s, a.shape[0] * s)
-        a, b = (cv2.resize(x, size, interpolation=cv2.INTER_CUBIC) for x in (a, b))
-        m = cv2.resize(m.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
-    r = int(round(s * float(max_shift)))
-    nh, nw = a.shape[0] // w, a.shape[1] // w
-    if nh == 0 or nw == 0:
-        raise InputError(f"gradient_correlation: the image is smaller than one {window} px tile")
-
-    def tiles(x: np.ndarray) -> np.ndarray:
-        return x[:nh * w, :nw * w].reshape(nh, w, nw, w).sum(axis=(1, 3)).astype(np.float64)
-
-    mf = m.astype(np.float32)
-    bx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) * mf
-    by = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) * mf
-    eb = tiles(bx * bx + by * by)
-    valid = (tiles(mf) >= 0.5 * w * w) & (eb > 1e-12)
-    if not valid.any():
-        raise InputError("gradient_correlation: no tile inside the (eroded) mask where the reference has gradients")
-    pad = ((r, r), (r, r))
-    ax = np.pad(cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3), pad, mode="edge")
-    ay = np.pad(cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3), pad, mode="edge")
-    a2 = ax * ax + ay * ay
-    H, W = a.shape
-    best = np.full(eb.shape, -np.inf)
-    for dy in range(-r, r + 1):  # a loop over the (2r + 1)^2 shifts; each a few whole-image operations
-        for dx in range(-r, r + 1):
-            win = (slice(r + dy, r + dy + H), slice(r + dx, r + dx + W))
-            dot = tiles(ax[win] * bx + ay[win] * by)
-            ea = tiles(a2[win] * mf)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c = np.where(ea > 0, dot / np.sqrt(ea * eb), 0.0)
-            np.maximum(best, c, out=best)
-    return float(np.clip((eb[valid] * best[valid]).sum() / eb[valid].sum(), -1.0, 1.0))
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:

@@ -58,6 +58,7 @@ from .images import LRUCache
 from .meshops import oriented_face_normals
 from .parallel import current as current_executor
 from .scene import Mesh, load_mesh
+from .stray import drop_faces, stray_faces
 from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
 
 __all__ = [
@@ -542,6 +543,15 @@ def compute_visibility(
     for step in ("project+depth", "occlusion", "compare"):  # summed over the views' tasks (CPU of all workers)
         timings[f"{step} (sum over views)"] = float(sum(r.seconds.get(step, 0.0) for r in records))
 
+    stray = stray_faces(mesh.vertices, mesh.faces, records, np.array([v.center for v in views]).reshape(-1, 3))
+    if stray.any():  # far-away junk no photo sees: it would set the scene's scale and take the atlas
+        mesh, records, far = drop_faces(mesh, records, stray)
+        degenerate, F = degenerate[~stray], len(mesh.faces)
+        n = int(stray.sum())
+        where = f" {scene.mesh}" if isinstance(getattr(scene, "mesh", None), (str, os.PathLike)) else ""
+        warn(f"{n} face{'s' if n > 1 else ''} of the mesh{where} lie far from everything the photos see (up to "
+             f"{far:.3g} scene units away: floating junk of the scan?) and no photo sees them: left out of the "
+             "visibility, the atlas and the textured mesh; remove them from the mesh to silence this")
     per_view = [dict(r.info) for r in records]
     for view, r, entry in zip(views, records, per_view):
         if "depth_disagreement" in entry:

@@ -111,7 +111,7 @@ def test_texrecon_texture_lines_up_with_its_photos(tmp_path):
     photo's camera reproduces that photo where texrecon textured the faces from it."""
     from benchmarks.peers import run_texrecon, texrecon_binary
     from o3d_seqcc import load_scene, make_synthetic_scene
-    from o3d_seqcc.render import gradient_correlation, raycast, render_textured
+    from o3d_seqcc.render import gradient_similarity, raycast, render_textured
 
     exe = texrecon_binary()
     if exe is None:
@@ -133,10 +133,10 @@ def test_texrecon_texture_lines_up_with_its_photos(tmp_path):
             continue
         m &= raycast(res.mesh, v).mask
         photo = v.load_image()
-        at = gradient_correlation(render_textured(res.mesh, v), photo, m)
+        at = gradient_similarity(render_textured(res.mesh, v), photo, m, max_shift=0)  # no misregistration forgiven
         K = v.intrinsic.copy()
         K[:2, 2] -= 0.5  # half a pixel off: what the exact principal point gives
-        off = gradient_correlation(render_textured(res.mesh, replace(v, intrinsic=K)), photo, m)
+        off = gradient_similarity(render_textured(res.mesh, replace(v, intrinsic=K)), photo, m, max_shift=0)
         scores.append((at, off))
     assert scores, "texrecon textured too few pixels from any view"
     assert all(at > 0.97 and at > off + 0.02 for at, off in scores), scores

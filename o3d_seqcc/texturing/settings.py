@@ -130,6 +130,7 @@ class TextureSettings:
     fallback: str = "smooth"
 
     def __post_init__(self) -> None:
+        _check_types(self)
         if self.fallback not in FALLBACKS:
             raise ValueError(f"unknown fallback {self.fallback!r}; valid: {', '.join(map(repr, FALLBACKS))}")
         if self.data_term not in DATA_TERMS:
@@ -183,6 +184,25 @@ def parse_atlas_size(value: Any) -> int | str:
         raise InputError(f"atlas_size (--atlas-size) must be at most {MAX_ATLAS_SIZE} (the largest texture GPUs "
                          f"load), got {value}; use overflow='pages' (--atlas-overflow pages) for more")
     return int(value)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+_TYPES = {"int": (_is_int, "an integer"),
+          "float": (lambda v: _is_int(v) or isinstance(v, (float, np.floating)), "a number"),
+          "bool": (lambda v: isinstance(v, (bool, np.bool_)) or _is_int(v) and v in (0, 1), "True or False"),
+          "str": (lambda v: isinstance(v, str), "a string")}
+
+
+def _check_types(settings: Any) -> None:
+    """Every field of the type it is declared with (``padding="big"`` names the field, not ``int()``)."""
+    for f in fields(settings):
+        kind = _TYPES.get(str(f.type))
+        v = getattr(settings, f.name)
+        if kind is not None and not kind[0](v):
+            raise InputError(f"{f.name} must be {kind[1]}, got {v!r:.60} ({type(v).__name__})")
 
 
 def parse_texels_per_pixel(value: Any) -> float | str:
