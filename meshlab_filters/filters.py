@@ -219,7 +219,7 @@ def _registry() -> dict[str, MeshLabFilter]:
     from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
     from o3d_seqcc.graph import WEIGHTS
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
-    from o3d_seqcc.texturing.settings import FALLBACKS, OVERFLOWS
+    from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
     from . import meshset
 
@@ -229,7 +229,8 @@ def _registry() -> dict[str, MeshLabFilter]:
     save_docs = _doc_entries(pipeline.RunResult.save, "Parameters")
     ts_defaults = {f.name: getattr(TextureSettings(), f.name) for f in fields(TextureSettings)}
     ts_docs = _doc_entries(TextureSettings, "Attributes")
-    enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS)}
+    enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS),
+             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS)}
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
         "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
@@ -237,6 +238,7 @@ def _registry() -> dict[str, MeshLabFilter]:
         "fill_background": "Fill the background", "leveling": "Global seam leveling",
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",
+        "data_term": "Selection data term", "outlier_removal": "Photometric outlier removal",
     }
     if set(labels) != set(ts_defaults):
         raise RuntimeError(f"label the TextureSettings fields {sorted(set(ts_defaults) ^ set(labels))}")

@@ -47,6 +47,7 @@ from .errors import InputError, warn
 from .imageops import img_as_dtype
 from .meshops import vertex_normals
 from .scene import Mesh, Scene, View
+from .texturing.settings import TextureSettings
 
 __all__ = ["correct_images", "scene_from_open3d", "texture_mesh"]
 
@@ -298,7 +299,7 @@ def texture_mesh(
     depths: Sequence[Any] | None = None,
     correct: bool = True,
     selection: str = "mrf",
-    atlas_size: int = 2048,
+    atlas_size: int | str = TextureSettings.atlas_size,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
     t_npm: int = 400,
@@ -317,8 +318,9 @@ def texture_mesh(
         :func:`correct_images`); False textures with the images as they are.
     selection : {"mrf", "largest-area", "random"}, default "mrf"
         Per-face image selection.
-    atlas_size : int, default 2048
-        Side of the texture atlas in texels.
+    atlas_size : int or "auto", default "auto"
+        ``"auto"``: the atlas is sized to the charts at the photos' resolution; an integer: its
+        largest side in texels, a budget (:class:`~o3d_seqcc.texturing.TextureSettings`).
     depth_scale : float, default 1000.0
     return_result : bool, default False
         Also return the :class:`~o3d_seqcc.pipeline.RunResult` (selection, seams, timings, and

@@ -351,7 +351,8 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
     with _stage("selection", timings):
         adjacency = face_adjacency(mesh.faces, mesh.vertices)
         opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
-        labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
+        labels = select_views(vis, method=s.selection, seed=s.seed, images=images, data_term=s.data_term,
+                              outlier_removal=s.outlier_removal, **opts)
     with _stage("bake", timings):
         tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
     seams = None

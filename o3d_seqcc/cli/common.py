@@ -16,7 +16,7 @@ from ..io.output import check_output, check_output_file
 from ..mappings import MODES
 from ..orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
-from ..texturing.settings import FALLBACKS, OVERFLOWS
+from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
 __all__ = [
     "add_atlas_arguments",
@@ -107,6 +107,13 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
     p.add_argument("--smoothness", type=float, default=d.smoothness,
                    help=f"mrf: Potts weight per interior edge (default {d.smoothness:g})")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of random selection / mrf order (default 0)")
+    p.add_argument("--data-term", default=d.data_term, choices=DATA_TERMS,
+                   help=f"mrf: what makes a photo good for a face (default {d.data_term}: its gradient magnitude "
+                   "integrated over the face's projection, large and sharp; area: the projected area alone)")
+    p.add_argument("--outlier-removal", default=d.outlier_removal, choices=OUTLIER_REMOVALS,
+                   help=f"per face, drop the photos whose colour of it is far from the others' (passers-by, cars the "
+                   f"mesh lacks; default {d.outlier_removal}: far from the median of its photos; gauss-clamping / "
+                   "gauss-damping: texrecon's Gaussian test)")
     add_atlas_arguments(p)
     p.add_argument("--no-leveling", dest="leveling", action="store_false",
                    help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "
@@ -132,14 +139,15 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
 def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
     """The atlas budget and layout options of :class:`~o3d_seqcc.texturing.TextureSettings` (``texture``, ``run``, ``demo``)."""
     d = _DEFAULTS
-    p.add_argument("--atlas-size", type=int, default=d.atlas_size,
-                   help=f"largest atlas side in texels, a budget (default {d.atlas_size}): the atlas is the smallest "
-                   "power of two up to it that holds the charts at --texels-per-pixel")
+    p.add_argument("--atlas-size", default=d.atlas_size, metavar="auto|N",
+                   help=f"atlas side (default {d.atlas_size}: sized to the charts at the photos' resolution, pages of "
+                   "up to 8192^2); N: the largest side in texels, a budget: the atlas is the smallest power of two up "
+                   "to it that holds the charts at --texels-per-pixel")
     p.add_argument("--texels-per-pixel", default=d.texels_per_pixel, metavar="auto|T",
-                   help="texel density, atlas texels per photo pixel (default auto: at least the photos' resolution, "
-                   "raised to fill the atlas, at most 2)")
+                   help="texel density, atlas texels per photo pixel (default auto: the photos' resolution, 1, each "
+                   "texel a copy of a photo pixel; lowered only by an --atlas-size budget)")
     p.add_argument("--atlas-overflow", dest="overflow", choices=OVERFLOWS, default=d.overflow,
-                   help="when the charts do not fit --atlas-size at that density: scale the density down (default, "
+                   help="when the charts do not fit an --atlas-size budget at that density: scale the density down (default, "
                    "a warning gives the factor) or write several atlas pages (one material each)")
     p.add_argument("--no-power-of-two", dest="power_of_two", action="store_false",
                    help="atlas sides need not be powers of two (multiples of 4, as small as the charts allow)")
