@@ -100,12 +100,13 @@ def _graph_section(inp: PageInputs) -> str:
     weight = c.settings.get("graph_weight", "paper")
     total = inp.mappings.total if inp.mappings is not None else None
     formula = "w = 1 − n / N" if weight == "paper" else "w = log(N / n)"
-    n_txt = f", N = {total} mappings over all pairs" if total is not None else ""
+    unit = "px of shared surface" if getattr(inp.mappings, "mode", None) == "surface" else "mappings"
+    n_txt = f", N = {total} {unit} over all pairs" if total is not None else ""
     unreach = ", ".join(_esc(_name(inp, v)) for v in c.unreachable) or "none"
     cap = (f"Colour-correction graph (paper Figures 4-5). One node per view, numbered by index and placed by its "
            f"camera position (seen from above: the two main axes of the camera centres); the reference "
            f"<b>{_esc(names[ref])}</b> (#{ref}) in red. An edge joins two views sharing at least "
-           f"t<sub>npm</sub> = {c.t_npm} mappings: its width grows with the number of mappings n, its colour is its "
+           f"t<sub>npm</sub> = {c.t_npm} {unit}: its width grows with that count n, its colour is its "
            f"weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
            f"Unreachable views (grey): {unreach}.")
     by_pair = {(e["a"], e["b"]): e for e in c.graph_edges}
