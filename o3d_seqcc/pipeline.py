@@ -36,18 +36,19 @@ import numpy as np
 
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
+from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
 from .images import SceneImages
 from .io.files import atomic_write_bytes, write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, write_images
 from .io.output import output_folder
-from .mappings import MODES, Mappings, compute_mappings
+from .mappings import DEFAULT_MODE, MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import before_after
 from .orientation import UP_AXES, up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
+from .refine import coverage
 from .render import write_selection_picture
 from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
 from .report.figures import warm_up
@@ -304,13 +305,14 @@ class RunResult:
                 written["images"] = stage / "images"
             # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
             layer = stage / "mesh_meshlab.ply"
-            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters)
+            shift = float32_offset(self.textured.vertices)  # MeshLab holds float32: the layer matrix adds it back
+            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters, offset=shift)
             if project is not None:
                 written["meshlab_project"] = project
                 reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
                 written["meshlab_mesh"] = export_meshlab_ply(
                     self.textured, layer, texture=[stage / n for n in texture_file_names(
-                        "mesh", tfmt, self.textured.pages)] if reuse else None)
+                        "mesh", tfmt, self.textured.pages)] if reuse else None, offset=shift)
             written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
             self.timings["export"] = time.perf_counter() - t
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
@@ -349,7 +351,7 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
     if want_seams:
         with _stage("seams", timings):
             seams = seam_metric(tm)
-    return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
+    return labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm, seams
 
 
 def texture(
@@ -358,7 +360,7 @@ def texture(
     images: Sequence[np.ndarray] | None = None,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True,
+    seams: bool = True, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -376,6 +378,8 @@ def texture(
         Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
     seams : bool, default True
         Compute the seam metric of the result.
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
     **texture_options
@@ -399,7 +403,7 @@ def texture(
             raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
@@ -412,11 +416,11 @@ def run(
     *,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
-    mappings: str = "vertices",
+    t_npm: int | str = "auto",
+    mappings: str = DEFAULT_MODE,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True, compare_original: bool = False,
+    seams: bool = True, compare_original: bool = False, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -430,10 +434,11 @@ def run(
         Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
-    mappings : {"vertices", "dense"}, default "vertices"
-        Pairwise mapping mode.
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): pixels of
+        shared surface, ``"auto"`` = 1 % of a photo (surface mappings), or vertex mappings.
+    mappings : {"surface", "vertices", "dense"}, default "surface"
+        Pairwise mapping mode (:func:`o3d_seqcc.mappings.compute_mappings`; vertices: the paper's).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
     settings : TextureSettings, optional
@@ -442,6 +447,9 @@ def run(
         Compute the seam metric of the result.
     compare_original : bool, default False
         Also bake the uncorrected images (in memory) and report their seam metric.
+    split_faces : bool, default True
+        Split the faces no photo holds whole (clipped, partly hidden, too large, or whose texture
+        would slide inside them) into parts (:mod:`o3d_seqcc.refine`); False keeps the input's.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
         scene's files must be readable at the same paths on every worker); default local
@@ -474,7 +482,7 @@ def run(
     _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         with _stage("mappings", timings):
             maps = compute_mappings(sc, visibility=vis, mode=mappings)
         with _stage("correction", timings):
@@ -542,11 +550,11 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int = 400, mappings: str = "vertices",
+    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int | str = "auto", mappings: str = DEFAULT_MODE,
     graph_weight: str = "paper",
     seed: int = 0,
     metrics: bool = True,
-    mesh: str | os.PathLike | None = None,
+    mesh: str | os.PathLike | None = None, split_faces: bool = True,
     client: Any = None,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
@@ -563,6 +571,8 @@ def correct_scene(
     metrics : bool, default True
         Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
 
@@ -578,7 +588,7 @@ def correct_scene(
         resolve_view(sc.names, reference)
     t = time.perf_counter()
     with use_executor(client):
-        maps = compute_mappings(sc, mode=mappings)
+        maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
         res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,

@@ -276,7 +276,8 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     assert r[2]["p99"] <= 1.0 and r[2]["share_gt2"] <= 0.001, r
     assert r[1]["p99"] <= r[2]["p99"] + 1e-9
     # counted as foreign, the gutters still hardly change level 2: they continue the photo
-    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 3.0
+    # (3.00 measured with the faces split into parts (issue 20): more small faces along chart borders)
+    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 3.2
     # gutters removed (every texel outside the faces black, as an atlas without gutter fill): bleeds
     from dataclasses import replace
 
