@@ -330,7 +330,8 @@ def _xatlas_param(verts: np.ndarray, faces: np.ndarray, wid: np.ndarray, scale: 
     first = np.zeros(len(uw), dtype=np.int64)
     first[inv.reshape(-1)] = faces.reshape(-1)
     a = xatlas.Atlas()
-    a.add_mesh(np.ascontiguousarray(verts[first], dtype=np.float32), np.ascontiguousarray(lf, dtype=np.uint32))
+    local = verts[first] - verts[first].mean(axis=0)  # xatlas is float32: a local frame for far-away scenes
+    a.add_mesh(np.ascontiguousarray(local, dtype=np.float32), np.ascontiguousarray(lf, dtype=np.uint32))
     po = xatlas.PackOptions()
     po.texels_per_unit = float(scale)
     po.resolution = 0
