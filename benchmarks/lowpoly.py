@@ -59,13 +59,35 @@ CASES = (("room 1 m", 1.0, 0.0), ("room 10 cm", 0.1, 0.0))
 FAR = (("room 1 m at 5e5 m", 1.0, 5e5), ("room 1 m at 1e7 m", 1.0, 1e7))
 
 
-def _worker(scene_dir: str, out: str, reference: str) -> int:
+def _moved(scene, shift: float):
+    """The scene with its mesh and cameras moved by ``(shift, -shift / 3, shift / 4)`` (in memory, float64)."""
+    from dataclasses import replace
+
+    from o3d_seqcc.scene import Mesh, Scene
+
+    s = np.array([shift, -shift / 3, shift / 4])
+    m = scene.load_mesh()
+    views = []
+    for v in scene.views:
+        E = np.array(v.extrinsic, dtype=np.float64)
+        E[:3, 3] -= E[:3, :3] @ s
+        views.append(replace(v, extrinsic=E))
+    return Scene(mesh=Mesh(vertices=m.vertices + s, faces=m.faces, vertex_normals=m.vertex_normals),
+                 views=tuple(views), source=scene.source)
+
+
+def _worker(scene_dir: str, out: str, reference: str, shift: str = "0") -> int:
     """Run the pipeline of whatever o3d_seqcc is first on sys.path; save the textured mesh's arrays."""
     import o3d_seqcc as sc
 
     t = time.perf_counter()
     try:
-        res = sc.pipeline.run(str(Path(scene_dir) / "scene.json"), reference=reference)
+        if (Path(scene_dir) / "scene" / "key.log").is_file():  # Fountain, moved in memory by ``shift``
+            scene = sc.datasets.fountain(scene_dir, mesh="scene/mesh_decimated_uv_blender.ply")
+            scene = _moved(scene, float(shift)) if float(shift) else scene
+        else:
+            scene = str(Path(scene_dir) / "scene.json")
+        res = sc.pipeline.run(scene, reference=reference)
     except Exception as e:  # the figure is the failure itself
         Path(out).with_suffix(".json").write_text(json.dumps({"error": f"{type(e).__name__}: {e}"}))
         return 0
@@ -77,9 +99,9 @@ def _worker(scene_dir: str, out: str, reference: str) -> int:
     return 0
 
 
-def _run(checkout: Path, scene_dir: Path, out: Path, reference: str) -> dict:
+def _run(checkout: Path, scene_dir: Path, out: Path, reference: str, shift: float = 0.0) -> dict:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(scene_dir), str(out), reference]
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(scene_dir), str(out), reference, repr(shift)]
     subprocess.run(cmd, env=env, check=True, cwd=str(checkout))
     info = json.loads(out.with_suffix(".json").read_text())
     if "error" not in info:
@@ -97,7 +119,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-far", dest="far", action="store_false", help="skip the rooms moved 5e5 m and 1e7 m")
     ap.add_argument("--json", help="write the figures to this file")
     ap.add_argument("--keep", help="generate the scenes in this folder (kept) instead of a temporary one")
-    ap.add_argument("--worker", nargs=3, metavar=("SCENE", "OUT", "REFERENCE"), help=argparse.SUPPRESS)
+    ap.add_argument("--fountain", default=str(REPO.parent / "shared" / "datasets" / "fountain_small"),
+                    help="Fountain folder for the far-from-origin runs (skipped when absent)")
+    ap.add_argument("--no-fountain", dest="fountain", action="store_const", const="", help="skip Fountain")
+    ap.add_argument("--worker", nargs=4, metavar=("SCENE", "OUT", "REFERENCE", "SHIFT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
         return _worker(*args.worker)
@@ -163,6 +188,37 @@ def main(argv=None) -> int:
                   f"{base['partly']} at the origin ({'same' if same else 'DIFFERENT'}; faces out {r['faces_out']} vs "
                   f"{base['faces_out']}), renders vs the origin's {r['vs_origin_ciede2000']:.3f} CIEDE2000 "
                   "(target <= 0.5)")
+    if args.fountain and (Path(args.fountain) / "scene" / "key.log").is_file():
+        from o3d_seqcc.datasets import fountain
+
+        scene = fountain(args.fountain, mesh="scene/mesh_decimated_uv_blender.ply")
+        print("\nFountain (33 photos, 16k faces), reference auto, moved (s, -s/3, s/4) from the origin:")
+        for label, path in checkouts:
+            base = None
+            for shift in (0.0, 5e5, 1e7):
+                info = _run(path, Path(args.fountain), root / f"fountain_{shift:g}_{label}.npz", "auto", shift)
+                row = {"case": f"fountain at {shift:g} m", "checkout": label, "origin": shift}
+                if "error" in info:
+                    row["error"] = info["error"]
+                    print(f"  {label} {shift:g} m: fails: {info['error'][:150]}")
+                    rows.append(row)
+                    continue
+                st = info["stats"]
+                views = _moved(scene, shift).views if shift else scene.views
+                imgs = [render_textured(info["mesh"], v) for v in views]
+                row.update(faces_out=st["faces"], unseen=st["unseen_faces"],
+                           unseen_input=st.get("unseen_input_faces", st["unseen_faces"]),
+                           unseen_area=st.get("unseen_area"), seconds=round(info["seconds"], 1))
+                if base is None:
+                    base = (row, imgs)
+                else:
+                    row["vs_origin_ciede2000"] = round(float(np.mean([image_delta_e(a, b) for a, b in zip(imgs, base[1])])), 3)
+                ua = "-" if row["unseen_area"] is None else f"{100 * row['unseen_area']:.2f} %"
+                vs = f", renders vs the origin's {row['vs_origin_ciede2000']:.3f} CIEDE2000" if "vs_origin_ciede2000" in row \
+                    else ""
+                print(f"  {label:<10} {shift:>8g} m: faces out {row['faces_out']}, unseen {row['unseen']} "
+                      f"(input faces {row['unseen_input']}, area {ua}){vs}, {row['seconds']:.1f} s", flush=True)
+                rows.append(row)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     if tmp is not None:

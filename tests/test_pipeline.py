@@ -64,7 +64,8 @@ def test_library_defaults_are_the_command_line_defaults(small_scene):
             assert getattr(args, f.name) == getattr(d, f.name), f.name
     assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc-global", "auto", "surface")
     lib = library_default(sc.pipeline.run)
-    assert (lib["t_npm"], lib["mappings"], lib["split_faces"]) == (args.t_npm, args.mappings, True)
+    assert (lib["t_npm"], lib["mappings"], lib["split_faces"]) == (args.t_npm, args.mappings, args.split_faces) \
+        == ("auto", "surface", True)
 
 
 def test_texture_only_and_textured_mesh_conversions(small_scene, tmp_path):

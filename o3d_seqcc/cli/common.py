@@ -23,6 +23,7 @@ __all__ = [
     "add_correction_arguments",
     "add_export_arguments",
     "add_scene_arguments",
+    "add_split_argument",
     "add_t_npm_argument",
     "add_texture_arguments",
     "library_default",
@@ -68,6 +69,14 @@ def add_correction_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"pairwise mappings (default {DEFAULT_MODE}: points on the shared surface at the photos' "
                    "resolution, pairs counted in pixels; vertices: the paper's face vertices; dense: vertices and "
                    "interior points)")
+
+
+def add_split_argument(p: argparse.ArgumentParser) -> None:
+    """``--no-split-faces`` (:func:`o3d_seqcc.pipeline.run`'s ``split_faces``)."""
+    p.add_argument("--no-split-faces", dest="split_faces", action="store_false",
+                   help="keep the mesh's faces as they are: by default a face no photo holds whole (clipped by the "
+                   "image border, partly hidden, larger than a photo, or seen so deep its texture would slide) is "
+                   "split into parts the photos that see them can texture")
 
 
 def t_npm_value(text: str) -> int | str:
