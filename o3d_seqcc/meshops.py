@@ -79,7 +79,8 @@ def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarr
     Returns
     -------
     (N,) int64
-        Welded vertex id per vertex, in ``0 .. n_unique - 1``.
+        Welded vertex id per vertex, in ``0 .. n_unique - 1``, numbered in the order of each
+        group's first vertex.
     """
     v = np.asarray(vertices, dtype=np.float64)
     if len(v) == 0:
@@ -95,7 +96,12 @@ def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarr
     new[1:] = (qs[1:] != qs[:-1]).any(axis=1)
     inv = np.empty(len(q), dtype=np.int64)
     inv[order] = np.cumsum(new) - 1
-    return inv
+    # ids in the order of each group's first vertex, not of the rounded positions: the same ids wherever the mesh
+    # lies (far from the origin a coordinate's last bit can move a vertex to a neighbouring cell of the same group)
+    first = order[new]  # lexsort is stable: a run's first entry is its smallest vertex index
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inv]
 
 
 @dataclass(frozen=True, eq=False)
