@@ -35,7 +35,7 @@ from .camera import project_columns
 from .meshops import face_normals, weld_vertices
 from .meshsplit import bisect
 from .occlusion import _hidden, _rays_to, bary_grid
-from .view_visibility import ViewRecord, VisibilityJob, view_record
+from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
 
 __all__ = ["PROBE_SPACING", "Refinement", "coverage", "distortion", "refine_visibility"]
 
@@ -198,8 +198,6 @@ def _merge(old: ViewRecord, new: ViewRecord, old_to_new: np.ndarray, new_ids: np
     order = np.argsort(faces, kind="stable")
     flags = np.concatenate([old.flags[keep], new.flags])[order]
     info = dict(old.info)
-    from .view_visibility import DEPTH, OBLIQUE, OCCLUDED
-
     info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
                 depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
                 oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
