@@ -113,6 +113,32 @@ def _run(checkout: Path, scene_dir: Path, out: Path, reference: str, shift: floa
     return info
 
 
+def _resolution(root: Path) -> dict:
+    """This checkout's pair counts on Fountain's 16k- and 300k-face meshes (same photos): surface vs vertex mappings."""
+    import o3d_seqcc as sc
+    from o3d_seqcc.graph import resolve_t_npm
+    from o3d_seqcc.mappings import compute_mappings
+
+    counts = {}
+    for mesh in ("mesh_decimated_uv_blender.ply", "tsdf_mesh.ply"):
+        scene = sc.datasets.fountain(root, mesh=f"scene/{mesh}")
+        vis = sc.compute_visibility(scene)
+        surf, vert = compute_mappings(scene, visibility=vis), compute_mappings(scene, visibility=vis, mode="vertices")
+        counts[mesh] = (surf.counts, vert.counts, resolve_t_npm("auto", surf)[0], vis.stats["split"]["input_faces"])
+    (a_s, a_v, t, fa), (b_s, b_v, _, fb) = counts.values()
+    keys = sorted(set(a_s) & set(b_s))
+    rs = np.array([b_s[k] / a_s[k] for k in keys if a_s[k] >= t])
+    rv = np.array([b_v.get(k, 0) / a_v[k] for k in keys if a_v.get(k, 0) >= 400])
+    row = {"case": "fountain counts 300k / 16k", "surface_ratio": np.percentile(rs, [10, 50, 90]).round(3).tolist(),
+           "vertex_ratio": np.percentile(rv, [10, 50, 90]).round(3).tolist(),
+           "edges_auto": [int(sum(v >= t for v in a_s.values())), int(sum(v >= t for v in b_s.values()))],
+           "edges_400_vertices": [int(sum(v >= 400 for v in a_v.values())), int(sum(v >= 400 for v in b_v.values()))]}
+    print(f"\nFountain pair counts, {fb}-face mesh over the {fa}-face one (same photos, pairs over the threshold; "
+          f"10 / 50 / 90 %): shared surface in px {row['surface_ratio']}, vertex mappings {row['vertex_ratio']}; "
+          f"graph edges at t_npm auto ({t} px) {row['edges_auto']}, at 400 vertex mappings {row['edges_400_vertices']}")
+    return row
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--compare", action="append", default=[], help="another checkout to run beside this one")
@@ -122,6 +148,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fountain", default=str(REPO.parent / "shared" / "datasets" / "fountain_small"),
                     help="Fountain folder for the far-from-origin runs (skipped when absent)")
     ap.add_argument("--no-fountain", dest="fountain", action="store_const", const="", help="skip Fountain")
+    ap.add_argument("--no-resolution", dest="resolution", action="store_false",
+                    help="skip the pair counts of Fountain's 16k- and 300k-face meshes")
     ap.add_argument("--worker", nargs=4, metavar=("SCENE", "OUT", "REFERENCE", "SHIFT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -219,6 +247,8 @@ def main(argv=None) -> int:
                 print(f"  {label:<10} {shift:>8g} m: faces out {row['faces_out']}, unseen {row['unseen']} "
                       f"(input faces {row['unseen_input']}, area {ua}){vs}, {row['seconds']:.1f} s", flush=True)
                 rows.append(row)
+    if args.resolution and args.fountain and (Path(args.fountain) / "scene" / "tsdf_mesh.ply").is_file():
+        rows.append(_resolution(Path(args.fountain)))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     if tmp is not None:

@@ -7,10 +7,11 @@ additionally samples points inside each face (sub-triangle centroids) whose numb
 face's projected size (more observations for small overlaps). Both count mappings, so a count
 (and the graph threshold ``t_npm``) depends on how finely the mesh is tessellated.
 
-``mode="surface"`` (the default) samples the surface both views see at the photos' resolution:
-about one point per ``sample_spacing``^2 pixels of each shared face's smaller projection
-(sub-triangle centroids; faces smaller than one sample get one with a probability equal to
-their share), and counts a pair by the area of that surface in pixels
+``mode="surface"`` (the default) samples the surface both views see at least at the photos'
+resolution: the vertices of every shared face (as the paper) and, inside faces larger than
+``sample_spacing``^2 px in the smaller of the two projections, about one point per
+``sample_spacing``^2 px (sub-triangle centroids), and counts a pair by the area of that surface
+in pixels
 (:func:`~o3d_seqcc.pairs.shared_area`), so the counts, the graph and ``t_npm`` (pixels) mean
 the same on a 300-face and a 3M-face mesh of one scene.
 
@@ -71,8 +72,7 @@ class Mappings:
         The visibility the mappings were derived from (None when loaded from a file).
     counts : dict[(int, int), int]
         Number of mappings per pair (same keys as ``pairs``); computed when not given. In
-        ``"surface"`` mode: the pair's shared surface in pixels (its number of samples is about
-        ``count / sample_spacing**2``).
+        ``"surface"`` mode: the pair's shared surface in pixels (not its number of samples).
     n_views : int
         Number of views (from ``view_names`` when not given).
     image_sizes : tuple of (width, height), optional
@@ -282,7 +282,7 @@ def compute_mappings(
     *,
     mode: str = DEFAULT_MODE,
     visibility=None,
-    sample_spacing: float = 2.0,
+    sample_spacing: float = 3.0,
     dense_spacing: float = 3.0,
     dense_max_level: int = 6,
     cache_size: int = 8,
@@ -295,9 +295,9 @@ def compute_mappings(
     scene : Scene or None
         May be None when ``visibility`` is given.
     mode : {"surface", "vertices", "dense"}, default "surface"
-        ``"surface"``: points on every face usable in both views, about one per
-        ``sample_spacing``^2 pixels of its smaller projection; pairs counted by their shared
-        surface in pixels (see the module docstring). ``"vertices"``: the projections of the 3
+        ``"surface"``: the vertices of every face usable in both views and points inside the
+        larger ones, about one per ``sample_spacing``^2 pixels of the smaller projection; pairs
+        counted by their shared surface in pixels (see the module docstring). ``"vertices"``: the projections of the 3
         vertices of every face usable in both views (the paper). ``"dense"``: the 3 vertices plus the centroids of the ``L**2`` sub-triangles
         of a level-``L`` subdivision of each such face, ``L = clip(ceil(sqrt(2 * A) /
         dense_spacing), 1, dense_max_level)`` where ``A`` is the face's largest projected area
@@ -306,8 +306,9 @@ def compute_mappings(
     visibility : Visibility, optional
         Precomputed :func:`~o3d_seqcc.visibility.compute_visibility` result (then
         ``filter_options`` must be empty).
-    sample_spacing : float, default 2.0
-        Surface mode: spacing of the samples in pixels (of the view where the face is smaller).
+    sample_spacing : float, default 3.0
+        Surface mode: spacing in pixels (of the view where the face is smaller) of the samples
+        inside faces larger than ``sample_spacing**2`` px, besides their vertices.
     dense_spacing : float, default 3.0
         Target spacing of dense samples in pixels (in the view where the face is largest).
     dense_max_level : int, default 6

@@ -77,7 +77,7 @@ def save_mappings(mappings: Mappings, path: str | os.PathLike, *, format: str = 
         )
         if src.level is not None:
             data["level"] = src.level.astype(np.int16)
-        data["sample_spacing"] = np.array(float(getattr(src, "spacing", 2.0)))
+        data["sample_spacing"] = np.array(float(getattr(src, "spacing", 3.0)))
         if src.face_mask is not None:
             data["face_mask"] = np.packbits(src.face_mask)
     else:
@@ -156,7 +156,7 @@ def load_mappings(path: str | os.PathLike) -> Mappings:
             vis = _StoredVisibility(z["uv"], z["depth"], usable, z["vertices"], z["faces"])
             level = z["level"].astype(np.int64) if "level" in files else None
             face_mask = np.unpackbits(z["face_mask"], count=F).astype(bool) if "face_mask" in files else None
-            spacing = float(z["sample_spacing"]) if "sample_spacing" in files else 2.0
+            spacing = float(z["sample_spacing"]) if "sample_spacing" in files else 3.0
             src = PairSource(vis, mode, level, face_mask, spacing=spacing)
             return Mappings(
                 pairs=LazyPairs(src, keys), view_names=names, mode=mode, filter_stats=stats, counts=counts,
