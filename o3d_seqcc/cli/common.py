@@ -66,9 +66,9 @@ def add_correction_arguments(p: argparse.ArgumentParser) -> None:
 
     add_t_npm_argument(p, library_default(run)["t_npm"])
     p.add_argument("--mappings", choices=MODES, default=DEFAULT_MODE,
-                   help=f"pairwise mappings (default {DEFAULT_MODE}: points on the shared surface at the photos' "
-                   "resolution, pairs counted in pixels; vertices: the paper's face vertices; dense: vertices and "
-                   "interior points)")
+                   help=f"pairwise mappings (default {DEFAULT_MODE}: the shared faces' vertices and points inside "
+                   "the large ones at the photos' resolution, pairs counted in pixels of shared surface; vertices: "
+                   "the paper's face vertices, counted; dense: vertices and interior points, counted)")
 
 
 def add_split_argument(p: argparse.ArgumentParser) -> None:
