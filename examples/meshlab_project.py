@@ -7,7 +7,8 @@ as ms.apply_filter(name, ...) would be called, with the command line's defaults
 a project it builds a small synthetic room (4 photos with different exposure, white balance and
 gamma) and writes its project first.
 
-How to run (from any folder; a few seconds on the synthetic room):
+How to run (from any folder; a few seconds on the synthetic room; needs the meshlab extra,
+pip install "o3d-seqcc[meshlab]", which ./dev.sh setup installs):
 
     python examples/meshlab_project.py                          # the synthetic room
     python examples/meshlab_project.py /abs/path/project.mlp --texture --out DIR

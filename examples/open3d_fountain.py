@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,11 @@ def main() -> int:
     ap.add_argument("--show", action="store_true", help="open an Open3D window on the result")
     args = ap.parse_args()
 
-    scene = o3d_seqcc.datasets.fountain(args.data_root)  # file names and the mesh; read below with Open3D
+    try:
+        scene = o3d_seqcc.datasets.fountain(args.data_root)  # file names and the mesh; read below with Open3D
+    except o3d_seqcc.datasets.DatasetUnavailable as e:  # offline and no copy: say how to run it, in this script's words
+        print(f"open3d_fountain.py: {e.cli_message('--data-root DIR')}", file=sys.stderr)
+        return 2
     root = Path(scene.views[0].image).parents[1]
     keep = np.arange(len(scene.views))
     if args.views:

@@ -47,7 +47,7 @@ from typing import Any, Callable, TextIO
 
 import numpy as np
 
-from o3d_seqcc.errors import InputError
+from o3d_seqcc.errors import InputError, require
 
 __all__ = ["FilterParameter", "MeshLabFilter", "apply", "filter_list", "filter_parameter_text",
            "get_filter", "print_filter_parameter_list"]
@@ -365,7 +365,7 @@ def apply(ms: Any, filter_name: str, **parameters: Any) -> dict[str, Any]:
         Unknown parameter name (the message lists the filter's parameters).
     """
     f = get_filter(filter_name)
-    import pymeshlab
+    pymeshlab = require("pymeshlab", extra="meshlab", what="meshlab_filters.apply (pymeshlab's MeshSet)")
 
     if not isinstance(ms, pymeshlab.MeshSet):
         raise InputError(f"{filter_name}: ms must be a pymeshlab.MeshSet holding a project "

@@ -28,18 +28,24 @@ import importlib
 from typing import Any
 
 from .errors import InputError
-from .io.load import load_scene, save_scene
-from .scene import FORMAT, PRIMESENSE_INTRINSIC, Mesh, Scene, View, load_mesh
 
 __version__ = "0.1.0"
 
 # public name -> module that defines it
 _LAZY: dict[str, str] = {
+    # the scene model and its loading (numpy, OpenCV): imported on first use too, so that the command line's
+    # own handlers are in place before anything slow runs (Ctrl-C while `python -m o3d_seqcc` starts)
+    **dict.fromkeys(("FORMAT", "PRIMESENSE_INTRINSIC", "Mesh", "Scene", "View", "load_mesh"), "scene"),
+    **dict.fromkeys(("load_scene", "save_scene"), "io.load"),
     # synthetic test / demo scenes
     "SyntheticScene": "synthetic",
     "make_synthetic_scene": "synthetic",
     "load_synthetic": "synthetic",
     "perturb_poses": "synthetic",
+    # camera sanity, lens distortion
+    "check_cameras": "camera_checks",
+    "CameraReport": "camera_checks",
+    "Distortion": "distortion",
     # visibility and mappings (paper 3.1-3.2)
     "Visibility": "visibility",
     "compute_visibility": "visibility",
@@ -89,7 +95,8 @@ _LAZY: dict[str, str] = {
     "seam_metric": "seams",
     "render_textured": "render",
     "render_selection": "render",
-    "sharpness": "render",
+    "sharpness": "sharpness",
+    "gradient_similarity": "sharpness",
     "plot_pair": "render",
     # Open3D front door
     "correct_images": "open3d_api",
@@ -103,23 +110,15 @@ _LAZY: dict[str, str] = {
 
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
-    "camera", "cmf", "correction", "datasets", "demo", "depthmaps", "evaluation", "export", "graph", "imageops",
+    "camera", "camera_checks", "cmf", "correction", "datasets", "demo", "depthmaps", "distortion", "evaluation", "export", "graph", "imageops",
     "images", "io", "jih", "mappings", "meshops", "metrics", "occlusion", "open3d_api", "parallel", "photometric",
     "pipeline", "render", "report", "scene", "seams", "semireal", "synthetic", "texturing", "view_visibility",
     "visibility",
 })
 
 __all__ = [
-    "FORMAT",
-    "PRIMESENSE_INTRINSIC",
     "InputError",
-    "Mesh",
-    "Scene",
-    "View",
     "__version__",
-    "load_mesh",
-    "load_scene",
-    "save_scene",
     *_LAZY,
 ]
 

@@ -47,10 +47,11 @@ from .errors import InputError
 from .imageops import sample_bilinear
 from .io.files import atomic_write_bytes
 from .meshops import float32_offset, vertex_normals
+from .orientation import UP_AXES
 
 __all__ = [
-    "FORMATS", "TEXTURE_FORMATS", "encode_png", "encode_texture", "export_glb", "export_meshlab_ply", "export_obj",
-    "export_ply", "export_textured_mesh", "float32_offset", "texture_file_names",
+    "DEFAULT_FORMATS", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture", "export_glb", "export_meshlab_ply", "export_obj",
+    "export_ply", "export_textured_mesh", "float32_offset", "parse_formats", "texture_file_names",
 ]
 
 logger = logging.getLogger(__name__)
@@ -59,6 +60,33 @@ logger = logging.getLogger(__name__)
 FORMATS = ("glb", "obj", "ply")
 #: texture image formats: name -> (file extension, MIME type)
 TEXTURE_FORMATS = {"png": ("png", "image/png"), "jpg": ("jpg", "image/jpeg"), "webp": ("webp", "image/webp")}
+#: export formats written by default (:meth:`o3d_seqcc.pipeline.RunResult.save`)
+DEFAULT_FORMATS = ("glb", "obj")
+
+
+def parse_formats(formats: str | Iterable[str]) -> list[str]:
+    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
+    items = formats.split(",") if isinstance(formats, str) else list(formats)
+    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
+    bad = [f for f in out if f not in FORMATS]
+    if bad or not out:
+        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
+    return out
+
+
+def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
+    """Validate :meth:`o3d_seqcc.pipeline.RunResult.save`'s export options (the command line calls it before any work).
+
+    Returns the texture format's canonical name; raises InputError naming the bad option.
+    """
+    if str(up_axis).lower() not in UP_AXES:
+        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
+    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
+    if fmt not in TEXTURE_FORMATS:
+        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
+        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
+    return fmt
 
 
 def _check(textured: Any) -> None:

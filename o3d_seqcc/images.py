@@ -25,7 +25,7 @@ import numpy as np
 
 from .imageops import img_as_float
 
-__all__ = ["CACHE_BYTES", "FloatImages", "ImageSequence", "LRUCache", "SceneImages", "default_cache_bytes",
+__all__ = ["CACHE_BYTES", "CachedImages", "FloatImages", "ImageSequence", "LRUCache", "SceneImages", "default_cache_bytes",
            "image_dtypes"]
 
 #: default byte budget of the float image cache (512 MiB; ``O3D_SEQCC_IMAGE_CACHE_MB`` overrides it)
@@ -176,6 +176,33 @@ class FloatImages(ImageSequence):
     def dtypes(self) -> list[np.dtype]:
         return [np.dtype(np.float64)] * len(self)
 
+
+
+class CachedImages(ImageSequence):
+    """Another sequence's images through a least-recently-used cache, which several sequences may share.
+
+    For a consumer that reads the same images several times (the report: thumbnails, joint
+    histograms, renders, the viewer's textures): each image is produced once while it fits.
+
+    Parameters
+    ----------
+    images : sequence of (H, W, 3) arrays
+    cache : LRUCache
+    key : str
+        Distinguishes this sequence's entries from the others' in a shared cache.
+    """
+
+    def __init__(self, images: Sequence, cache: LRUCache, key: str) -> None:
+        self.images, self.cache, self.key = images, cache, key
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def _load(self, i: int) -> np.ndarray:
+        return self.cache.get((self.key, i), lambda: self.images[i])
+
+    def dtypes(self) -> list[np.dtype]:
+        return image_dtypes(self.images)
 
 
 def image_dtypes(images: Sequence) -> list[np.dtype]:

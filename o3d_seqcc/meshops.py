@@ -220,8 +220,11 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray, *, rel_tol: float = 0.
     vertices : (N, 3) float array
     faces : (F, 3) int array
     rel_tol : float, default 0.0
-        A face is degenerate when twice its area is at most ``rel_tol * extent**2`` (``extent``:
-        the largest side of the bounding box); 0 flags only exactly zero areas.
+        A face is degenerate when twice its area is at most ``rel_tol * L * max(L, M)``, with
+        ``L`` its longest edge and ``M`` its largest absolute coordinate (the scale of the
+        rounding in its edge vectors): a measure of the face itself, so that one far-away
+        vertex or stray triangle elsewhere in the mesh changes nothing; 0 flags only exactly
+        zero areas.
 
     Returns
     -------
@@ -231,10 +234,15 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray, *, rel_tol: float = 0.
     """
     v = np.asarray(vertices, dtype=np.float64)
     tri = v[np.asarray(faces, dtype=np.int64)]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    n = np.cross(e1, e2)
     norm = np.linalg.norm(n, axis=1)
-    extent = float(np.ptp(v, axis=0).max()) if len(v) else 1.0
-    degenerate = norm <= float(rel_tol) * max(extent, 1e-300) ** 2
+    if rel_tol > 0:
+        edge = np.sqrt(np.maximum.reduce([(e1 * e1).sum(1), (e2 * e2).sum(1), ((e2 - e1) ** 2).sum(1)]))
+        mag = np.abs(tri).max(axis=(1, 2)) if len(tri) else np.zeros(0)
+        degenerate = norm <= float(rel_tol) * edge * np.maximum(edge, mag)
+    else:
+        degenerate = norm <= 0.0
     return np.divide(n, norm[:, None], out=np.zeros_like(n), where=~degenerate[:, None]), degenerate
 
 

@@ -28,6 +28,9 @@ Accepted inputs (checked before any work; a wrong type or size raises
   (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays.
 
 Everything runs in memory (an in-memory :class:`~o3d_seqcc.scene.Scene`): nothing is written.
+The cameras are checked against the mesh first (:func:`~o3d_seqcc.camera_checks.check_cameras`):
+camera-to-world poses given as extrinsics, OpenGL axes or other units than the mesh's raise
+:class:`~o3d_seqcc.errors.InputError` naming the fix.
 """
 
 from __future__ import annotations
@@ -38,8 +41,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import pipeline
+from .camera_checks import check_cameras
 from .correction import DEFAULT_METHOD
-from .errors import InputError
+from .errors import InputError, warn
 from .imageops import img_as_dtype
 from .meshops import vertex_normals
 from .scene import Mesh, Scene, View
@@ -52,16 +56,16 @@ logger = logging.getLogger(__name__)
 def _mesh(mesh: Any) -> Mesh:
     import open3d as o3d
 
-    if isinstance(mesh, o3d.geometry.TriangleMesh):
-        v = np.asarray(mesh.vertices, dtype=np.float64)
-        f = np.asarray(mesh.triangles, dtype=np.int64)
-        n = np.asarray(mesh.vertex_normals, dtype=np.float64) if mesh.has_vertex_normals() else None
+    if isinstance(mesh, o3d.geometry.TriangleMesh):  # copies: the result must not move with the caller's mesh
+        v = np.array(mesh.vertices, dtype=np.float64)
+        f = np.array(mesh.triangles, dtype=np.int64)
+        n = np.array(mesh.vertex_normals, dtype=np.float64) if mesh.has_vertex_normals() else None
     elif isinstance(mesh, o3d.t.geometry.TriangleMesh):
         if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
             raise InputError("mesh: the o3d.t.geometry.TriangleMesh has no vertex positions or triangle indices")
-        v = mesh.vertex.positions.numpy().astype(np.float64)
-        f = mesh.triangle.indices.numpy().astype(np.int64)
-        n = mesh.vertex.normals.numpy().astype(np.float64) if "normals" in mesh.vertex else None
+        v = mesh.vertex.positions.numpy().astype(np.float64, copy=True)
+        f = mesh.triangle.indices.numpy().astype(np.int64, copy=True)
+        n = mesh.vertex.normals.numpy().astype(np.float64, copy=True) if "normals" in mesh.vertex else None
     else:
         raise InputError(f"mesh must be an o3d.geometry.TriangleMesh or o3d.t.geometry.TriangleMesh, got "
                          f"{type(mesh).__name__}")
@@ -99,7 +103,13 @@ def _image(img: Any, i: int) -> tuple[np.ndarray, np.dtype]:
     if dtype in (np.uint8, np.uint16):
         return np.ascontiguousarray(a), dtype
     if np.issubdtype(dtype, np.floating):
-        return img_as_dtype(a, np.uint16), dtype  # 16 bits keep a float image's precision
+        if not np.isfinite(a).all():
+            raise InputError(f"images[{i}] holds NaN or infinite values; give finite colours in [0, 1]")
+        lo, hi = float(a.min()), float(a.max())
+        if lo < -1e-6 or hi > 1 + 1e-6:
+            raise InputError(f"images[{i}] is a float image with values in [{lo:.4g}, {hi:.4g}]; float images must be in "
+                             "[0, 1] (divide 8-bit values by 255, 16-bit ones by 65535, or give the integer image)")
+        return img_as_dtype(np.clip(a, 0.0, 1.0), np.uint16), dtype  # 16 bits keep a float image's precision
     raise InputError(f"images[{i}] has dtype {dtype}; give uint8, uint16 or float images in [0, 1]")
 
 
@@ -164,6 +174,16 @@ def _depth(d: Any, i: int, size: tuple[int, int], depth_scale: float) -> dict[st
     return {"depth_map": a.astype(np.float64) / scale}
 
 
+def _check_options(*, depth_scale: Any, **flags: Any) -> None:
+    """The front door's own options: ``depth_scale`` a positive number, the flags booleans (named when not)."""
+    if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float, np.integer, np.floating)) \
+            or not 0 < float(depth_scale) < float("inf"):
+        raise InputError(f"depth_scale must be a positive number of depth units per metre, got {depth_scale!r:.60}")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"{name} must be True or False, got {value!r:.60} ({type(value).__name__})")
+
+
 def scene_from_open3d(
     mesh: Any, images: Sequence[Any], cameras: Any, *, depths: Sequence[Any] | None = None, depth_scale: float = 1000.0,
     names: Sequence[str] | None = None,
@@ -193,7 +213,22 @@ def scene_from_open3d(
                               height=sizes[i][1], **extra))
         except InputError as e:
             raise InputError(f"images[{i}] / cameras[{i}]: {e}") from None
-    return Scene(mesh=_mesh(mesh), views=tuple(views)), [d for _, d in pix]
+    scene = Scene(mesh=_mesh(mesh), views=tuple(views))
+    rep = check_cameras(scene, fix=_CAMERA_FIXES, where="cameras")  # before any work: the likely mistakes
+    for w in rep.warnings:
+        warn(f"cameras: {w}")
+    return scene, [d for _, d in pix]
+
+
+#: the fixes an Open3D user is told (extrinsics are world-to-camera, OpenCV axes, as Open3D's own)
+_CAMERA_FIXES = {
+    "inverse": "give world-to-camera extrinsics, as PinholeCameraParameters.extrinsic and project_images_to_albedo "
+               "take them: extrinsic = numpy.linalg.inv(camera_to_world)",
+    "opengl": "flip the camera axes to OpenCV's (y down, looking down +z): extrinsic = numpy.diag([1, -1, -1, 1]) @ "
+              "extrinsic",
+    "inverse+opengl": "extrinsic = numpy.diag([1, -1, -1, 1]) @ numpy.linalg.inv(camera_to_world) for camera-to-world "
+                      "OpenGL poses",
+}
 
 
 def _like(original: Any, pixels: np.ndarray, dtype: np.dtype) -> Any:
@@ -249,6 +284,7 @@ def correct_images(
     list, or (list, dict)
         The corrected images, in the type and dtype each came in.
     """
+    _check_options(depth_scale=depth_scale, return_report=return_report)
     scene, dtypes = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
     job = pipeline.correct_scene(scene, reference=reference, method=method, t_npm=t_npm, mappings=mappings,
                                  metrics=return_report)
@@ -299,6 +335,7 @@ def texture_mesh(
         and the atlas as the ``albedo`` map of its material: ``o3d.visualization.draw`` shows it
         textured and ``o3d.t.io.write_triangle_mesh`` writes it.
     """
+    _check_options(depth_scale=depth_scale, return_result=return_result, correct=correct)
     scene, _ = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
     options = dict(selection=selection, atlas_size=atlas_size, **texture_options)
     if correct:

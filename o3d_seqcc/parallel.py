@@ -29,11 +29,12 @@ from __future__ import annotations
 
 import contextvars
 import logging
+import threading
 import uuid
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator, Sequence
 
-from .errors import InputError
+from .errors import InputError, require
 from .progress import track
 
 __all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "connect", "current", "use"]
@@ -81,10 +82,14 @@ class LocalExecutor:
         items = list(items)
         if not items:
             return iter(())
+        n = self.threads()
+        if n == 1:
+            return iter(track((fn(item, *args) for item in items), desc=desc, total=len(items), unit=unit))
+        guard = _InFlight()
         # n_jobs resolved here: joblib's Parallel(n_jobs=None, prefer="threads") ignores parallel_config's n_jobs
-        gen = Parallel(n_jobs=self.threads(), prefer="threads", return_as="generator")(
-            delayed(fn)(item, *args) for item in items)
-        return iter(track(gen, desc=desc, total=len(items), unit=unit))
+        gen = Parallel(n_jobs=n, prefer="threads", return_as="generator")(
+            delayed(guard.run)(fn, item, *args) for item in items)
+        return guard.drain(track(gen, desc=desc, total=len(items), unit=unit))
 
     def map(self, fn: Callable, items: Sequence, *args: Any, desc: str = "tasks", unit: str = "task") -> list:
         """``[fn(item, *args) for item in items]``, computed in parallel."""
@@ -92,6 +97,49 @@ class LocalExecutor:
 
     def __repr__(self) -> str:
         return f"LocalExecutor(n_jobs={self.n_jobs})"
+
+
+class _InFlight:
+    """Tasks of one :meth:`LocalExecutor.imap`, so that none is still running when it raises.
+
+    joblib stops dispatching after a task raises (or the consumer stops), but the tasks already
+    running in its threads go on; if the exception then ends the program, the interpreter shuts
+    down under native code still running in them (Open3D, OpenCV), which aborts with
+    "terminate called without an active exception". Here the tasks not yet started return at
+    once and the error waits for the running ones to finish.
+    """
+
+    def __init__(self) -> None:
+        self._cv = threading.Condition()
+        self._running = 0
+        self._stopped = False
+
+    def run(self, fn: Callable, *args: Any) -> Any:
+        with self._cv:
+            if self._stopped:
+                return None
+            self._running += 1
+        try:
+            return fn(*args)
+        finally:
+            with self._cv:
+                self._running -= 1
+                self._cv.notify_all()
+
+    def drain(self, results: Iterator) -> Iterator:
+        try:
+            yield from results
+        except BaseException:
+            self.stop()
+            raise
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        with self._cv:
+            self._stopped = True
+            while self._running:
+                self._cv.wait(0.1)
 
 
 class DaskExecutor:
@@ -164,7 +212,8 @@ def _as_executor(target: Any) -> LocalExecutor | DaskExecutor | None:
         return target
     if hasattr(target, "scatter") and hasattr(target, "submit"):  # a dask.distributed.Client
         return DaskExecutor(target)
-    raise TypeError(f"expected a dask.distributed.Client, an executor or None, got {type(target).__name__}")
+    raise InputError(f"client must be a dask.distributed.Client, an executor or None, got {target!r:.60} "
+                     f"({type(target).__name__})")
 
 
 @contextmanager
@@ -206,7 +255,7 @@ def connect(address: str, *, timeout: float = 10.0, option: str = "--scheduler")
     """
     import socket
 
-    from distributed import Client
+    Client = require("distributed", extra="dask", what=f"{option} (a Dask cluster)").Client
     from distributed.comm.addressing import parse_address, parse_host_port
 
     address = str(address).strip()

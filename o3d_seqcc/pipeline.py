@@ -34,26 +34,28 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
+from .export import DEFAULT_FORMATS, check_export_options, export_meshlab_ply, export_textured_mesh, float32_offset, \
+    parse_formats, texture_file_names
 from .images import SceneImages
 from .io.files import atomic_write_bytes, write_json
 from .io.load import load_scene, save_scene
-from .io.result_files import meshlab_project, scene_paths, write_images
+from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
 from .mappings import DEFAULT_MODE, MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import before_after
-from .orientation import UP_AXES, up_axis_transform
+from .orientation import up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
 from .refine import coverage
 from .render import write_selection_picture
-from .report import METRICS_MAX_PER_PAIR, REPORT_FILE, write_report
+from .report import REPORT_FILE, cached_images, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
-from .seams import SeamReport, seam_metric
+from .seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility import Visibility, compute_visibility
 
@@ -61,42 +63,15 @@ __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene"
 
 logger = logging.getLogger(__name__)
 
-#: export formats written by default
-DEFAULT_FORMATS = ("glb", "obj")
-
-
-def parse_formats(formats: str | Iterable[str]) -> list[str]:
-    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
-    items = formats.split(",") if isinstance(formats, str) else list(formats)
-    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
-    bad = [f for f in out if f not in FORMATS]
-    if bad or not out:
-        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
-    return out
-
-
-def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
-    """Validate :meth:`RunResult.save`'s export options (the command line calls it before any work).
-
-    Returns the texture format's canonical name; raises InputError naming the bad option.
-    """
-    if str(up_axis).lower() not in UP_AXES:
-        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
-    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
-    if fmt not in TEXTURE_FORMATS:
-        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
-    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
-        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
-    return fmt
-
-
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
+    check_scene_argument(scene, mesh)
     if isinstance(scene, Scene):
         return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
     return load_scene(scene, mesh=mesh)
 
 
 def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> TextureSettings:
+    check_type("settings", settings, TextureSettings)
     s = settings or TextureSettings()
     s = s.updated(**options) if options else s
     if s.selection not in SELECTION_METHODS:
@@ -105,10 +80,8 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
 
 
 def _import_in_background(*modules: str) -> None:
-    """Import slow third-party modules in a daemon thread while this one works (scikit-learn takes
-    about a second; Python's import locks make the later ``import`` wait for it, never run it twice)."""
-    import importlib
-    import threading
+    """Import slow third-party modules in a daemon thread while this one works (scikit-learn: ~1 s)."""
+    import importlib, threading  # noqa: E401
 
     def load() -> None:
         for m in modules:
@@ -176,11 +149,12 @@ class RunResult:
     originals: list | None = None
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
-               export: dict[str, Any] | None = None, metrics: dict | None = None) -> dict[str, Any]:
+               export: dict[str, Any] | None = None, metrics: dict | None = None,
+               selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types).
 
-        ``export``: the export options :meth:`save` used; ``metrics``: Table 2
-        (:func:`~o3d_seqcc.metrics.before_after`).
+        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.metrics.before_after`);
+        ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`.
         """
         s = self.settings
         names = self.scene.names
@@ -211,6 +185,8 @@ class RunResult:
         rep["files"] = dict(files or {})
         if self.seams_original is not None:
             rep["seams_original_images"] = self.seams_original.to_dict()
+        if selection_seams is not None:
+            rep["selection_seams"] = {k: v.summary() for k, v in selection_seams.items()}
         rep["visibility_stats"] = self.visibility.stats
         rep["timings_s"] = {k: round(v, 4) for k, v in self.timings.items()}
         return rep
@@ -259,8 +235,8 @@ class RunResult:
             JPEG / WebP quality (1-100).
         report : bool, default True
             Also write ``report.html`` (:mod:`o3d_seqcc.report`: the paper's figures for this run)
-            and, after a correction, Table 2 in ``report.json`` (``metrics``: scored on at most
-            :data:`~o3d_seqcc.report.METRICS_MAX_PER_PAIR` mappings per pair).
+            and, after a correction, Table 2 in ``report.json`` (``metrics``: every mapping up to
+            :data:`~o3d_seqcc.report.METRICS_ALL_UP_TO`, else a sample: ``metrics_sample``).
 
         Returns
         -------
@@ -286,7 +262,8 @@ class RunResult:
                 _stage("export"):
             # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
             # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
-            prelude = pool.submit(self._report_prelude, table2) if report else None
+            images = cached_images(*((self.originals, self.images) if self.originals else (self.images, None)))
+            prelude = pool.submit(self._report_prelude, table2, images) if report else None
             picture = None
             if selection_view is None or view is not None:
                 picture = write_selection_picture(self.scene, self.visibility, self.selection,
@@ -318,25 +295,29 @@ class RunResult:
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
                       "orientation": {**orientation, "applies_to": [f for f in fmts]}}
             t = time.perf_counter()
-            metrics = None if prelude is None else prelude.result()
+            metrics, steps = (None, None) if prelude is None else prelude.result()
             if report:
                 written_out["report_html"] = str(Path(out) / REPORT_FILE)
             rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
-                              metrics=metrics)
+                              metrics=metrics, selection_seams=steps)
             if report:
-                write_report(self, stage / REPORT_FILE, report=rep)
+                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images)
                 self.timings["report"] = time.perf_counter() - t
                 rep["timings_s"]["report"] = round(self.timings["report"], 4)
             write_json(stage / "report.json", rep)
         return written_out
 
-    def _report_prelude(self, table2: bool) -> dict | None:
-        """What the report needs that does not depend on the files written: matplotlib loaded, Table 2."""
+    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
+        """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
         warm_up()
         if not table2:
-            return None
-        return before_after(self.originals, self.images, self.mappings, self.correction.paths,
-                            max_per_pair=METRICS_MAX_PER_PAIR)
+            return None, None
+        (photos, corrected), mpp = images, metrics_sample(self.mappings)
+        metrics = before_after(photos, corrected, self.mappings, self.correction.paths, max_per_pair=mpp)
+        mesh = self.visibility.mesh
+        steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
+                 for k, imgs in (("photos", photos), ("corrected", corrected))}
+        return metrics, steps
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
@@ -398,9 +379,7 @@ def texture(
     if images is None:
         imgs = SceneImages(sc.views)  # read when the bake needs them
     else:
-        imgs = list(images)
-        if len(imgs) != len(sc.views):
-            raise InputError(f"images: {len(imgs)} given for {len(sc.views)} views; give one per view")
+        imgs = check_images_argument(images, sc.views)
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc, split_faces=split_faces)
@@ -532,13 +511,15 @@ class CorrectionRun:
         output of o3d_seqcc there. Returns ``out``.
         """
         t = time.perf_counter()
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage:
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage, \
+                _stage("export"):
             paths = write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
             rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
+            scene = with_mesh_file(self.scene, stage / "mesh.ply")  # a mesh in memory is written beside them
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
-            save_scene(self.scene.replace_images(paths), stage / "scene.json")
-            meshlab_project(self.scene, stage, mesh=None, images=paths)
+            save_scene(scene.replace_images(paths), stage / "scene.json")
+            meshlab_project(scene, stage, mesh=None, images=paths)
             if report:
                 t = time.perf_counter()
                 write_report(self, stage / REPORT_FILE, report=rep)
@@ -588,11 +569,13 @@ def correct_scene(
         resolve_view(sc.names, reference)
     t = time.perf_counter()
     with use_executor(client):
-        maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
+        with _stage("mappings"):
+            maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
-        res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
-                      seed=seed, graph_weight=graph_weight)
+        with _stage("correction"):
+            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
+                          seed=seed, graph_weight=graph_weight)
     res.timings["mappings"] = t_map
     names = sc.names
     report: dict[str, Any] = {
@@ -605,16 +588,14 @@ def correct_scene(
     }
     t = time.perf_counter()
     if metrics:
-        report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
+        with _stage("metrics"):
+            report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
     t_metrics = time.perf_counter() - t
     if any(isinstance(tr, LutTransform) for tr in res.transforms):
         luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")
                 for v, tr in enumerate(res.transforms) if isinstance(tr, (LutTransform, IdentityTransform))}
-        report["lookup_tables"] = {
-            "note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced inputs in [0, 1], "
-            "or 'identity' (reference, unreachable views)",
-            "tables": luts,
-        }
+        report["lookup_tables"] = {"note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced "
+                                   "inputs in [0, 1], or 'identity' (reference, unreachable views)", "tables": luts}
     report["timings"] = {**{k: round(float(v), 4) for k, v in res.timings.items()}, "metrics": round(t_metrics, 4)}
     report["graph_weight"] = graph_weight
     return CorrectionRun(scene=sc, result=res, mappings=maps, originals=originals, report=report)

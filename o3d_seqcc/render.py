@@ -1,4 +1,4 @@
-"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, mapping plots.
+"""Pictures: ray-cast renders from a scene view, selection colouring, sharpness, gradient similarity, mapping plots.
 
 Paper Figures 2-3 (pairwise mappings, :func:`plot_pair`), 9 (per-face image selection coloured
 by image) and 12-13 (textured mesh from chosen viewpoints). Rendering is plain ray casting with Open3D's ``RaycastingScene``: the
@@ -9,6 +9,7 @@ mip-mapping: a render from a view's own camera is directly comparable with that 
 
 from __future__ import annotations
 
+import functools
 import io
 import logging
 import os
@@ -16,18 +17,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-import cv2
 import numpy as np
 
 from .errors import InputError
-from .imageops import dtype_scale
 from .io.files import atomic_write_bytes, write_image
 from .meshops import local_origin
 from .scene import View
+from .sharpness import gradient_similarity, sharpness  # noqa: F401 - public here too
 from .texturing.textured_mesh import load_textured_mesh, sample_texture
 
 __all__ = [
     "RayHits",
+    "gradient_similarity",
     "plot_pair",
     "raycast",
     "render_selection",
@@ -222,7 +223,9 @@ def resized_view(view: View, width: int, height: int | None = None) -> View:
     K[0, 2] = sx * (view.intrinsic[0, 2] + 0.5) - 0.5
     K[1, 2] = sy * (view.intrinsic[1, 2] + 0.5) - 0.5
     K[2] = [0.0, 0.0, 1.0]
-    return replace(view, intrinsic=K, width=width, height=height)
+    # a camera only: in-memory pixels or depth of the original size do not belong to it (never read)
+    return replace(view, intrinsic=K, width=width, height=height, image=view.image or Path(f"{view.name}.png"),
+                   pixels=None, depth_map=None, points=None)
 
 
 def supersampled_view(view: View, s: int) -> View:
@@ -236,13 +239,50 @@ def supersampled_view(view: View, s: int) -> View:
     return resized_view(view, view.width * s, view.height * s)
 
 
-def selection_palette(n: int, *, cmap: str = "tab20") -> np.ndarray:
-    """(n, 3) uint8 qualitative colours, one per image index (cycled through ``cmap``)."""
+#: distinct colours of the selection palette (more views repeat them)
+_PALETTE_MAX = 64
+#: colours the selection palette keeps clear of: the background, unseen faces (dark grey) and greys
+_PALETTE_AVOID = ((255, 255, 255), (40, 40, 40))
+
+
+@functools.lru_cache(maxsize=16)
+def _distinct_palette(n: int) -> np.ndarray:
+    """n colours, each the sRGB grid colour farthest (CIEDE2000) from the background, grey and those chosen before."""
+    from .imageops import ciede2000, rgb_to_lab
+
+    g = np.linspace(0.0, 1.0, 18)
+    rgb = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    lab = rgb_to_lab(rgb)
+    # coloured (greys read as shading), neither too dark nor too light (the shading darkens by up to 45 %)
+    ok = (lab[:, 0] > 30) & (lab[:, 0] < 88) & (np.hypot(lab[:, 1], lab[:, 2]) > 30)
+    rgb, lab = rgb[ok], lab[ok]
+    avoid = rgb_to_lab(np.array(_PALETTE_AVOID, dtype=np.float64) / 255.0)
+    dist = ciede2000(lab[:, None], avoid[None]).min(axis=1)
+    out = np.empty(n, dtype=np.int64)
+    for k in range(n):  # O(n x grid) CIEDE2000 evaluations, once per n (cached)
+        out[k] = int(np.argmax(dist))
+        dist = np.minimum(dist, ciede2000(lab, lab[out[k]][None]))
+    return np.clip(np.rint(rgb[out] * 255), 0, 255).astype(np.uint8)
+
+
+def selection_palette(n: int, *, cmap: str | None = None) -> np.ndarray:
+    """(n, 3) uint8 colours, one per image index, as distinct from each other as possible.
+
+    By default a greedy farthest-point choice (CIEDE2000) among coloured sRGB values that stay
+    clear of white (the background), of the dark grey of unseen faces and of greys (which read
+    as shading): every colour is the one farthest from all before it, so the smallest
+    difference between two of them is about 30 for 8 colours, 22 for 16 and 16 for 33; beyond
+    64 the colours repeat. With ``cmap``, a matplotlib colormap's
+    colours instead (listed maps are cycled, darker on the second cycle).
+    """
+    n = max(int(n), 0)
+    if cmap is None:  # beyond 64 views no palette keeps them apart: the 64 colours repeat
+        return np.resize(_distinct_palette(min(n, _PALETTE_MAX)), (n, 3))
     import matplotlib
 
     cm = matplotlib.colormaps[cmap]
     k = getattr(cm, "N", 20)
-    idx = np.arange(max(int(n), 0))
+    idx = np.arange(n)
     if k <= 32:  # listed (qualitative) map: cycle its entries, alternate darker on the 2nd cycle
         rgb = np.asarray(cm(idx % k))[:, :3] * np.where((idx // k) % 2 == 1, 0.6, 1.0)[:, None]
     else:
@@ -259,7 +299,7 @@ def render_selection(
     background: Sequence[int] = (255, 255, 255),
     unseen_color: Sequence[int] = (40, 40, 40),
     shade: bool = True,
-    cmap: str = "tab20",
+    cmap: str | None = None,
     hits: RayHits | None = None,
 ) -> np.ndarray:
     """Render the per-face image selection, each face coloured by its selected image (Fig. 9a/d).
@@ -277,8 +317,8 @@ def render_selection(
         Colours of empty pixels and of faces with no selected image.
     shade : bool, default True
         Darken faces by the angle to the camera (0.55 + 0.45 |cos|) so geometry stays readable.
-    cmap : str, default "tab20"
-        Matplotlib qualitative colormap.
+    cmap : str, optional
+        Matplotlib colormap; default :func:`selection_palette`'s distinct colours.
     hits : RayHits, optional
         Reuse a previous :func:`raycast`.
 
@@ -304,38 +344,6 @@ def render_selection(
         col = col * (0.55 + 0.45 * np.abs(hits.cos_angle[m]))[:, None]
     out[m] = col
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
-
-
-def sharpness(image: np.ndarray, mask: np.ndarray | None = None, *, erode: int = 2) -> float:
-    """Variance of the Laplacian of the grey image inside a mask (a focus / detail measure).
-
-    Parameters
-    ----------
-    image : (H, W, 3) or (H, W) uint8 / uint16 / float array
-        RGB image; integers are scaled to [0, 1] first so 8- and 16-bit images compare.
-    mask : (H, W) bool array, optional
-        Pixels to use (e.g. the mesh silhouette of a render); default all.
-    erode : int, default 2
-        Erode the mask by this many pixels so its border (e.g. the silhouette edge against the
-        background) does not count.
-
-    Returns
-    -------
-    float
-        Variance of ``cv2.Laplacian`` (3x3) of the grey image over the mask, in [0,1]^2 units.
-    """
-    img = np.asarray(image)
-    img = img.astype(np.float32) / np.float32(dtype_scale(img.dtype))
-    grey = (cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img).astype(np.float64)
-    lap = cv2.Laplacian(grey, cv2.CV_64F, ksize=1)
-    m = np.ones(grey.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    if m.shape != grey.shape:
-        raise InputError(f"mask shape {m.shape} does not match the image {grey.shape}")
-    if erode > 0:
-        m = cv2.erode(m.astype(np.uint8), np.ones((2 * erode + 1, 2 * erode + 1), np.uint8), borderValue=0).astype(bool)
-    if not m.any():
-        raise InputError("sharpness: the (eroded) mask is empty")
-    return float(np.var(lap[m]))
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:

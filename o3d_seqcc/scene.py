@@ -19,7 +19,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .io.files import check_image_file, read_depth, read_image, read_point_cloud
+from .distortion import Distortion
+from .io.files import check_depth_file, check_image_file, open_regular, read_depth, read_image
+from .io.mesh_files import read_mesh, read_point_cloud
 from .meshops import face_normals
 from .errors import InputError
 
@@ -144,6 +146,10 @@ class View:
         Depth in metres in memory (0 = missing), instead of a depth file.
     points : (M, 3) float array, optional
         Partial point cloud in memory, instead of a file.
+    distortion : Distortion, optional
+        The photo's lens distortion: the image (and depth map) is undistorted as it is read
+        (:meth:`load_image`, :meth:`load_depth`) to the pinhole camera ``intrinsic`` (same size);
+        see :mod:`o3d_seqcc.distortion`.
     """
 
     name: str
@@ -158,6 +164,7 @@ class View:
     pixels: np.ndarray | None = field(default=None, repr=False)
     depth_map: np.ndarray | None = field(default=None, repr=False)
     points: np.ndarray | None = field(default=None, repr=False)
+    distortion: Distortion | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -189,6 +196,9 @@ class View:
         if not np.isfinite(ds) or ds <= 0:
             raise InputError(f"{where}: depth_scale must be > 0 (units per metre), got {self.depth_scale}")
         object.__setattr__(self, "depth_scale", ds)
+        if self.distortion is not None and not isinstance(self.distortion, Distortion):
+            raise InputError(f"{where}: distortion must be an o3d_seqcc.distortion.Distortion, got "
+                             f"{type(self.distortion).__name__}")
         self._freeze_memory(where)
 
     def _freeze_memory(self, where: str) -> None:
@@ -240,6 +250,7 @@ class View:
             == (other.width, other.height, other.depth, other.depth_scale, other.point_cloud)
             and all(a is b for a, b in zip((self.pixels, self.depth_map, self.points),
                                            (other.pixels, other.depth_map, other.points)))
+            and self.distortion == other.distortion
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -269,25 +280,40 @@ class View:
         """(3,) unit focal axis (camera +z) in world coordinates."""
         return self.rotation[2].copy()
 
+    @property
+    def distorted(self) -> bool:
+        """The photo has lens distortion that :meth:`load_image` removes."""
+        return self.distortion is not None and self.distortion.images and not self.distortion.is_zero
+
     def load_image(self) -> np.ndarray:
-        """Read the image: (H, W, 3) uint8/uint16 RGB; raises if its size is not width x height."""
+        """Read the image: (H, W, 3) uint8/uint16 RGB, undistorted to ``intrinsic`` when the view has a
+        ``distortion``; raises if its size is not width x height."""
         if self.pixels is not None:
-            return self.pixels
-        img = read_image(self.image)
-        if img.shape[:2] != (self.height, self.width):
-            raise InputError(
-                f"view {self.name!r}: image {self.image} is {img.shape[1]}x{img.shape[0]} but the scene says "
-                f"{self.width}x{self.height}; fix width/height (and the intrinsic) or the image"
-            )
+            img = self.pixels
+        else:
+            img = read_image(self.image)
+            if img.shape[:2] != (self.height, self.width):
+                raise InputError(
+                    f"view {self.name!r}: image {self.image} is {img.shape[1]}x{img.shape[0]} but the scene says "
+                    f"{self.width}x{self.height}; fix width/height (and the intrinsic) or the image"
+                )
+        if self.distorted:
+            img = self.distortion.undistort(img, self.intrinsic)
+            img.setflags(write=False)
         return img
 
     def load_depth(self) -> np.ndarray | None:
-        """Read the depth map in metres ((H, W) float64, 0 = missing), or None without one."""
+        """Read the depth map in metres ((H, W) float64, 0 = missing; undistorted, nearest neighbour, when the
+        view has a ``distortion``), or None without one."""
         if self.depth_map is not None:
-            return self.depth_map
-        if self.depth is None:
+            d = self.depth_map
+        elif self.depth is None:
             return None
-        return read_depth(self.depth, self.depth_scale, shape=(self.height, self.width))
+        else:
+            d = read_depth(self.depth, self.depth_scale, shape=(self.height, self.width))
+        if self.distortion is not None and self.distortion.depth and not self.distortion.is_zero:
+            d = self.distortion.undistort(d, self.intrinsic, nearest=True)
+        return d
 
     def load_points(self) -> np.ndarray | None:
         """The partial point cloud ((M, 3) float64 world points), or None without one."""
@@ -332,36 +358,23 @@ class Mesh:
         """This mesh as ``open3d.geometry.TriangleMesh`` (legacy)."""
         import open3d as o3d
 
-        m = o3d.geometry.TriangleMesh(
-            o3d.utility.Vector3dVector(self.vertices), o3d.utility.Vector3iVector(self.faces.astype(np.int32))
+        m = o3d.geometry.TriangleMesh(  # copies: Open3D needs writeable buffers, ours are read-only
+            o3d.utility.Vector3dVector(np.array(self.vertices)), o3d.utility.Vector3iVector(self.faces.astype(np.int32))
         )
-        m.vertex_normals = o3d.utility.Vector3dVector(self.vertex_normals)
+        m.vertex_normals = o3d.utility.Vector3dVector(np.array(self.vertex_normals))
         return m
 
 
 @lru_cache(maxsize=4)
 def _load_mesh_cached(path: str, mtime_ns: int, size: int) -> Mesh:
-    import open3d as o3d
-
     p = Path(path)
-    mesh = o3d.io.read_triangle_mesh(str(p), enable_post_processing=False, print_progress=False)
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    f = np.asarray(mesh.triangles, dtype=np.int64)
-    if len(f) == 0:
-        raise InputError(
-            f"mesh {p} has no triangles (is it a point cloud or a non-triangle mesh?); "
-            "give a triangle mesh (PLY/OBJ/OFF/GLB), triangulate polygons first (MeshLab: Filters > "
-            "Polygonal and Quad Mesh > Turn into a Pure-Triangular mesh)"
-        )
-    if not np.all(np.isfinite(v)):
-        raise InputError(f"mesh {p} has non-finite vertex coordinates; clean it (remove NaN vertices)")
-    if f.min() < 0 or f.max() >= len(v):
-        raise InputError(f"mesh {p} has face indices outside the vertex array")
-    if mesh.has_vertex_normals():
-        n = np.asarray(mesh.vertex_normals, dtype=np.float64)
-    else:
-        mesh.compute_vertex_normals()
-        n = np.asarray(mesh.vertex_normals, dtype=np.float64)
+    v, f, n = read_mesh(p)  # the file layer: regular file, header counts, finite and sane vertices
+    if n is None:
+        import open3d as o3d
+
+        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v), o3d.utility.Vector3iVector(f.astype(np.int32)))
+        m.compute_vertex_normals()
+        n = np.asarray(m.vertex_normals, dtype=np.float64)
         logger.info("mesh %s has no vertex normals: computed them", p)
     for a in (v, f, n):
         a.setflags(write=False)
@@ -377,8 +390,10 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         Missing file, no triangles, non-finite vertices.
     """
     p = Path(path).resolve()
-    if not p.is_file():
+    if not p.exists():
         raise InputError(f"mesh not found: {path} (check the 'mesh' entry or pass mesh=...)")
+    if not p.is_file():
+        open_regular(p, "mesh").close()  # raises, naming what it is (a FIFO, a folder, ...)
     st = p.stat()
     if st.st_size == 0:
         raise InputError(f"mesh {path} is an empty file")
@@ -398,11 +413,16 @@ class Scene:
     source : pathlib.Path, optional
         The file or folder the scene was read from (set by :func:`~o3d_seqcc.load_scene`; not
         part of equality).
+    options : dict, optional
+        The keyword options :func:`~o3d_seqcc.load_scene` read it with (JSON values: paths as
+        strings), so that it can be read again the same way (``o3d-seqcc report``); not part of
+        equality.
     """
 
     mesh: Path | Mesh
     views: tuple[View, ...] = field(default_factory=tuple)
     source: Path | None = field(default=None, compare=False)
+    options: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.mesh, Mesh):
@@ -461,12 +481,20 @@ class Scene:
         return paths
 
     def replace_images(self, images: Sequence[str | os.PathLike]) -> "Scene":
-        """A copy whose views point at other image files (same cameras)."""
+        """A copy whose views point at other image files (same cameras), taken to be undistorted (pinhole)
+        images: a view's lens distortion then applies to its depth map only."""
         if len(images) != len(self.views):
             raise ValueError("one image per view is needed")
         from dataclasses import replace
 
-        return Scene(self.mesh, tuple(replace(v, image=Path(p)) for v, p in zip(self.views, images)), source=self.source)
+        # the views' pixels in memory (if any) give way to the files
+        def undistorted(v: View) -> Distortion | None:  # the new images are the pinhole ones; a depth map is not
+            if v.distortion is None or v.depth is None:
+                return None
+            return replace(v.distortion, images=False)
+
+        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v), pixels=None)
+                                      for v, p in zip(self.views, images)), source=self.source, options=self.options)
 
     def validate(self, *, check_images: bool = True) -> None:
         """Check that every referenced file exists and images have the declared size and type.
@@ -477,17 +505,44 @@ class Scene:
         for v in self.views:
             if check_images and not v.in_memory:
                 _check_image_header(v)
-            if v.depth is not None and not v.depth.is_file():
-                raise InputError(f"view {v.name!r}: depth map not found: {v.depth}")
-            if v.point_cloud is not None and not v.point_cloud.is_file():
-                raise InputError(f"view {v.name!r}: point cloud not found: {v.point_cloud}")
+            try:
+                if v.depth is not None:  # the header only: size and pixel budget before any decoding
+                    check_depth_file(v.depth, shape=(v.height, v.width))
+                if v.point_cloud is not None:
+                    open_regular(v.point_cloud, "point cloud").close()
+            except InputError as e:
+                raise InputError(f"view {v.name!r}: {e}") from None
+
+
+def near_miss(path: Path) -> str:
+    """``"; found NAME beside it: did you mean it?"`` for a missing file with a near namesake, else ``""``.
+
+    A near namesake is a file in the same folder whose name differs only in case or in the
+    extension (``img00.jpg`` for ``img00.png``, as COLMAP models written before a conversion
+    name them); a missing folder is said as such.
+    """
+    folder = Path(path).parent
+    if not folder.is_dir():
+        return f"; the folder {folder} does not exist"
+    name, stem = Path(path).name.lower(), Path(path).stem.lower()
+    try:
+        entries = [e for e in os.scandir(folder) if e.is_file()]
+    except OSError:
+        return ""
+    same = [e.name for e in entries if e.name.lower() == name]
+    other = sorted(e.name for e in entries if Path(e.name).stem.lower() == stem and e.name.lower() != name)
+    found = same or other
+    if not found:
+        return ""
+    return f"; found {found[0]} beside it: did you mean it?"
 
 
 def _check_image_header(v: View) -> None:
     try:
         size = check_image_file(v.image)[:2]
     except InputError as e:
-        raise InputError(f"view {v.name!r}: {e}") from None
+        hint = near_miss(v.image) if not v.image.is_file() else ""
+        raise InputError(f"view {v.name!r}: {e}{hint}") from None
     if size != (v.width, v.height):
         raise InputError(
             f"view {v.name!r}: image {v.image} is {size[0]}x{size[1]} but the scene says {v.width}x{v.height}; "
@@ -505,6 +560,7 @@ def summarise(scene: Scene) -> dict:
         "image_size": sorted({f"{v.width}x{v.height}" for v in scene.views}),
         "with_depth": sum(v.depth is not None for v in scene.views),
         "with_point_cloud": sum(v.point_cloud is not None for v in scene.views),
+        "distorted": sum(v.distorted for v in scene.views),
         "mesh": "(in memory)" if isinstance(scene.mesh, Mesh) else str(scene.mesh),
         "mesh_vertices": int(len(m.vertices)),
         "mesh_faces": int(len(m.faces)),

@@ -27,7 +27,7 @@ from .imageops import delta_e_2000
 from .meshops import edge_topology, weld_vertices
 from .texturing.textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
 
-__all__ = ["SeamReport", "mip_bleed", "seam_metric"]
+__all__ = ["SeamReport", "SelectionSeams", "mip_bleed", "photo_colors", "seam_metric", "selection_seams"]
 
 logger = logging.getLogger(__name__)
 
@@ -375,3 +375,138 @@ def mip_bleed(mesh_or_path: Any, *, levels: tuple[int, ...] = (1, 2, 3), reach: 
         out[k] = {"mean": float(dmax.mean()), "p99": float(np.percentile(dmax, 99)), "max": float(dmax.max()),
                   "share_gt1": float((dmax > 1).mean()), "share_gt2": float((dmax > 2).mean()), "faces": int(len(dmax))}
     return out
+
+
+def photo_colors(views: Any, points: np.ndarray, view_ids: np.ndarray, *image_sets: Any) -> Any:
+    """Colours of 3-D points in the photos that texture them: point ``i`` in ``images[view_ids[i]]``.
+
+    Each point is projected by its view's camera (once, whatever the number of image sets) and
+    the image looked up bilinearly, clamped at the border (the definition of
+    :func:`o3d_seqcc.imageops.sample_bilinear`, by OpenCV's ``remap``: weights in 1/32 pixel).
+    Every image needed is read once.
+
+    Parameters
+    ----------
+    views : sequence of View
+        The cameras (``scene.views``).
+    points : (n, 3) float
+        World coordinates.
+    view_ids : (n,) int
+        View of each point; negative entries get NaN.
+    *image_sets : sequences of (H, W, 3) arrays
+        One or more sets of one image per view (e.g. the photos and the corrected images); a
+        lazy sequence is read only at the views in ``view_ids``.
+
+    Returns
+    -------
+    (n, 3) float64, or a list of them (one per image set when several are given)
+        sRGB in [0, 1].
+    """
+    import cv2
+
+    from .camera import project_points
+    from .imageops import dtype_scale, sample_colors
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    vid = np.asarray(view_ids, dtype=np.int64).reshape(-1)
+    outs = [np.full((len(pts), 3), np.nan) for _ in image_sets]
+    order = np.argsort(vid, kind="stable")
+    bounds = np.searchsorted(vid[order], np.arange(len(views) + 1))
+    for v in range(len(views)):
+        idx = order[bounds[v]:bounds[v + 1]]
+        if len(idx) == 0:
+            continue
+        uv, _ = project_points(pts[idx], views[v].intrinsic, views[v].extrinsic)
+        n, k = len(idx), 4096
+        pad = (-n) % k
+        maps = None
+        for images, out in zip(image_sets, outs):
+            img = np.asarray(images[v])
+            if n < img.shape[0] * img.shape[1] // 20:  # a few points: numpy, without a float copy of the image
+                out[idx] = sample_colors(img, np.nan_to_num(uv)) / dtype_scale(img.dtype)
+                continue
+            if maps is None:
+                h, w = img.shape[:2]
+                x = np.clip(np.nan_to_num(uv[:, 0], nan=0.0), 0.0, w - 1.0).astype(np.float32)
+                y = np.clip(np.nan_to_num(uv[:, 1], nan=0.0), 0.0, h - 1.0).astype(np.float32)
+                maps = [np.concatenate([a, np.zeros(pad, np.float32)]).reshape(-1, min(k, n + pad)) for a in (x, y)]
+            col = cv2.remap(img.astype(np.float32), maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            out[idx] = col.reshape(-1, img.shape[2])[:n].astype(np.float64) / dtype_scale(img.dtype)
+    outs = [np.clip(o, 0.0, 1.0) for o in outs]
+    return outs[0] if len(outs) == 1 else outs
+
+
+@dataclass(frozen=True, eq=False)
+class SelectionSeams:
+    """The colour steps in the photos across the edges where the per-face selection changes photo.
+
+    Attributes
+    ----------
+    delta_e : (n,) float64
+        CIEDE2000 between the two photos' colours on each such edge (mean of its samples).
+    segments : (n, 2, 3) float64
+        The edges' end points (world coordinates), for drawing.
+    faces : (n, 2) int64
+        The two faces of each edge.
+    """
+
+    delta_e: np.ndarray
+    segments: np.ndarray
+    faces: np.ndarray
+
+    def summary(self) -> dict[str, float]:
+        """``n_edges``, ``mean``, ``median``, ``p90``, ``frac_above_5`` (JSON types; zeros when no edge)."""
+        d = self.delta_e
+        if len(d) == 0:
+            return {"n_edges": 0, "mean": 0.0, "median": 0.0, "p90": 0.0, "frac_above_5": 0.0}
+        return {"n_edges": int(len(d)), "mean": float(d.mean()), "median": float(np.median(d)),
+                "p90": float(np.percentile(d, 90)), "frac_above_5": float((d > 5).mean())}
+
+
+def selection_seams(
+    vertices: np.ndarray, faces: np.ndarray, selection: np.ndarray, views: Any, images: Any, *,
+    samples_per_edge: int = 3,
+) -> SelectionSeams:
+    """The colour step each selection seam shows before any atlas or seam leveling.
+
+    For every interior edge whose two faces are textured from different photos, points along
+    the edge are looked up in both photos (:func:`photo_colors`) and compared with CIEDE2000:
+    what a viewer would see across the edge if each face showed its photo as it is. A colour
+    correction that makes the photos agree lowers it; seam leveling, which hides the steps
+    after the fact, does not enter (compare :func:`seam_metric` of the finished texture).
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+    faces : (F, 3) int
+        The scene's mesh (coincident vertices are merged to find the edges).
+    selection : (F,) int
+        View per face, -1 = seen by no view (edges to such faces are skipped).
+    views : sequence of View
+    images : sequence of (H, W, 3) arrays
+        One per view (e.g. the photos, or the corrected images).
+    samples_per_edge : int, default 3
+
+    Returns
+    -------
+    SelectionSeams
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    sel = np.asarray(selection, dtype=np.int64).reshape(-1)
+    if len(sel) != len(f):
+        raise InputError(f"selection has {len(sel)} entries for {len(f)} faces")
+    topo = edge_topology(weld_vertices(v)[f])
+    a, b = sel[topo.face_a], sel[topo.face_b]
+    k = np.flatnonzero((a >= 0) & (b >= 0) & (a != b))
+    fa, fb = topo.face_a[k], topo.face_b[k]
+    p0 = v[f[fa, topo.corner_a0[k]]]
+    p1 = v[f[fa, topo.corner_a1[k]]]
+    s = max(int(samples_per_edge), 1)
+    t = (np.arange(s) + 0.5) / s
+    pts = (p0[:, None] * (1.0 - t)[None, :, None] + p1[:, None] * t[None, :, None]).reshape(-1, 3)
+    both = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
+                        images)  # each image read once for both sides
+    ca, cb = both[:len(pts)], both[len(pts):]
+    de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
+    return SelectionSeams(delta_e=de, segments=np.stack([p0, p1], axis=1), faces=np.stack([fa, fb], axis=1))

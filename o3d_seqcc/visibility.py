@@ -59,6 +59,7 @@ from .meshops import oriented_face_normals
 from .parallel import current as current_executor
 from .scene import Mesh, load_mesh
 from .refine import refine_visibility
+from .stray import drop_faces, stray_faces
 from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, summarize_records, view_record
 
 __all__ = [
@@ -586,10 +587,19 @@ def compute_visibility(
                         split["faces_split"], split["faces_added"], split["rounds"])
         timings["split_faces"] = time.perf_counter() - t1
     del job
+    stray = stray_faces(mesh.vertices, mesh.faces, records, np.array([v.center for v in views]).reshape(-1, 3))
+    if stray.any():  # far-away junk no photo sees: it would set the scene's scale and take the atlas
+        mesh, records, far = drop_faces(mesh, records, stray)
+        parent = (np.flatnonzero(~stray) if parent is None else parent[~stray]).astype(np.int64)
+        n, degenerate = int(stray.sum()), degenerate[~stray]
+        where = f" {scene.mesh}" if isinstance(getattr(scene, "mesh", None), (str, os.PathLike)) else ""
+        warn(f"{n} face{'s' if n > 1 else ''} of the mesh{where} lie far from everything the photos see (up to "
+             f"{far:.3g} scene units away: floating junk of the scan?) and no photo sees them: left out of the "
+             "visibility, the atlas and the textured mesh; remove them from the mesh to silence this")
     stats = summarize_records(views, records, opts, scene_mesh=getattr(scene, "mesh", ""))
     timings.update(stats["timings"])
     stats.update(n_faces=int(len(mesh.faces)), degenerate_faces=int(degenerate.sum()), normals_flipped=flipped,
-                 split={"enabled": bool(split_faces), **split}, timings=timings)
+                 split={"enabled": bool(split_faces), **split}, stray_faces=int(stray.sum()), timings=timings)
     timings["total"] = time.perf_counter() - t0
     logger.info(
         "visibility: %d views x %d faces: valid %d, occluded %d, depth-inconsistent %d, oblique %d -> usable %d (%.2f s)",

@@ -26,7 +26,7 @@ def test_evaluate_prints_and_writes_json(syn, tmp_path, capsys):
     from o3d_seqcc.metrics import evaluate
 
     js = tmp_path / "ev.json"
-    assert main(["-q", "evaluate", str(syn.root / "scene.json"), "--json", str(js)]) == 0
+    assert main(["evaluate", str(syn.root / "scene.json"), "--json", str(js)]) == 0
     text = capsys.readouterr().out
     assert "PSNR" in text and "CIEDE2000" in text
     d = json.loads(js.read_text())

@@ -23,7 +23,7 @@ def _run(script: str, *args: str, cwd: Path, env: dict | None = None) -> subproc
 def test_every_example_says_what_it_shows_and_how_to_run_it():
     scripts = sorted(EXAMPLES.glob("*.py"))
     assert {"open3d_fountain.py", "game_engine_glb.py", "meshlab_project.py",
-            "meshlab_screenshot.py"} <= {p.name for p in scripts}
+            "meshlab_screenshot.py", "meshlab_plugin_screenshots.py"} <= {p.name for p in scripts}
     for p in scripts:
         doc = p.read_text().split('"""')[1]
         assert "What it shows" in doc and "How to run" in doc, p.name
@@ -56,3 +56,15 @@ def test_meshlab_project_example(tmp_path):
 def test_meshlab_screenshot_example(tmp_path):
     r = _run("meshlab_screenshot.py", "--out", "o", "--png", "shot.png", cwd=tmp_path)
     assert (tmp_path / "shot.png").stat().st_size > 10_000 and "loaded in" in r.stdout
+
+
+@pytest.mark.skipif(not Path("/usr/lib/x86_64-linux-gnu/meshlab/plugins/libfilter_o3d_seqcc.so").is_file()
+                    or shutil.which("meshlab") is None or shutil.which("xdotool") is None,
+                    reason="the MeshLab plugin is not built (./dev.sh setup builds and installs it) or MeshLab / "
+                    "xdotool are not installed")
+def test_meshlab_plugin_screenshots_example(tmp_path):
+    r = _run("meshlab_plugin_screenshots.py", "--out", "o", "--docs", "shots", cwd=tmp_path)
+    assert "from its Filters > Texture menu" in r.stdout
+    for name in ("meshlab_plugin_menu.png", "meshlab_plugin_dialog.png", "meshlab_plugin_result.jpg"):
+        assert 20_000 < (tmp_path / "shots" / name).stat().st_size < 400_000
+    assert (tmp_path / "o" / "room" / "seqcc_textured" / "mesh_meshlab.ply").is_file()

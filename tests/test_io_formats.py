@@ -87,16 +87,22 @@ def test_colmap_binary_bad_input(colmap_model, tmp_path):
         load_scene(d, mesh=mesh, image_dir=root / "images")
     with pytest.raises(InputError, match="pass the mesh"):
         load_scene(root / "sparse_txt")
-    rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="OPENCV", width=W, height=H,
-                                                    params=[50, 50, 32, 24, 0.1, 0, 0, 0], camera_id=1))
-    rec.add_image_with_trivial_frame(pycolmap.Image(name="img0.png", camera_id=1, image_id=1),
-                                     pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([0, 0, 0, 1.0])), np.zeros(3)))
-    dist = tmp_path / "distorted"
-    dist.mkdir()
-    rec.write_binary(str(dist))
-    with pytest.raises(InputError, match=r"cameras\.bin: camera 1: camera model OPENCV with distortion.*undistort"):
-        load_scene(dist, mesh=mesh, image_dir=root / "images")
+    for model, params, err in (("OPENCV", [50, 50, 32, 24, 0.1, 0, 0, 0], None),  # undistorted when read
+                               ("FOV", [50, 50, 32, 24, 0.1], r"camera model FOV is not supported.*undistort")):
+        rec = pycolmap.Reconstruction()
+        rec.add_camera_with_trivial_rig(pycolmap.Camera(model=model, width=W, height=H, params=params, camera_id=1))
+        rec.add_image_with_trivial_frame(pycolmap.Image(name="img0.png", camera_id=1, image_id=1),
+                                         pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([0, 0, 0, 1.0])), np.zeros(3)))
+        dist = tmp_path / f"distorted_{model}"
+        dist.mkdir()
+        rec.write_binary(str(dist))
+        if err is None:
+            view = load_scene(dist, mesh=mesh, image_dir=root / "images").views[0]
+            assert view.distortion.model == "opencv" and view.distortion.coefficients == (0.1, 0.0, 0.0, 0.0)
+            assert view.distorted and view.load_image().shape == (H, W, 3)
+        else:
+            with pytest.raises(InputError, match=r"cameras\.bin: camera 1: " + err):
+                load_scene(dist, mesh=mesh, image_dir=root / "images")
 
 
 @pytest.fixture
@@ -152,10 +158,13 @@ def test_meshroom_versions_unposed_views_and_distortion(meshroom_cameras, tmp_pa
     assert scene.names == ["IMG_0", "IMG_1"] and "no pose" in caplog.text
     np.testing.assert_allclose(scene.views[0].intrinsic[:2, 2], [30.0, 20.0])
     bad = json.loads(json.dumps(data))
-    bad["intrinsics"][1]["type"] = "radial3"
+    bad["intrinsics"][1]["type"] = "radial3"  # AliceVision's radial3: removed when read
     bad["intrinsics"][1]["distortionParams"] = ["0.1", "0", "0"]
     p.write_text(json.dumps(bad))
-    with pytest.raises(InputError, match=r"radial3.*undistort"):
+    assert load_scene(p, mesh=mesh).views[1].distortion.coefficients == (0.1, 0.0, 0.0, 0.0, 0.0)
+    bad["intrinsics"][1]["type"] = "3deanamorphic4"
+    p.write_text(json.dumps(bad))
+    with pytest.raises(InputError, match=r"3deanamorphic4.*not supported.*undistort"):
         load_scene(p, mesh=mesh)
     bad = json.loads(json.dumps(data))
     bad["poses"][0]["pose"]["transform"]["rotation"] = ["1", "0"]
@@ -184,13 +193,13 @@ def test_mlp_through_load_scene_and_cli(tmp_path, rng, capsys):
     for a, b in zip(back.views, scene.views):
         np.testing.assert_allclose(a.intrinsic, b.intrinsic, atol=1e-9)
         np.testing.assert_allclose(a.extrinsic, b.extrinsic, atol=1e-9)
-    assert main(["info", str(mlp)]) == 0
+    assert main(["info", str(mlp), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["views"] == 2
 
 
 def test_loader_table_checks(tmp_path, colmap_model):
     _, root, mesh = colmap_model
-    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap"]
+    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap", "openmvs"]
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError) as e:
         load_scene(tmp_path / "empty")

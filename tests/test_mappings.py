@@ -303,7 +303,7 @@ def test_cli_mappings(occluder_scene, tmp_path, capsys):
 
     root = occluder_scene.mesh.parent
     out = tmp_path / "maps.npz"
-    rc = main(["-q", "mappings", str(root / "scene.json"), "--out", str(out), "--plot", "v0,v1", "--max-angle", "80"])
+    rc = main(["mappings", str(root / "scene.json"), "--out", str(out), "--plot", "v0,v1", "--max-angle", "80"])
     assert rc == 0
     assert "mappings_total" in capsys.readouterr().out
     L = load_mappings(out)

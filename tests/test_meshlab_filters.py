@@ -131,8 +131,10 @@ def test_load_mlp_bad_input(tmp_path: Path):
         load_mlp(bad)
     scene = random_scene(tmp_path, n=1)
     p = save_mlp(scene, tmp_path / "d.mlp")
-    p.write_text(p.read_text().replace('LensDistortion="0 0"', 'LensDistortion="0.1 0"'))
-    with pytest.raises(InputError, match="distortion"):
+    p.write_text(p.read_text().replace('LensDistortion="0 0"', 'LensDistortion="0.001 0"'))
+    assert load_mlp(p).views[0].distortion.model == "meshlab"  # undistorted when read (issue 20)
+    p.write_text(p.read_text().replace('LensDistortion="0.001 0"', 'LensDistortion="0.1"'))
+    with pytest.raises(InputError, match="LensDistortion needs 2 numbers"):
         load_mlp(p)
 
 

@@ -316,20 +316,26 @@ def test_interrupt_during_start_up_exits_130(monkeypatch, capsys):
 # 8. writes outside --out -------------------------------------------------------------------------
 
 
-def test_symlinked_out_is_followed_and_images_symlink_not_written_through(S, tmp_path):
+def test_symlinked_out_is_followed_and_images_symlink_not_written_through(S, tmp_path, capsys):
     target = tmp_path / "disk" / "results"
     target.mkdir(parents=True)
     link = tmp_path / "out"
     link.symlink_to(target, target_is_directory=True)
     assert main(["-q", "run", str(S), "--out", str(link), *FAST]) == 0
     assert link.is_symlink() and (target / "report.json").is_file()
+    assert len(sc.load_scene(link / "project.mlp").views) == 5  # the project loads through the link
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     (elsewhere / "keep.png").write_bytes(b"not ours")
     shutil.rmtree(target / "images", ignore_errors=True)
     (target / "images").symlink_to(elsewhere, target_is_directory=True)
-    assert main(["-q", "run", str(S), "--out", str(link), "--overwrite", "--save-images", *FAST]) == 0
+    # a link the user put into the output is not ours: --overwrite refuses instead of removing it
+    assert main(["-q", "run", str(S), "--out", str(link), "--overwrite", "--save-images", *FAST]) == 2
+    assert "did not write (images)" in capsys.readouterr().err
     assert _visible(elsewhere) == ["keep.png"] and (elsewhere / "keep.png").read_bytes() == b"not ours"
+    assert (target / "images").is_symlink()
+    (target / "images").unlink()
+    assert main(["-q", "run", str(S), "--out", str(link), "--overwrite", "--save-images", *FAST]) == 0
     assert not (target / "images").is_symlink() and len(_visible(target / "images")) == 5
     assert sorted(p.name for p in tmp_path.iterdir()) == ["S", "disk", "elsewhere", "out"]
     assert sorted(p.name for p in (tmp_path / "disk").iterdir()) == ["results"]

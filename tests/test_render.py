@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.render: ray-cast textured renders, selection colouring, sharpness."""
+"""Tests of o3d_seqcc.render: ray-cast textured renders, selection colouring, sharpness, gradient similarity."""
 
 from __future__ import annotations
 
@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.render import raycast, render_selection, render_textured, selection_palette, sharpness
+from o3d_seqcc.render import (
+    gradient_similarity,
+    raycast,
+    render_selection,
+    render_textured,
+    selection_palette,
+    sharpness,
+)
 from o3d_seqcc.scene import View
 
 import trimesh
@@ -102,6 +109,75 @@ def test_sharpness_blur_lower():
     np.testing.assert_allclose(sharpness(img.astype(np.uint16) * 257, mask), s, rtol=1e-6)
     with pytest.raises(InputError):
         sharpness(img, np.zeros(img.shape[:2], bool))
+
+
+def _lettering() -> np.ndarray:
+    """A wall with dark lettering (like Fountain's "HAROLD HATCH"): smooth texture, antialiased strokes."""
+    rng = np.random.default_rng(0)
+    wall = 170 + cv2.GaussianBlur(rng.normal(0, 12, (120, 360, 3)), (0, 0), 3)
+    img = np.clip(wall, 0, 255).astype(np.uint8)
+    cv2.putText(img, "HAROLD HATCH", (12, 75), cv2.FONT_HERSHEY_SIMPLEX, 1.5, (40, 35, 30), 3, cv2.LINE_AA)
+    return img
+
+
+def test_gradient_similarity_known_answers():
+    img = _lettering()
+    mask = np.ones(img.shape[:2], bool)
+    # the photo itself scores 1, also as 16-bit; an offset changes no gradient; a gain k on the
+    # contrast scores 2k / (1 + k^2)
+    assert gradient_similarity(img, img, mask) == pytest.approx(1.0, abs=1e-9)
+    assert gradient_similarity(img.astype(np.uint16) * 257, img) == pytest.approx(1.0, abs=1e-6)
+    f = img.astype(np.float64) / 255.0
+    assert gradient_similarity(f + 0.1, f, mask) == pytest.approx(1.0, abs=1e-6)
+    assert gradient_similarity(0.6 * f + 0.2, f, mask) == pytest.approx(2 * 0.6 / (1 + 0.36), abs=1e-5)
+    # a blurred copy scores lower, the more blurred the lower
+    g = [gradient_similarity(cv2.GaussianBlur(img, (0, 0), s), img, mask) for s in (0.7, 1.0, 2.0)]
+    assert 0.95 > g[0] > g[1] > g[2] > 0.3
+    # a misregistration within max_shift is forgiven (a real scan's render is a few pixels off its
+    # photo); without the search, or shifted further, the copy scores lower, the further the lower
+    assert gradient_similarity(np.roll(img, 1, axis=1), img, mask) > 0.999
+    assert gradient_similarity(np.roll(img, (3, -2), axis=(1, 0)), img, mask) > 0.999
+    g0 = [gradient_similarity(np.roll(img, d, axis=1), img, mask, max_shift=0) for d in (1, 2, 4)]
+    assert 0.9 > g0[0] > g0[1] > g0[2]
+    g = [gradient_similarity(np.roll(img, d, axis=1), img, mask) for d in (6, 9)]
+    assert 0.5 > g[0] > g[1]
+    # doubled edges (the lettering twice, 3 px apart, as at a misregistered seam) raise the
+    # variance of the Laplacian above the photo's but lower the similarity
+    doubled = np.minimum(img, np.roll(img, 3, axis=1))
+    assert sharpness(doubled, mask) > sharpness(img, mask)
+    assert gradient_similarity(doubled, img, mask) < 0.8
+    # half the wall from a photo misregistered by 6 px: a seam through the lettering
+    seam = img.copy()
+    seam[:, 180:] = np.roll(img, 6, axis=1)[:, 180:]
+    assert sharpness(seam, mask) > 0.99 * sharpness(img, mask)
+    assert gradient_similarity(seam, img, mask) < 0.8
+    # noise added to the photo scores lower; a flat image scores 0
+    noisy = np.clip(img + np.random.default_rng(1).normal(0, 20, img.shape[:2])[..., None], 0, 255).astype(np.uint8)
+    assert sharpness(noisy, mask) > sharpness(img, mask) and gradient_similarity(noisy, img, mask) < 0.9
+    assert gradient_similarity(np.full_like(img, 99), img, mask) == 0.0
+
+
+def test_gradient_similarity_mask_and_errors():
+    img = _lettering()
+    left = np.zeros(img.shape[:2], bool)
+    left[:, :168] = True
+    seam = img.copy()
+    seam[:, 180:] = np.roll(img, 6, axis=1)[:, 180:]
+    # only the masked pixels count: the seam's right half is outside the mask
+    assert gradient_similarity(seam, img, left) == pytest.approx(1.0, abs=1e-9)
+    assert gradient_similarity(seam, img) < 0.8
+    with pytest.raises(InputError, match="one size"):
+        gradient_similarity(img[:, :100], img)
+    with pytest.raises(InputError, match="mask shape"):
+        gradient_similarity(img, img, left[:, :100])
+    with pytest.raises(InputError, match="no tile"):
+        gradient_similarity(img, img, np.zeros(img.shape[:2], bool))
+    with pytest.raises(InputError, match="no tile"):
+        gradient_similarity(img, np.full_like(img, 7))
+    with pytest.raises(InputError, match="window"):
+        gradient_similarity(img, img, window=2)
+    with pytest.raises(InputError, match="integer"):
+        gradient_similarity(img, img, max_shift=1.5)
 
 
 def test_supersampled_render_is_box_filtered():

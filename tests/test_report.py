@@ -6,6 +6,7 @@ import base64
 import json
 import re
 import shutil
+import struct
 import subprocess
 import tempfile
 
@@ -18,6 +19,8 @@ from o3d_seqcc.cli import main
 from o3d_seqcc.io.output import MANIFEST
 from o3d_seqcc.luts import compose_luts
 from o3d_seqcc.report import regenerate_report
+from o3d_seqcc.report.page import MAX_DETAIL_EDGES
+from o3d_seqcc.report.viewer import viewer_bundle
 
 FAST = ["--t-npm", "50", "--atlas-size", "1024", "--format", "glb", "--fallback", "flat"]
 IMG = re.compile(r'<img(?: class="[^"]*")? src="data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)" alt="[^"]*">')
@@ -43,6 +46,12 @@ def _images(fragment: str) -> list[tuple[str, bytes]]:
     return [(kind, base64.b64decode(data)) for kind, data in IMG.findall(fragment)]
 
 
+def _scripts(page: str) -> tuple[str, list[tuple[str, str]]]:
+    """The page without its scripts, and the scripts as (opening tag, content)."""
+    found = re.findall(r"(<script[^>]*>)(.*?)</script>", page, flags=re.S)
+    return re.sub(r"<script[^>]*>.*?</script>", "", page, flags=re.S), found
+
+
 def test_the_report_is_one_self_contained_file(run_dir):
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
@@ -51,18 +60,29 @@ def test_the_report_is_one_self_contained_file(run_dir):
     assert len(imgs) == page.count("<img") > 20
     for kind, data in imgs:
         assert data[:8] == b"\x89PNG\r\n\x1a\n" if kind == "png" else data[:3] == b"\xff\xd8\xff", kind
-    # nothing fetched from anywhere: no URL, no script, no stylesheet link, no CSS url()
-    for bad in ("http://", "https://", "<script", "<link", "url(", "@import", "src=\"/", "src='", "file:"):
-        assert bad not in page, bad
-    assert re.findall(r'src="(?!data:)', page) == [] and re.findall(r'href="(?!#)', page) == []
+    # two scripts, both inline: the viewer's data (JSON) and the viewer, exactly the bundle the package ships
+    rest, scripts = _scripts(page)
+    assert [tag for tag, _ in scripts] == ['<script type="application/json" id="o3d-viewer-data">', "<script>"]
+    assert scripts[1][1] == viewer_bundle()
+    data = json.loads(scripts[0][1])
+    glb = base64.b64decode(data["glb"])
+    assert glb[:4] == b"glTF" and struct.unpack("<I", glb[8:12])[0] == len(glb)
+    for m in data["modes"][1:]:
+        assert m["texture"].startswith("data:image/jpeg;base64,")
+    # nothing fetched from anywhere: no URL, no stylesheet link, no CSS url(), outside the scripts and in the data
+    for bad in ("http://", "https://", "<link", "url(", "@import", "src=\"/", "src='", "file:"):
+        assert bad not in rest and bad not in scripts[0][1], bad
+    assert re.findall(r'src="(?!data:)', rest) == [] and re.findall(r'href="(?!#)', rest) == []
+    # the bundle names no address it could load (three.js's XHTML namespace string is not a request)
+    assert set(re.findall(r"https?://[^\s\"'`)]+", scripts[1][1])) <= {"http://www.w3.org/1999/xhtml"}
 
 
 def test_the_report_shows_this_run(run_dir, scene):
     rep = json.loads((run_dir / "report.json").read_text())
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     sec = _sections(page)
-    assert list(sec) == ["views", "table2", "graph", "jih", "steps", "selection", "renders", "seams", "timings",
-                         "settings"]
+    assert list(sec) == ["model", "correction", "views", "table2", "graph", "jih", "steps", "selection", "renders",
+                         "seams", "timings", "settings"]
     names, ref = scene.scene.names, rep["correction"]["reference"]
     paths = rep["correction"]["paths"]
     n_views = len(names)
@@ -70,8 +90,9 @@ def test_the_report_shows_this_run(run_dir, scene):
     edges = {(p[i], p[i + 1]) for p in paths.values() for i in range(len(p) - 1)}
     assert f"the reference <b>{ref}</b>" in sec["graph"] and len(_images(sec["graph"])) == 1
     assert sec["graph"].count("<tr><td>") == len(edges)
-    # Figures 6-7: one detailed figure, one thumbnail per path edge
-    assert len(_images(sec["jih"])) == 1 + len(edges)
+    # Figures 6-7: three channels of the path's edges (at most MAX_DETAIL_EDGES), one thumbnail per path edge
+    detail = min(max(len(p) for p in paths.values()) - 1, MAX_DETAIL_EDGES)
+    assert len(_images(sec["jih"])) == 3 * detail + len(edges)
     # Figure 8: the longest path, its views above, one step (image + CMF) per edge below
     hops = max(len(p) for p in paths.values()) - 1
     # (+ its corrected image after the joint refinement: the default method refines the sequential estimate)
@@ -93,7 +114,7 @@ def test_the_report_shows_this_run(run_dir, scene):
         for stat in ("mean", "min"):
             assert cells[f"contrast.{when}.{stat}"] == f"{m['contrast'][when][stat]:.3f}"
     assert m["after"]["ciede2000"]["mean"] < m["before"]["ciede2000"]["mean"]
-    assert m["before"]["max_per_pair"] == 200 and m["before"]["n_scored"] <= 200 * m["before"]["n_pairs"]
+    assert "max_per_pair" not in m["before"]  # a small scene: every mapping scored, as correct does
     # Figure 9: the legend counts the faces of selection.npy
     sel = np.load(run_dir / "selection.npy")
     counts = np.bincount(sel[sel >= 0], minlength=n_views)
@@ -193,3 +214,64 @@ def test_the_report_renders_in_headless_chromium(run_dir, tmp_path):
     labels, n = ndimage.label(ndimage.binary_closing(ink, iterations=2))
     big = np.sort(np.bincount(labels.ravel())[1:])[::-1]
     assert (big > 4000).sum() >= 6, big[:10]
+
+
+def test_table2_is_what_correct_gives_with_the_command_the_report_names(run_dir, tmp_path):
+    import html
+    import shlex
+
+    sec = _sections((run_dir / "report.html").read_text(encoding="utf-8"))
+    cmd = html.unescape(re.search(r"<code>(o3d-seqcc correct [^<]*)</code>", sec["table2"]).group(1))
+    argv = shlex.split(cmd)[1:]
+    argv[argv.index("OUT")] = str(tmp_path / "c")
+    assert main(["-q", *argv]) == 0
+    ran, full = (json.loads((d / "report.json").read_text()) for d in (run_dir, tmp_path / "c"))
+    assert full["reference"] == ran["correction"]["reference"] and full["paths"] == ran["correction"]["paths"]
+    # the same correction scored on the same mappings (a small scene: all of them): the same table
+    assert "gives this very table" in sec["table2"]
+    page_c = _sections((tmp_path / "c" / "report.html").read_text(encoding="utf-8"))["table2"]
+    cells = re.compile(r'<td data-key="([a-z0-9_.]+)">([^<]*)</td>')
+    assert dict(cells.findall(sec["table2"])) == dict(cells.findall(page_c))
+    for when in ("before", "after"):
+        for metric in ("psnr", "ciede2000"):
+            assert full["metrics"][when][metric]["mean"] == pytest.approx(ran["metrics"][when][metric]["mean"], abs=1e-9)
+    assert full["metrics"]["before"]["n_mappings"] == ran["metrics"]["before"]["n_mappings"]
+
+
+def test_the_selection_legend_colours_are_told_apart_and_the_seam_steps_are_report_json_s(run_dir):
+    from o3d_seqcc.imageops import delta_e_2000
+
+    page = (run_dir / "report.html").read_text(encoding="utf-8")
+    sec = _sections(page)
+    rgb = np.array([list(map(int, c)) for c in re.findall(r"background:rgb\((\d+),(\d+),(\d+)\)", sec["selection"])])
+    views = rgb[:-1]  # the last swatch: faces seen by no view
+    assert len(views) >= 3
+    d = delta_e_2000(views[:, None] / 255.0, views[None] / 255.0)
+    np.fill_diagonal(d, np.inf)
+    assert d.min() > 15, d.min()
+    steps = json.loads((run_dir / "report.json").read_text())["selection_seams"]
+    a, b = steps["photos"], steps["corrected"]
+    assert b["mean"] < a["mean"]  # the correction lowers the colour steps at the seams
+    assert f"{a['mean']:.2f} → {b['mean']:.2f}" in page  # the summary card
+    assert f"<td>{a['p90']:.2f}</td><td>{b['p90']:.2f}</td>" in sec["correction"]
+    assert len(_images(sec["correction"])) == 5
+
+
+def test_a_model_too_big_to_embed_is_said_so(run_dir, scene):
+    from o3d_seqcc.report.viewer import model_section
+    from o3d_seqcc.texturing import load_textured_mesh
+
+    tm = load_textured_mesh(run_dir / "mesh.glb")
+    html_ = model_section(tm, scene.scene.views[0], scene.scene, None, None, max_faces=len(tm.faces) - 1)
+    assert "<canvas" not in html_ and f"has {len(tm.faces)} faces, more than this page embeds" in html_
+    assert "mesh.glb" in html_
+
+
+def test_texture_writes_the_viewer_without_the_correction_sections(scene, tmp_path):
+    out = tmp_path / "t"
+    assert main(["-q", "texture", str(scene.root / "scene.json"), "--out", str(out), *FAST[2:]]) == 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    sec = _sections(page)
+    assert list(sec)[:1] == ["model"] and "correction" not in sec and "table2" not in sec
+    data = json.loads(_scripts(page)[1][0][1])
+    assert [m["key"] for m in data["modes"]] == ["result", "photos"]

@@ -230,7 +230,9 @@ def test_alpha_image(tiny):
 
 def test_depth_map_of_wrong_size(tiny):
     cv2.imwrite(str(tiny / "depth" / "v0.png"), np.ones((10, 10), np.uint16))
-    s = load_scene(tiny)
+    with pytest.raises(InputError, match=r"depth map .*v0\.png is 10x10 but the view is 64x48"):
+        load_scene(tiny)  # from the header, before any work
+    s = load_scene(tiny, validate=False)
     with pytest.raises(InputError, match=r"depth map .*v0\.png is 10x10 but the view is 64x48"):
         s.views[0].load_depth()
 
@@ -309,9 +311,12 @@ def test_colmap_text_model(tmp_path, rng):
     assert np.allclose(a.translation, [0.1, 0.2, 0.3]) and np.allclose(a.rotation, np.eye(3))
     assert np.allclose(b.rotation, [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
     assert b.intrinsic[0, 0] == b.intrinsic[1, 1] == 90
-    # distortion is refused with the fix
+    # distortion is removed when the images are read; models without an OpenCV form are refused with the fix
     (root / "sparse" / "cameras.txt").write_text("1 OPENCV 64 48 100 100 32 24 0.1 0 0 0\n2 PINHOLE 64 48 1 1 1 1\n")
-    with pytest.raises(InputError, match=r"cameras\.txt: camera line .*camera model OPENCV with distortion.*undistort"):
+    assert load_scene(root / "sparse", mesh=root / "mesh.ply").views[0].distortion.model == "opencv"
+    (root / "sparse" / "cameras.txt").write_text("1 THIN_PRISM_FISHEYE 64 48 100 100 32 24 0.1 0 0 0 0 0 0 0\n"
+                                                 "2 PINHOLE 64 48 1 1 1 1\n")
+    with pytest.raises(InputError, match=r"cameras\.txt: camera line .*THIN_PRISM_FISHEYE is not supported.*undistort"):
         load_scene(root / "sparse", mesh=root / "mesh.ply")
 
 

@@ -10,8 +10,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
+import re
 import sys
-from contextlib import contextmanager
+import warnings
+from contextlib import contextmanager, redirect_stdout
 from typing import Iterator
 
 from ..errors import InputError
@@ -28,7 +31,8 @@ def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
     d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
     p.add_argument("-v", "--verbose", action="count", default=d(0),
                    help="more log output: -v the library's progress messages, -vv debug")
-    p.add_argument("-q", "--quiet", action="store_true", default=d(False), help="only errors")
+    p.add_argument("-q", "--quiet", action="store_true", default=d(False),
+                   help="print nothing but errors (no summary, no warnings, no progress)")
     p.add_argument("-j", "--jobs", type=int, default=d(-1),
                    help="parallel workers (joblib threads) for per-view and per-edge work (default -1: all cores)")
     p.add_argument("--scheduler", default=d(None), metavar="ADDRESS",
@@ -39,10 +43,35 @@ def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
                    help=f"refuse images with more pixels than N before decoding them (default {MAX_IMAGE_PIXELS})")
 
 
+class _Parser(argparse.ArgumentParser):
+    """The top-level parser: an option the command does not know is an error in that command's own usage.
+
+    argparse hands a sub-command's unknown options to the top-level parser, whose usage says
+    nothing about them; here the sub-command's parser reports them, with the closest option it
+    has ("did you mean --t-npm?").
+    """
+
+    def parse_args(self, args=None, namespace=None):  # noqa: D102 - argparse's
+        import difflib
+
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            sub = ns._subparsers[ns.command]
+            known = [o for a in sub._actions for o in a.option_strings]
+            hints = []
+            for word in extra:
+                if word.startswith("-"):
+                    close = difflib.get_close_matches(word.split("=", 1)[0], known, n=1, cutoff=0.75)
+                    if close:
+                        hints.append(f"{word.split('=', 1)[0]}: did you mean {close[0]}?")
+            sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
+        return ns
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="o3d-seqcc",
         description="Sequential pairwise colour correction and texture mapping of registered photos onto a mesh.",
     )
@@ -58,36 +87,121 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         _add_global_options(p, suppress=True)
         p.set_defaults(func=mod.run)
+    parser.set_defaults(_subparsers=sub.choices)
     return parser
 
 
-@contextmanager
-def _logging(verbose: int, quiet: bool) -> Iterator[None]:
-    """Our log lines on stderr for the duration of a command, then the logging state as it was.
+class WarningLog(logging.Handler):
+    """Warnings a person reads: collected while a command runs, printed at its end one line per kind.
 
-    The package's loggers at WARNING (default), INFO (-v), DEBUG (-vv) or ERROR (-q); third-party
-    loggers untouched (WARNING, Python's default); library warnings
-    (:class:`~o3d_seqcc.errors.O3dSeqccWarning`) routed through logging so they show once.
+    A kind is a message with its quoted names and numbers blanked out, so the same warning about
+    16 views is one line: ``o3d-seqcc run: warning (16 times): view 'v00' ...; also 'v01', 'v02',
+    ... (13 more)``. Library warnings come from :func:`warnings.warn`
+    (:class:`~o3d_seqcc.errors.O3dSeqccWarning` and third-party ones, through :meth:`showwarning`)
+    and from the package's loggers at WARNING; Python's ``file:line: Category:`` prefix never shows.
+    """
+
+    _QUOTED = re.compile(r"'[^'\s]*'|\"[^\"\s]*\"")  # a repr'd name (no blank inside: "view's" is no quote)
+    _PATH = re.compile(r"\S*/\S*")
+    _NUMBER = re.compile(r"(?<![A-Za-z_])[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?%?")
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(logging.WARNING)
+        self.prog = prog
+        self.kinds: dict[str, list[str]] = {}
+
+    def add(self, message: str) -> None:
+        text = " ".join(str(message).split())
+        key = self._NUMBER.sub("#", self._PATH.sub("…", self._QUOTED.sub("'…'", text)))
+        self.kinds.setdefault(key, []).append(text)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.add(record.getMessage())
+        except Exception:  # pragma: no cover - a broken format string must not break the command
+            self.handleError(record)
+
+    def showwarning(self, message, category, filename, lineno, file=None, line=None) -> None:
+        from ..errors import O3dSeqccWarning
+
+        ours = issubclass(category, O3dSeqccWarning)
+        self.add(str(message) if ours else f"{category.__name__}: {message}")
+
+    def lines(self) -> list[str]:
+        out = []
+        for texts in self.kinds.values():
+            first, n = texts[0], len(texts)
+            if n == 1:
+                out.append(f"{self.prog}: warning: {first}")
+                continue
+            names = list(dict.fromkeys(m.group(0) for t in texts[1:] for m in [self._QUOTED.search(t)] if m))
+            also = ""
+            if names and self._QUOTED.search(first) and names[0] != self._QUOTED.search(first).group(0):
+                shown = ", ".join(names[:5])
+                also = f"; also {shown}" + (f" ({len(names) - 5} more)" if len(names) > 5 else "")
+            out.append(f"{self.prog}: warning ({n} times): {first}{also}")
+        return out
+
+
+@contextmanager
+def _logging(verbose: int, quiet: bool, prog: str = "o3d-seqcc") -> Iterator[None]:
+    """Our log for the duration of a command, then the logging and warnings state as it was.
+
+    -q: errors only (nothing else on stderr, nothing on stdout: see :func:`_quiet`). Otherwise
+    warnings (the library's :func:`warnings.warn` and its loggers at WARNING) are printed at the
+    end, one line per kind with a count (:class:`WarningLog`); -v streams the library's INFO
+    messages as they come, -vv DEBUG. Third-party loggers are untouched (WARNING, Python's
+    default).
     """
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    saved = []
-    for name, lvl in (("o3d_seqcc", level), ("py.warnings", max(level, logging.WARNING))):
-        lg = logging.getLogger(name)
-        saved.append((lg, lg.level, lg.propagate))
-        lg.setLevel(lvl)
-        lg.propagate = False
-        lg.addHandler(handler)
-    logging.captureWarnings(True)
-    try:
+    stream = logging.StreamHandler(sys.stderr)
+    stream.setFormatter(logging.Formatter(f"{prog}: %(message)s"))
+    stream.addFilter(lambda r: r.levelno != logging.WARNING)  # warnings go to the grouped lines
+    grouped = WarningLog(prog)
+    lg = logging.getLogger("o3d_seqcc")
+    saved = (lg.level, lg.propagate)
+    lg.setLevel(level)
+    lg.propagate = False
+    lg.addHandler(stream)
+    if not quiet:
+        lg.addHandler(grouped)
+    from ..errors import O3dSeqccWarning
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("always", category=O3dSeqccWarning)  # every one counts in the grouped line
+        warnings.showwarning = grouped.showwarning if not quiet else (lambda *a, **k: None)
+        try:
+            yield
+        finally:
+            lg.removeHandler(stream)
+            lg.removeHandler(grouped)
+            lg.setLevel(saved[0])
+            lg.propagate = saved[1]
+            for line in grouped.lines():
+                print(line, file=sys.stderr)
+
+
+@contextmanager
+def _quiet(quiet: bool) -> Iterator[None]:
+    """With -q, nothing on standard output (ours, or a compiled library's), until the block ends."""
+    if not quiet:
         yield
+        return
+    sys.stdout.flush()
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # a captured or replaced sys.stdout without a file
+        fd = None
+    saved = os.dup(fd) if fd is not None else None
+    try:
+        with open(os.devnull, "w") as null, redirect_stdout(null):
+            if saved is not None:
+                os.dup2(null.fileno(), fd)
+            yield
     finally:
-        logging.captureWarnings(False)
-        for lg, lvl, prop in saved:
-            lg.removeHandler(handler)
-            lg.setLevel(lvl)
-            lg.propagate = prop
+        if saved is not None:
+            os.dup2(saved, fd)
+            os.close(saved)
 
 
 def _client(address: str | None):
@@ -110,6 +224,42 @@ def _executor(client):
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
+    problem = _environment_problem()
+    if problem:
+        print(f"o3d-seqcc: error: {problem}", file=sys.stderr)
+        return 2
+    from ..interrupts import Terminated, interruptible
+
+    try:
+        with interruptible():  # SIGTERM / SIGHUP clean up like Ctrl-C
+            return _main(argv)
+    except Terminated as e:
+        print(f"o3d-seqcc: terminated ({e.name})", file=sys.stderr)
+        return 128 + e.signum
+    except KeyboardInterrupt:
+        print("o3d-seqcc: interrupted", file=sys.stderr)
+        return 130
+
+
+def _environment_problem() -> str | None:
+    """What makes any run fail before it starts (a deleted working directory), as a message; also lets
+    paths whose bytes are not UTF-8 print as they are (like ``ls``) instead of failing."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="surrogateescape")
+    try:
+        os.getcwd()
+    except (FileNotFoundError, PermissionError, OSError):
+        return ("the current working directory no longer exists (deleted or moved, or not readable); change to an "
+                "existing folder (cd) and run the command again")
+    return None
+
+
+def _main(argv: list[str] | None) -> int:
+    from ..interrupts import Terminated
+
     try:
         parser = build_parser()
         try:
@@ -120,13 +270,15 @@ def main(argv: list[str] | None = None) -> int:
 
         from ..io.files import set_max_image_pixels
         from ..progress import show_progress
+        from .common import progress_from_args
 
         try:
             old = set_max_image_pixels(args.max_image_pixels)
             client = None
             try:
                 bars = sys.stderr.isatty() and not args.quiet
-                with _logging(args.verbose, args.quiet), parallel_config(n_jobs=args.jobs), show_progress(bars):
+                with _logging(args.verbose, args.quiet, f"o3d-seqcc {args.command}"), _quiet(args.quiet), \
+                        parallel_config(n_jobs=args.jobs), show_progress(bars), progress_from_args(args):
                     client = _client(args.scheduler)
                     with _executor(client):
                         return int(args.func(args) or 0)
@@ -140,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             print(f"o3d-seqcc {args.command}: error: {e}", file=sys.stderr)
             return 1
+    except Terminated:
+        raise
     except KeyboardInterrupt:
         print("o3d-seqcc: interrupted", file=sys.stderr)
         return 130

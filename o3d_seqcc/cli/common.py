@@ -12,7 +12,7 @@ from ..correction import DEFAULT_METHOD, available_methods
 from ..errors import InputError
 from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
-from ..io.output import check_output
+from ..io.output import check_output, check_output_file
 from ..mappings import DEFAULT_MODE, MODES
 from ..orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
@@ -22,6 +22,7 @@ __all__ = [
     "add_atlas_arguments",
     "add_correction_arguments",
     "add_export_arguments",
+    "add_progress_argument",
     "add_scene_arguments",
     "add_split_argument",
     "add_t_npm_argument",
@@ -30,8 +31,10 @@ __all__ = [
     "prepare_out_dir",
     "print_report_path",
     "print_run_summary",
+    "progress_from_args",
     "save_options_from_args",
     "scene_from_args",
+    "scene_options_from_args",
     "texture_settings_from_args",
 ]
 
@@ -40,20 +43,43 @@ _DEFAULTS = TextureSettings()
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The scene argument and the loader options every command shares."""
+    from ..io.load import AXES, EXTRINSIC_CONVENTIONS
+
     p.add_argument("scene", help="scene.json (or its folder), a MeshLab .mlp, Meshroom cameras.sfm, an Open3D RGB-D "
-                   "folder, or a COLMAP model folder (text or binary)")
+                   "folder, a COLMAP model folder (text or binary), or an OpenMVS scene.mvs")
     p.add_argument("--mesh", help="mesh file (required for RGB-D folders, COLMAP and Meshroom; overrides the others')")
+    p.add_argument("--image-dir", help="folder of the images (COLMAP, Meshroom, OpenMVS), instead of where the scene "
+                   "file says")
     p.add_argument("--depth-dir", help="folder of depth maps named after the views, for scenes without depth (MeshLab "
                    "projects, COLMAP, Meshroom): turns the depth-consistency filter on")
     p.add_argument("--depth-scale", type=float, default=1000.0,
                    help="depth units per metre of the --depth-dir maps (default 1000: millimetres)")
+    p.add_argument("--extrinsic", choices=EXTRINSIC_CONVENTIONS, default=None,
+                   help="what the scene's pose matrices map (scene.json, COLMAP, RGB-D folders), when not the format's "
+                   "own (scene.json and COLMAP world-to-camera, key.log camera-to-world); default: the format's, "
+                   "checked against the mesh")
+    p.add_argument("--axes", choices=AXES, default=None,
+                   help="the scene's camera axes: opencv (y down, looking down +z; every format's own) or opengl (y up, "
+                   "looking down -z); default opencv, checked against the mesh")
+    p.add_argument("--intrinsic", metavar="FILE",
+                   help="RGB-D folders: the colour camera's intrinsic, Open3D's PinholeCameraIntrinsic JSON (default "
+                   "PrimeSense, for 640x480 images only)")
+    p.add_argument("--no-camera-check", dest="camera_check", action="store_false",
+                   help="skip the check of the cameras against the mesh (camera-to-world, OpenGL axes, other units)")
+
+
+def scene_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword options of :func:`~o3d_seqcc.load_scene` given on the command line (validated)."""
+    if not 0 < args.depth_scale < float("inf"):
+        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
+    return {"mesh": args.mesh, "image_dir": args.image_dir, "depth_dir": args.depth_dir,
+            "depth_scale": args.depth_scale, "extrinsic": args.extrinsic, "axes": args.axes,
+            "intrinsic": args.intrinsic, "check_cameras": args.camera_check}
 
 
 def scene_from_args(args: argparse.Namespace):
-    """The scene named on the command line (validated)."""
-    if not 0 < args.depth_scale < float("inf"):
-        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
-    return load_scene(args.scene, mesh=args.mesh, depth_dir=args.depth_dir, depth_scale=args.depth_scale)
+    """The scene named on the command line (validated, cameras checked)."""
+    return load_scene(args.scene, **scene_options_from_args(args))
 
 
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:
@@ -215,26 +241,35 @@ def texture_job_from_args(args: argparse.Namespace) -> tuple[TextureSettings, di
 
 
 def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
-    """Refuse an output file path that is one of the inputs (it would be replaced by the result).
-
-    Parameters
-    ----------
-    path : str or Path
-        The output file given on the command line.
-    inputs : iterable of path-like
-        Every file the command reads.
-    option : str
-        The option's name, for the message.
+    """Check an output file path before any work (:func:`o3d_seqcc.io.output.check_output_file`): never one
+    of the inputs (links resolved), a folder, a FIFO or device, or a file of an o3d-seqcc output folder.
 
     Raises
     ------
     InputError
-        ``path`` resolves to one of ``inputs``.
+        The message names ``option`` and what ``path`` is.
     """
-    target = Path(path).resolve()
-    for p in inputs:
-        if Path(p).resolve() == target:
-            raise InputError(f"{option} {path} is the input {p}: writing there would replace it; choose another file")
+    check_output_file(path, option=option, inputs=inputs)
+
+
+def add_progress_argument(p: argparse.ArgumentParser) -> None:
+    """``--progress-lines``: machine-readable progress on stderr (``run``, ``texture``, ``correct``)."""
+    from ..progress import LINE_PREFIX
+
+    p.add_argument("--progress-lines", action="store_true",
+                   help=f"write machine-readable progress lines to stderr, '{LINE_PREFIX} PERCENT TEXT' (PERCENT an "
+                   "integer 0-100 that never decreases), for programs that run this command (the MeshLab plugin)")
+
+
+def progress_from_args(args: argparse.Namespace):
+    """The :func:`o3d_seqcc.progress.progress_lines` context of ``--progress-lines`` (a no-op without it),
+    with the command's plan (:data:`o3d_seqcc.progress.PLANS`)."""
+    import sys
+
+    from ..progress import PLANS, progress_lines
+
+    on = getattr(args, "progress_lines", False)
+    return progress_lines(sys.stderr if on else None, PLANS.get(getattr(args, "command", ""), ()))
 
 
 def library_default(fn: Callable) -> dict[str, Any]:

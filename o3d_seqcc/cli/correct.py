@@ -17,6 +17,7 @@ import argparse
 
 from ..graph import WEIGHTS
 from ..pipeline import correct_scene
+from .common import add_progress_argument
 from .common import add_correction_arguments, add_scene_arguments, add_split_argument, prepare_out_dir, \
     print_report_path, scene_from_args
 
@@ -51,3 +52,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty OUT")
+    add_progress_argument(p)

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import argparse
 
+from ..datasets import DatasetUnavailable
 from ..demo import DATASETS, DEMO_SCENE, run_demo
+from ..errors import InputError
 from .common import add_atlas_arguments, add_export_arguments, add_t_npm_argument, library_default, save_options_from_args, \
     texture_settings_from_args
 from .synthetic import add_synthetic_arguments, scene_options
@@ -29,13 +31,14 @@ def _print_summary(res) -> None:
           f"textured from the photos, atlas {run_['atlas']['atlas_size']}^2 with {run_['atlas']['charts']} charts "
           f"({100 * run_['atlas']['coverage']:.0f}% covered); "
           f"outputs in {res.out / 'run'}: {', '.join(run_['outputs'])}")
-    seams, seams0 = run_["seams"], run_["seams_original"]
+    steps, seams = run_.get("selection_seams"), run_["seams"]
+    if steps:
+        a, b = steps["photos"], steps["corrected"]
+        print(f"  colour step at the {a['n_edges']} seams between photos (CIEDE2000 mean / share > 5): "
+              f"{a['mean']:.2f} / {a['frac_above_5']:.3f} as taken -> {b['mean']:.2f} / {b['frac_above_5']:.3f} corrected")
     if seams:
-        line = f"  seam CIEDE2000 mean / p99 / share > 5: {seams['mean']:.2f} / {seams['p99']:.2f} / {seams['frac_above_5']:.3f}"
-        if seams0:
-            line += (f"  (uncorrected images: {seams0['mean']:.2f} / {seams0['p99']:.2f} / "
-                     f"{seams0['frac_above_5']:.3f})")
-        print(line)
+        print(f"  seam CIEDE2000 of the texture after seam leveling, mean / p99 / share > 5: {seams['mean']:.2f} / "
+              f"{seams['p99']:.2f} / {seams['frac_above_5']:.3f}")
     if "ground_truth" in s:
         gt = s["ground_truth"]
         print("mean CIEDE2000 to the ground-truth renders (covered pixels), per view before -> after:")
@@ -64,8 +67,11 @@ def _print_photometric(summ: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     options = scene_options(args) if args.dataset == "synthetic" else {}
     settings, save_options = texture_settings_from_args(args), save_options_from_args(args)
-    res = run_demo(args.out, dataset=args.dataset, data_root=args.data_root, t_npm=args.t_npm,
-                   overwrite=args.overwrite, settings=settings, save_options=save_options, **options)
+    try:
+        res = run_demo(args.out, dataset=args.dataset, data_root=args.data_root, t_npm=args.t_npm,
+                       overwrite=args.overwrite, settings=settings, save_options=save_options, **options)
+    except DatasetUnavailable as e:
+        raise InputError(e.cli_message("--data-root DIR")) from None
     _print_summary(res)
     return 0
 
@@ -77,7 +83,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_t_npm_argument(p, library_default(run_demo)["t_npm"])
     p.add_argument("--dataset", choices=DATASETS, default="synthetic",
                    help="the synthetic room (default, scored against its ground truth) or the real Fountain set")
-    p.add_argument("--data-root", help="fountain: a local copy of the set (default: Open3D's download)")
+    p.add_argument("--data-root", help="fountain: a local copy of the set (default: the folder named by "
+                   "O3D_SEQCC_FOUNTAIN, else Open3D's download)")
     add_synthetic_arguments(p, defaults=DEMO_SCENE)
     add_atlas_arguments(p)
     add_export_arguments(p)

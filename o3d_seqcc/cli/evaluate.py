@@ -19,7 +19,7 @@ import argparse
 from ..correction import available_methods
 from ..errors import InputError
 from ..evaluation import evaluate_scene
-from ..io.files import write_json
+from ..io.output import write_output_json
 from ..mappings import MODES
 from .common import add_scene_arguments, add_t_npm_argument, library_default, refuse_input_overwrite, scene_from_args
 
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
           f"{'':<32} {'mean':>7} {'w.mean':>7} {'std':>6}   {'mean':>7} {'w.mean':>7} {'std':>6}")
     print("\n".join(_row(label, ev) for label, ev in rows))
     if args.json:
-        write_json(args.json, {"scene": str(args.scene), **out})
+        write_output_json(args.json, {"scene": str(args.scene), **out}, inputs=scene.input_paths())
     return 0
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..io.mappings_npz import save_mappings
+from ..io.output import check_output_file, output_file
 from ..mappings import MODES, compute_mappings, mappings_summary
 from ..render import plot_pair
 from ..visibility import FILTERS, compute_visibility
@@ -30,6 +31,8 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not args.overwrite:
         raise InputError(f"--out {out} exists; choose another file or pass --overwrite")
     scene = scene_from_args(args)
+    inputs = scene.input_paths()
+    check_output_file(out, option="--out", inputs=inputs, overwrite=bool(args.overwrite))
     pair = None
     if args.plot and "," in args.plot:
         parts = [p.strip() for p in args.plot.split(",")]
@@ -38,13 +41,17 @@ def run(args: argparse.Namespace) -> int:
         pair = (scene.index(parts[0]), scene.index(parts[1]))
         if pair[0] == pair[1]:
             raise InputError(f"--plot {args.plot!r}: the two views must differ")
+        names = scene.names
+        check_output_file(out.with_name(f"{out.stem}_{names[pair[0]]}_{names[pair[1]]}.png"), option="--plot",
+                          inputs=inputs)
     elif args.plot and Path(args.plot).suffix.lower() == ".png":
         raise InputError(f"--plot {args.plot}: give a pair 'A,B' (view names or indices) or a folder")
     filters = tuple(f for f in FILTERS if f not in set(args.disable or ()))
     M = compute_mappings(scene, mode=args.mode, occlusion_tol=args.occlusion_tol, depth_tol=args.depth_tol,
                          depth_atol=args.depth_atol, depth_edge_margin=args.depth_edge_margin, max_angle=args.max_angle,
                          oblique_reference=args.oblique_reference, two_sided=args.two_sided, filters=filters)
-    save_mappings(M, out, format="arrays" if args.arrays else "auto")
+    with output_file(out, option="--out", inputs=inputs, overwrite=bool(args.overwrite)) as tmp:
+        save_mappings(M, tmp, format="arrays" if args.arrays else "auto")
     summary = {"out": str(out), **mappings_summary(M)}
     if args.plot:
         if pair is None:
@@ -53,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             a, b = pair
             path = out.with_name(f"{out.stem}_{scene.views[a].name}_{scene.views[b].name}.png")
-        plot_pair(scene, M, a, b, path, stages=not args.no_stages)
+        with output_file(path, option="--plot", inputs=inputs) as tmp:
+            plot_pair(scene, M, a, b, tmp, stages=not args.no_stages)
         summary["plot"] = str(path)
     print(json.dumps(summary, indent=1))
     return 0

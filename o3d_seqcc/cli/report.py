@@ -21,7 +21,8 @@ from ..report import regenerate_report
 
 
 def run(args: argparse.Namespace) -> int:
-    path = regenerate_report(args.run_dir, scene=args.scene, mesh=args.mesh, output=args.output)
+    path = regenerate_report(args.run_dir, scene=args.scene, mesh=args.mesh, output=args.output,
+                             image_dir=args.image_dir)
     print(f"report written to {path}")
     return 0
 
@@ -30,5 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run_dir", metavar="RUN_DIR", help="output folder (--out) of o3d-seqcc run, correct or texture")
     p.add_argument("--scene", help="the scene, when it is no longer where RUN_DIR/report.json says")
     p.add_argument("--mesh", help="the scene's mesh, when it is no longer where RUN_DIR/report.json says")
+    p.add_argument("--image-dir", help="the scene's images (COLMAP, Meshroom, OpenMVS), when no longer where the run "
+                   "read them")
     p.add_argument("--output", metavar="FILE",
                    help="write the page to FILE instead of RUN_DIR/report.html (the folder is then left as it is)")

@@ -15,6 +15,7 @@ import argparse
 from dataclasses import replace
 
 from .. import pipeline
+from .common import add_progress_argument
 from .common import add_correction_arguments, add_scene_arguments, add_split_argument, add_texture_arguments, \
     print_run_summary, texture_job_from_args
 
@@ -41,3 +42,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--save-images", action="store_true", help="also write the corrected images to OUT/images/")
     p.add_argument("--compare-original", action="store_true",
                    help="also report the seam metric of the same texturing with the uncorrected images")
+    add_progress_argument(p)

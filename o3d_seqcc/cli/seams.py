@@ -10,19 +10,37 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
+from pathlib import Path
 
-from ..io.files import write_json
+from ..io.output import write_output_json
 from ..seams import seam_metric
 from .common import refuse_input_overwrite
 
 
+def _mesh_files(mesh: str) -> list[Path]:
+    """The mesh and the files it names (an OBJ's material libraries and their texture images)."""
+    p = Path(mesh)
+    out = [p]
+    if p.suffix.lower() == ".obj" and p.is_file():
+        names = re.findall(rb"^\s*mtllib\s+(.+?)\s*$", p.read_bytes()[:1 << 20], flags=re.M)
+        for m in (p.parent / os.fsdecode(n) for n in names):
+            out.append(m)
+            if m.is_file():
+                maps = re.findall(rb"^\s*map_\w+\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", m.read_bytes()[:1 << 20], flags=re.M)
+                out += [p.parent / os.fsdecode(t) for t in maps]
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
+    inputs = _mesh_files(args.mesh)
     if args.json:
-        refuse_input_overwrite(args.json, [args.mesh], "--json")
+        refuse_input_overwrite(args.json, inputs, "--json")
     report = seam_metric(args.mesh, offset=args.offset, samples_per_edge=args.samples_per_edge)
     d = {"mesh": str(args.mesh), **report.to_dict()}
     if args.json:
-        write_json(args.json, d)
+        write_output_json(args.json, d, inputs=inputs)
     print(json.dumps(d, indent=1))
     return 0
 

@@ -13,6 +13,7 @@ from dataclasses import replace
 
 from .. import pipeline
 from ..io.files import read_view_images
+from .common import add_progress_argument
 from .common import add_scene_arguments, add_split_argument, add_texture_arguments, print_run_summary, \
     texture_job_from_args
 
@@ -35,3 +36,4 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_split_argument(p)
     add_texture_arguments(p)
     p.add_argument("--images", help="folder of (corrected) images named after the views, used instead of the scene's")
+    add_progress_argument(p)

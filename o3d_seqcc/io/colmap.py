@@ -1,8 +1,11 @@
 """COLMAP sparse models, text (``cameras.txt``, ``images.txt``) or binary (``cameras.bin``, ``images.bin``).
 
-Only undistorted cameras are accepted: PINHOLE and SIMPLE_PINHOLE, and the radial / OpenCV
-models when all their distortion parameters are zero (run ``colmap image_undistorter`` first).
-COLMAP's pixel convention (the centre of the top-left pixel at 0.5) is converted to ours (pixel
+Pinhole cameras (PINHOLE, SIMPLE_PINHOLE) are read as they are; distorted ones are undistorted
+on the fly (:mod:`o3d_seqcc.distortion`): SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV as
+OpenCV's model, OPENCV_FISHEYE, SIMPLE_RADIAL_FISHEYE and RADIAL_FISHEYE as OpenCV's fisheye
+model; the view's camera is then the pinhole :meth:`~o3d_seqcc.distortion.Distortion.pinhole`
+of the same size. FOV and THIN_PRISM_FISHEYE cameras are refused (``colmap
+image_undistorter`` makes PINHOLE ones). COLMAP's pixel convention (the centre of the top-left pixel at 0.5) is converted to ours (pixel
 centres at integers): cx, cy are shifted by -0.5. COLMAP's ``images`` hold world-to-camera
 poses (quaternion ``qw qx qy qz`` and translation) in OpenCV axes, like our extrinsics.
 
@@ -22,6 +25,7 @@ from typing import Iterable
 
 import numpy as np
 
+from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 
@@ -63,30 +67,49 @@ def qvec_to_rotmat(q: Iterable[float]) -> np.ndarray:
     )
 
 
-def _intrinsic(model: str, params: list[float], where: str) -> np.ndarray:
-    """Our (3, 3) intrinsic of an undistorted COLMAP camera."""
+#: COLMAP model -> (our distortion model, the coefficients of OpenCV's order from COLMAP's parameters)
+_DISTORTION = {
+    "SIMPLE_RADIAL": ("opencv", lambda p: [p[3], 0.0, 0.0, 0.0]),
+    "RADIAL": ("opencv", lambda p: [p[3], p[4], 0.0, 0.0]),
+    "OPENCV": ("opencv", lambda p: p[4:8]),
+    "FULL_OPENCV": ("opencv", lambda p: p[4:12]),
+    "OPENCV_FISHEYE": ("fisheye", lambda p: p[4:8]),
+    "SIMPLE_RADIAL_FISHEYE": ("fisheye", lambda p: [p[3], 0.0, 0.0, 0.0]),
+    "RADIAL_FISHEYE": ("fisheye", lambda p: [p[3], p[4], 0.0, 0.0]),
+}
+_ONE_FOCAL = ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE")
+
+
+def _intrinsic(model: str, params: list[float], where: str, width: int = 0,
+               height: int = 0) -> tuple[np.ndarray, Distortion | None]:
+    """Our (3, 3) pinhole intrinsic of a COLMAP camera, and its distortion (None for a pinhole one)."""
     if model not in _N_PARAMS:
         raise InputError(f"{where}: unknown camera model {model!r}; valid: {', '.join(_N_PARAMS)}")
     if len(params) != _N_PARAMS[model]:
         raise InputError(f"{where}: model {model} needs {_N_PARAMS[model]} parameters, got {len(params)}")
     if not all(np.isfinite(params)):
         raise InputError(f"{where}: camera parameters are not finite")
-    if model == "PINHOLE":
-        fx, fy, cx, cy = params
-    elif model == "SIMPLE_PINHOLE":
-        fx, cx, cy = params
-        fy = fx
-    elif model in ("SIMPLE_RADIAL", "RADIAL") and all(p == 0 for p in params[3:]):
-        fx, cx, cy = params[:3]
-        fy = fx
-    elif model in ("OPENCV", "FULL_OPENCV") and all(p == 0 for p in params[4:]):
-        fx, fy, cx, cy = params[:4]
-    else:
+    if model not in ("PINHOLE", "SIMPLE_PINHOLE") and model not in _DISTORTION:
         raise InputError(
-            f"{where}: camera model {model} with distortion; undistort the images first "
+            f"{where}: camera model {model} is not supported; undistort the images first "
             "(`colmap image_undistorter`) to get PINHOLE cameras"
         )
-    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    if model in _ONE_FOCAL:
+        fx = fy = params[0]
+        cx, cy = params[1:3]
+    else:
+        fx, fy, cx, cy = params[:4]
+    K = np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    if model not in _DISTORTION or not any(params[3 if model in _ONE_FOCAL else 4:]):
+        return K, None
+    kind, coeffs = _DISTORTION[model]
+    if width <= 0 or height <= 0:
+        raise InputError(f"{where}: image size {width}x{height} must be positive")
+    try:
+        dist = Distortion(kind, coeffs(params), K)
+        return dist.pinhole(width, height), dist
+    except InputError as e:
+        raise InputError(f"{where}: {e}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -100,8 +123,8 @@ def _read_text(path: Path) -> list[str]:
         raise InputError(f"{path}: not a UTF-8 text file; is it a binary model? (use cameras.bin / images.bin)") from None
 
 
-def _text_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray]]:
-    cams: dict[int, tuple[int, int, np.ndarray]] = {}
+def _text_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray, Distortion | None]]:
+    cams: dict[int, tuple[int, int, np.ndarray, Distortion | None]] = {}
     for ln in _read_text(path):
         tok = ln.split()
         if not tok:
@@ -114,7 +137,7 @@ def _text_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray]]:
             params = [float(x) for x in tok[4:]]
         except ValueError:
             raise InputError(f"{where}: id, width and height must be integers and the parameters numbers") from None
-        cams[cid] = (w, h, _intrinsic(tok[1], params, where))
+        cams[cid] = (w, h, *_intrinsic(tok[1], params, where, w, h))
     return cams
 
 
@@ -169,7 +192,7 @@ class _Reader:
             raise InputError(f"{self.path}: image name at offset {self.pos} is not UTF-8") from None
 
 
-def _bin_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray]]:
+def _bin_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray, Distortion | None]]:
     r = _Reader(path)
     cams = {}
     for _ in range(r.count("cameras")):
@@ -180,7 +203,7 @@ def _bin_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray]]:
         params = list(r.take(f"<{n}d"))
         if w > 2**31 or h > 2**31:
             raise InputError(f"{path}: camera {cid} has an implausible size {w}x{h}")
-        cams[cid] = (int(w), int(h), _intrinsic(name, params, f"{path}: camera {cid}"))
+        cams[cid] = (int(w), int(h), *_intrinsic(name, params, f"{path}: camera {cid}", int(w), int(h)))
     return cams
 
 
@@ -221,7 +244,7 @@ def load(
     Raises
     ------
     InputError
-        No mesh, missing or malformed model files, distorted cameras, unknown camera ids.
+        No mesh, missing or malformed model files, unsupported camera models, unknown camera ids.
     """
     if mesh is None:
         raise InputError(f"{model_dir} is a COLMAP model: pass the mesh explicitly (mesh=... / --mesh)")
@@ -241,12 +264,13 @@ def load(
             raise InputError(f"{where} refers to camera {cid}, which the model's cameras do not define")
         if not name or "\x00" in name:
             raise InputError(f"{where}: empty image name")
-        w, h, K = cams[cid]
+        w, h, K, dist = cams[cid]
         ext = np.eye(4)
         ext[:3, :3] = qvec_to_rotmat(q)
         ext[:3, 3] = t
         try:
-            views.append(View(name=Path(name).stem, image=image_dir / name, intrinsic=K, extrinsic=ext, width=w, height=h))
+            views.append(View(name=Path(name).stem, image=image_dir / name, intrinsic=K, extrinsic=ext, width=w, height=h,
+                              distortion=dist))
         except InputError as e:
             raise InputError(f"{where}: {e}") from None
     if not views:

@@ -15,12 +15,19 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import InputError
+from ..camera_checks import FLIP, check_cameras
+from ..errors import InputError, warn
 from ..scene import Scene, View
-from . import colmap, meshlab, meshroom, rgbd_folder, scene_json
+from . import colmap, meshlab, meshroom, openmvs, rgbd_folder, scene_json
 from .files import find_file
 
-__all__ = ["SCENE_FORMATS", "SceneFormat", "load_scene", "save_scene"]
+__all__ = ["AXES", "EXTRINSIC_CONVENTIONS", "SCENE_FORMATS", "SceneFormat", "detect_format", "load_scene",
+           "save_scene"]
+
+#: values of ``load_scene(extrinsic=)`` / ``--extrinsic``: what the file's pose matrices map
+EXTRINSIC_CONVENTIONS = ("world-to-camera", "camera-to-world")
+#: values of ``load_scene(axes=)`` / ``--axes``: the file's camera axes
+AXES = ("opencv", "opengl")
 
 
 @dataclass(frozen=True)
@@ -36,12 +43,18 @@ class SceneFormat:
         ``detect(path) -> path to read | None``.
     load : callable
         ``load(path, *, mesh=None, ...) -> Scene``.
+    poses : str or None
+        The format's own pose convention (a value of :data:`EXTRINSIC_CONVENTIONS`) when its
+        cameras are pose matrices (or quaternion + translation) that ``extrinsic=`` may restate;
+        None when they are a rotation and a centre in a fixed convention (``extrinsic=`` and
+        ``axes=`` do not apply).
     """
 
     name: str
     description: str
     detect: Callable[[Path], Path | None]
     load: Callable[..., Scene]
+    poses: str | None = None
 
 
 def _detect_mlp(path: Path) -> Path | None:
@@ -52,14 +65,46 @@ def _detect_mlp(path: Path) -> Path | None:
 SCENE_FORMATS: dict[str, SceneFormat] = {
     f.name: f
     for f in (
-        SceneFormat("scene.json", "a scene.json manifest or its folder", scene_json.detect, scene_json.load),
+        SceneFormat("scene.json", "a scene.json manifest or its folder", scene_json.detect, scene_json.load,
+                    "world-to-camera"),
         SceneFormat("meshlab", "a MeshLab project (.mlp)", _detect_mlp, meshlab.load_mlp),
         SceneFormat("meshroom", "Meshroom/AliceVision SfM data (cameras.sfm or its folder)", meshroom.detect, meshroom.load),
         SceneFormat("rgbd-folder", "an Open3D RGB-D folder (image/, depth/, scene/key.log)", rgbd_folder.detect,
-                    rgbd_folder.load),
-        SceneFormat("colmap", "a COLMAP model folder (cameras/images .txt or .bin)", colmap.detect, colmap.load),
+                    rgbd_folder.load, "camera-to-world"),
+        SceneFormat("colmap", "a COLMAP model folder (cameras/images .txt or .bin)", colmap.detect, colmap.load,
+                    "world-to-camera"),
+        SceneFormat("openmvs", "an OpenMVS interface file (scene.mvs)", openmvs.detect, openmvs.load),
     )
 }
+
+
+def detect_format(path: str | os.PathLike, format: str = "auto") -> tuple[SceneFormat, Path]:
+    """The format of a scene path and the file or folder to read (what :func:`load_scene` dispatches on).
+
+    Raises
+    ------
+    InputError
+        Missing path, unknown layout (the message lists the formats), unknown ``format`` name,
+        or a path that is not of the named format.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"scene not found: {p}")
+    if format == "auto":
+        found = next(((f, hit) for f in SCENE_FORMATS.values() if (hit := f.detect(p)) is not None), None)
+        if found is None:
+            raise InputError(
+                f"{p}: unknown scene layout; expected "
+                + "; ".join(f"{f.description}" for f in SCENE_FORMATS.values())
+            )
+        return found
+    if format not in SCENE_FORMATS:
+        raise InputError(f"unknown scene format {format!r}; valid: 'auto', {', '.join(map(repr, SCENE_FORMATS))}")
+    fmt = SCENE_FORMATS[format]
+    hit = fmt.detect(p)
+    if hit is None:
+        raise InputError(f"{p} is not {fmt.description}")
+    return fmt, hit
 
 
 def load_scene(
@@ -67,34 +112,56 @@ def load_scene(
     *,
     mesh: str | os.PathLike | None = None,
     format: str = "auto",
-    intrinsic: np.ndarray | None = None,
+    intrinsic: np.ndarray | str | os.PathLike | None = None,
     image_dir: str | os.PathLike | None = None,
     depth_dir: str | os.PathLike | None = None,
     depth_scale: float = 1000.0,
+    extrinsic: str | None = None,
+    axes: str | None = None,
+    check_cameras: bool = True,
     validate: bool = True,
 ) -> Scene:
-    """Load a scene, detecting its format.
+    """Load a scene, detecting its format, and check its cameras against its mesh.
 
     Parameters
     ----------
     path : path-like
         A ``scene.json`` manifest (or its folder), a MeshLab project (``.mlp``), Meshroom's
-        ``cameras.sfm`` (or its folder), an Open3D RGB-D folder or a COLMAP model folder (text
-        or binary); see :data:`SCENE_FORMATS`.
+        ``cameras.sfm`` (or its folder), an Open3D RGB-D folder, a COLMAP model folder (text
+        or binary) or an OpenMVS interface file (``scene.mvs``); see :data:`SCENE_FORMATS`.
     mesh : path-like, optional
         Mesh file; required for RGB-D folders, COLMAP and Meshroom, overrides the others'.
     format : str, default "auto"
         A name of :data:`SCENE_FORMATS` to skip detection.
-    intrinsic : (3, 3) array, optional
-        RGB-D folders only; default PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5).
+    intrinsic : (3, 3) array or path-like, optional
+        RGB-D folders only: the colour camera's pinhole matrix, or a file holding it (Open3D's
+        ``PinholeCameraIntrinsic`` JSON, whose width and height must be the images'; or a text
+        3x3 matrix); default PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5), which only
+        640x480 images may use.
     image_dir : path-like, optional
-        COLMAP and Meshroom only: folder of the images.
+        COLMAP, Meshroom and OpenMVS only: folder of the images.
     depth_dir : path-like, optional
         Folder of depth maps registered to the images, for the views that have none (MeshLab
         projects, COLMAP and Meshroom models carry no depth): ``<view name>.png`` or the image's
         file name with a depth extension (``.png``, ``.tif``, ``.tiff``, ``.exr``).
     depth_scale : float, default 1000.0
         Units per metre of the depth maps of ``depth_dir`` (1000: millimetres).
+    extrinsic : {"world-to-camera", "camera-to-world"}, optional
+        What the file's pose matrices map, when it is not the format's own convention
+        (``scene.json`` and COLMAP: world-to-camera; an RGB-D folder's ``key.log``:
+        camera-to-world); the other value inverts every pose. Default: the format's, and
+        camera-to-world matrices given in its place are refused by the camera check. Not for
+        formats whose cameras are a rotation and a centre (MeshLab, Meshroom, OpenMVS).
+    axes : {"opencv", "opengl"}, optional
+        The file's camera axes: OpenCV (x right, y down, looking down +z; every format's own)
+        or OpenGL (y up, looking down -z: flipped on loading). Default: OpenCV, and OpenGL
+        cameras given in its place are refused by the camera check. Same formats as
+        ``extrinsic``.
+    check_cameras : bool, default True
+        Check the cameras against the mesh (:func:`o3d_seqcc.camera_checks.check_cameras`):
+        an :class:`InputError` when they look camera-to-world, OpenGL or in other units than
+        the mesh (the message names the fix), warnings when most of the mesh faces no camera.
+        Needs ``validate``.
     validate : bool, default True
         Check files, image headers (size, grey, alpha) and the mesh now rather than later.
 
@@ -107,27 +174,14 @@ def load_scene(
     ------
     InputError
         Unknown layout (the message lists the formats), an option the format does not take,
-        missing files, malformed cameras, duplicate names, ...
+        missing files, malformed cameras, duplicate names, cameras that look like another
+        convention, ...
     """
+    fmt, target = detect_format(path, format)
     p = Path(path)
-    if not p.exists():
-        raise InputError(f"scene not found: {p}")
-    if format == "auto":
-        found = next(((f, hit) for f in SCENE_FORMATS.values() if (hit := f.detect(p)) is not None), None)
-        if found is None:
-            raise InputError(
-                f"{p}: unknown scene layout; expected "
-                + "; ".join(f"{f.description}" for f in SCENE_FORMATS.values())
-            )
-    else:
-        if format not in SCENE_FORMATS:
-            raise InputError(f"unknown scene format {format!r}; valid: 'auto', {', '.join(map(repr, SCENE_FORMATS))}")
-        fmt = SCENE_FORMATS[format]
-        hit = fmt.detect(p)
-        if hit is None:
-            raise InputError(f"{p} is not {fmt.description}")
-        found = (fmt, hit)
-    fmt, target = found
+    conv = _conventions(fmt, p, extrinsic, axes)
+    if mesh is not None:
+        _check_mesh_path(Path(mesh), target)
     options: dict[str, Any] = {"mesh": mesh}
     accepted = inspect.signature(fmt.load).parameters
     for name, value in (("intrinsic", intrinsic), ("image_dir", image_dir)):
@@ -138,10 +192,88 @@ def load_scene(
         options[name] = value
     scene = fmt.load(target, **options)
     views = scene.views if depth_dir is None else _with_depth(scene.views, Path(depth_dir), depth_scale)
-    scene = Scene(scene.mesh, views, source=target)
+    if conv["invert"] or conv["flip"]:
+        views = tuple(_restated(v, conv, target) for v in views)
+    given = {"format": None if format == "auto" else format, "image_dir": image_dir, "depth_dir": depth_dir,
+             "depth_scale": None if depth_dir is None else float(depth_scale), "extrinsic": extrinsic, "axes": axes,
+             "intrinsic": intrinsic, "check_cameras": None if check_cameras else False}
+    recorded = {k: (str(Path(v).resolve()) if isinstance(v, (str, os.PathLike)) and k.endswith(("_dir", "intrinsic"))
+                    else np.asarray(v, dtype=np.float64).tolist() if k == "intrinsic" else v)
+                for k, v in given.items() if v is not None}
+    scene = Scene(scene.mesh, views, source=target, options=recorded)
     if validate:
         scene.validate()
+        if check_cameras:
+            run_camera_check(scene, fmt, target, extrinsic=extrinsic, axes=axes)
     return scene
+
+
+def _conventions(fmt: SceneFormat, p: Path, extrinsic: str | None, axes: str | None) -> dict[str, bool]:
+    """Whether the loaded poses are to be inverted / flipped for ``extrinsic=`` / ``axes=``."""
+    if extrinsic is not None and extrinsic not in EXTRINSIC_CONVENTIONS:
+        raise InputError(f"unknown extrinsic convention {extrinsic!r}; valid: {', '.join(EXTRINSIC_CONVENTIONS)}")
+    if axes is not None and axes not in AXES:
+        raise InputError(f"unknown camera axes {axes!r}; valid: {', '.join(AXES)}")
+    for name, value in (("extrinsic", extrinsic), ("axes", axes)):
+        if value is not None and fmt.poses is None:
+            raise InputError(f"{name}= does not apply to {fmt.description} ({p}): its cameras are a rotation and a "
+                             "centre in the format's own convention; drop it")
+    return {"invert": extrinsic is not None and extrinsic != fmt.poses, "flip": axes == "opengl"}
+
+
+def _restated(v: View, conv: dict[str, bool], target: Path) -> View:
+    E = np.array(v.extrinsic)
+    if conv["invert"]:
+        E = np.linalg.inv(E)
+        E[3] = [0.0, 0.0, 0.0, 1.0]
+    if conv["flip"]:
+        E = FLIP @ E
+    try:
+        return replace(v, extrinsic=E)
+    except InputError as e:
+        raise InputError(f"{target}: {e}") from None
+
+
+def camera_fixes(fmt: SceneFormat) -> dict[str, str]:
+    """The fix an error names for each likely camera mistake in a scene of format ``fmt``."""
+    tail = "; if the cameras are right after all, check_cameras=False (--no-camera-check) skips this check"
+    scale = ("scale the mesh by {s} (MeshLab: Filters > Normals, Curvatures and Orientation > Transform: Scale) or "
+             "the camera positions by the inverse, so that both use one unit" + tail)
+    if fmt.poses is None:
+        redo = f"re-export the cameras from the program that wrote this {fmt.description}"
+        return {"inverse": redo + tail, "opengl": redo + tail, "inverse+opengl": redo + tail, "scale": scale}
+    other = EXTRINSIC_CONVENTIONS[1 - EXTRINSIC_CONVENTIONS.index(fmt.poses)]
+    return {
+        "inverse": f"set extrinsic='{other}' (--extrinsic {other}) if its matrices are {other}, or invert them" + tail,
+        "opengl": "set axes='opengl' (--axes opengl) if its cameras use OpenGL axes, or flip them "
+                  "(diag(1, -1, -1, 1) @ extrinsic)" + tail,
+        "inverse+opengl": f"set extrinsic='{other}' and axes='opengl' (--extrinsic {other} --axes opengl)" + tail,
+        "scale": scale,
+    }
+
+
+def run_camera_check(scene: Scene, fmt: SceneFormat, target: Path, *, extrinsic: str | None = None,
+                     axes: str | None = None, raise_on_mistake: bool = True, **options: Any):
+    """:func:`~o3d_seqcc.camera_checks.check_cameras` with the fixes of ``fmt``; warnings emitted.
+
+    The conventions stated (``extrinsic``, ``axes``) are not second-guessed.
+    """
+    skip = tuple(n for n, stated in (("inverse", extrinsic), ("opengl", axes)) if stated is not None)
+    rep = check_cameras(scene, skip=skip, fix=camera_fixes(fmt), where=str(target), raise_on_mistake=raise_on_mistake, **options)
+    for w in rep.warnings:
+        warn(f"{target}: {w}")
+    return rep
+
+
+def _check_mesh_path(mesh: Path, target: Path) -> None:
+    """A mesh given by the user must exist as typed: from the current folder, or from the scene's folder."""
+    folder = target if target.is_dir() else target.parent
+    if mesh.is_file() or (not mesh.is_absolute() and (folder / mesh).is_file()):
+        return
+    where = ("" if mesh.is_absolute() else
+             f" (a relative path is looked for from the current folder {Path.cwd()} and from the scene's folder {folder})")
+    what = "is a folder, not a mesh file" if mesh.is_dir() else "not found"
+    raise InputError(f"mesh {mesh} {what}{where}; give the path of the mesh file")
 
 
 def _with_depth(views: tuple[View, ...], folder: Path, depth_scale: float) -> tuple[View, ...]:

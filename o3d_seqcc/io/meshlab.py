@@ -24,7 +24,10 @@ and ray-casting the result from the same camera reproduces the photo to 0.03 gre
 absolute difference) with this shift; with ``(0, 0)`` the render is offset by half a pixel in
 x and in y (texture sizes 512 to 2048 alike). Pass ``center_shift=(0, 0)`` for the plain
 convention ``cx = CenterPx.x, cy = height - CenterPx.y``.
-Lens distortion must be zero.
+A non-zero ``LensDistortion`` (its first coefficient: vcglib uses only that one) is removed on
+the fly the way MeshLab's ``Camera::Project`` applies it (:mod:`o3d_seqcc.distortion`, model
+``"meshlab"``); the view's camera is then the pinhole of the same size, and a project written
+for the original photos gets the photo's camera and ``LensDistortion`` back.
 """
 
 from __future__ import annotations
@@ -38,9 +41,10 @@ from typing import Sequence
 
 import numpy as np
 
+from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
-from .files import atomic_write_bytes
+from .files import atomic_write_bytes, join_path
 
 __all__ = [
     "CENTER_SHIFT",
@@ -100,6 +104,7 @@ def vcg_camera_attributes(
     *,
     pixel_size_mm: float = DEFAULT_PIXEL_SIZE_MM,
     center_shift: tuple[float, float] = CENTER_SHIFT,
+    undistorted: bool = False,
 ) -> dict[str, str]:
     """The ``VCGCamera`` XML attributes of a view.
 
@@ -111,6 +116,10 @@ def vcg_camera_attributes(
         Horizontal pixel size written to ``PixelSizeMm`` (the vertical one is scaled by fx / fy).
     center_shift : (float, float), default CENTER_SHIFT = (0.5, -0.5)
         ``CenterPx = (cx + sx, height - cy + sy)``; see the module docstring.
+    undistorted : bool, default False
+        The raster is the view's undistorted image (the pinhole camera is written); by default
+        a view with lens distortion gets its photo's camera and ``LensDistortion`` (MeshLab's
+        model only; others raise).
 
     Returns
     -------
@@ -119,6 +128,15 @@ def vcg_camera_attributes(
         RotationMatrix, CameraType``.
     """
     K = view.intrinsic
+    lens = "0 0"
+    if view.distorted and not undistorted:  # the rasters are the distorted photos: their own camera
+        d = view.distortion
+        if d.model != "meshlab":
+            raise InputError(f"view {view.name!r}: MeshLab cannot hold its {d.model} lens distortion; write the "
+                             "undistorted images (save_images=True, --save-images) for a project of pinhole rasters")
+        K = d.intrinsic
+        lens = _fmt(d.coefficients)
+        pixel_size_mm = d.meshlab["pixel_size_mm"][0]
     if K[0, 1] != 0:
         raise InputError(f"view {view.name!r}: MeshLab cameras have no skew; intrinsic[0, 1] = {K[0, 1]}")
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
@@ -130,7 +148,7 @@ def vcg_camera_attributes(
     C = -np.linalg.solve(view.rotation, view.translation)
     return {
         "TranslationVector": _fmt([*(-C), 1.0]),
-        "LensDistortion": "0 0",
+        "LensDistortion": lens,
         "ViewportPx": f"{view.width} {view.height}",
         "PixelSizeMm": _fmt([px, px * fx / fy]),
         "CenterPx": _fmt([cx + center_shift[0], view.height - cy + center_shift[1]]),
@@ -166,14 +184,12 @@ def view_from_vcg_camera(
     Raises
     ------
     InputError
-        Missing/malformed attributes, non-zero lens distortion, orthographic camera.
+        Missing/malformed attributes, orthographic camera.
     """
     where = f"raster {name!r}"
     if attrs.get("CameraType", "0").strip() not in ("0", ""):
         raise InputError(f"{where}: only perspective cameras (CameraType 0) are supported")
     dist = _floats(attrs, "LensDistortion", 2, where) if "LensDistortion" in attrs else np.zeros(2)
-    if np.any(dist != 0):
-        raise InputError(f"{where}: lens distortion {dist.tolist()} is not supported; undistort the image first")
     t = _floats(attrs, "TranslationVector", 3, where)
     w, h = (int(round(x)) for x in _floats(attrs, "ViewportPx", 2, where))
     pix = _floats(attrs, "PixelSizeMm", 2, where)
@@ -189,7 +205,17 @@ def view_from_vcg_camera(
     ext[:3, 3] = -R @ C
     cx, cy = c[0] - center_shift[0], h - (c[1] - center_shift[1])
     K = np.array([[f / pix[0], 0.0, cx], [0.0, f / pix[1], cy], [0.0, 0.0, 1.0]])
-    return View(name=name, image=Path(image), intrinsic=K, extrinsic=ext, width=w, height=h)
+    lens = None
+    if dist[0] != 0:  # vcglib's Camera::Project distorts only when k[0] != 0
+        try:
+            lens = Distortion("meshlab", dist.tolist(), K, meshlab={"pixel_size_mm": pix.tolist(),
+                                                                    "center_px": c.tolist(), "viewport_px": [w, h]})
+            K = lens.pinhole(w, h)
+        except InputError as e:
+            raise InputError(f"{where}: {e}") from None
+    elif dist[1] != 0:
+        logger.info("%s: LensDistortion %s: MeshLab ignores the second coefficient without a first", where, dist)
+    return View(name=name, image=Path(image), intrinsic=K, extrinsic=ext, width=w, height=h, distortion=lens)
 
 
 def project_meshlab(points: np.ndarray, attrs: dict[str, str]) -> np.ndarray:
@@ -247,7 +273,8 @@ def save_mlp(
     mesh : path-like, optional
         Mesh file to reference instead of ``scene.mesh``.
     images : sequence of path-like, optional
-        One image per view to reference instead of the views' own (e.g. corrected images).
+        One image per view to reference instead of the views' own (e.g. corrected images), taken
+        to be the undistorted images (pinhole cameras are written for them).
     layers : sequence of MeshLayer, optional
         Mesh layers (file, label, placement, visibility) to list instead of the one mesh; the
         cameras stay in world coordinates, as MeshLab keeps them.
@@ -283,7 +310,8 @@ def save_mlp(
     for k, v in enumerate(scene.views):
         img = Path(images[k]) if images is not None else v.image
         r = ET.SubElement(rasters, "MLRaster", label=v.name)
-        ET.SubElement(r, "VCGCamera", vcg_camera_attributes(v, pixel_size_mm=pixel_size_mm, center_shift=center_shift))
+        ET.SubElement(r, "VCGCamera", vcg_camera_attributes(v, pixel_size_mm=pixel_size_mm, center_shift=center_shift,
+                                                            undistorted=images is not None))
         ET.SubElement(r, "Plane", semantic="1", fileName=_rel(img, root))
     ET.indent(proj, space=" ")
     text = "<!DOCTYPE MeshLabDocument>\n" + ET.tostring(proj, encoding="unicode") + "\n"
@@ -339,7 +367,7 @@ def load_mlp(
             raise InputError(f"{path}: the project has no mesh; pass mesh=...")
         if len(meshes) > 1:
             logger.warning("%s: %d meshes in the project, using the first (%s)", path, len(meshes), meshes[0].get("filename"))
-        mesh_path = Path(os.path.normpath(root / meshes[0].get("filename", "")))
+        mesh_path = join_path(root, meshes[0].get("filename", ""))
         mat = meshes[0].find("MLMatrix44")
         if mat is not None and mat.text and mat.text.split():
             try:
@@ -357,7 +385,7 @@ def load_mlp(
         plane = r.find("Plane")
         if cam is None or plane is None or not plane.get("fileName"):
             raise InputError(f"{path}: raster {i} lacks a VCGCamera or an image (Plane fileName)")
-        img = Path(os.path.normpath(root / plane.get("fileName")))
+        img = join_path(root, plane.get("fileName"))
         name = r.get("label") or img.stem
         if name in names or any(ch in name for ch in '/\\:*?"<>|'):
             name = f"{img.stem}_{i}" if name in names else img.stem

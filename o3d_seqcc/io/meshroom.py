@@ -18,8 +18,11 @@ rotation. The extrinsic is ``[R | -R C]``.
 Intrinsics: ``pxFocalLength`` (one value or fx, fy) in pixels when present, otherwise
 ``focalLength`` (mm) x width / ``sensorWidth`` (mm), times ``pixelRatio`` for fy when given.
 The principal point is relative to the image centre from file version 1.2.1 on (absolute
-before); AliceVision's pixel centres are at integers, as ours. Cameras with non-zero
-distortion are refused (undistort the images first, e.g. with Meshroom's PrepareDenseScene).
+before); AliceVision's pixel centres are at integers, as ours. Distortion (``type`` or
+``distortionType`` radial1 / radialk1, radial3 / radialk3, brown, fisheye4, on focal-normalised
+coordinates as AliceVision's ``addDistortion``) is removed on the fly
+(:mod:`o3d_seqcc.distortion`); other distorted types are refused (undistort the images first,
+e.g. with Meshroom's PrepareDenseScene).
 Views without a pose (not reconstructed) are skipped, with a warning.
 """
 
@@ -33,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import find_file
@@ -73,17 +77,32 @@ def _version(data: dict) -> tuple[int, ...]:
         return (1, 0, 0)
 
 
-def _intrinsic(d: dict, where: str, version: tuple[int, ...]) -> tuple[int, int, np.ndarray]:
+#: AliceVision distortion types -> (our model, OpenCV-ordered coefficients from AliceVision's parameters)
+_DISTORTION = {
+    "radial1": ("opencv", lambda k: [k[0], 0.0, 0.0, 0.0]),
+    "radial3": ("opencv", lambda k: [k[0], k[1], 0.0, 0.0, k[2]]),
+    "brown": ("opencv", lambda k: [k[0], k[1], k[3], k[4], k[2]]),  # k1 k2 k3 t1 t2 -> k1 k2 p1 p2 k3
+    "fisheye4": ("fisheye", lambda k: list(k[:4])),
+}
+_DISTORTION["radialk1"], _DISTORTION["radialk3"] = _DISTORTION["radial1"], _DISTORTION["radial3"]
+_N_COEFFS = {"radial1": 1, "radialk1": 1, "radial3": 3, "radialk3": 3, "brown": 5, "fisheye4": 4}
+
+
+def _intrinsic(d: dict, where: str, version: tuple[int, ...]) -> tuple[int, int, np.ndarray, Distortion | None]:
     w, h = int(_num(d, "width", where)), int(_num(d, "height", where))
-    kind = str(d.get("type", "pinhole"))
+    kind = str(d.get("distortionType") or d.get("type", "pinhole"))
     dist = d.get("distortionParams") or []
     try:
         dist_vals = [float(x) for x in dist] if isinstance(dist, list) else [float("nan")]
     except (TypeError, ValueError):
         dist_vals = [float("nan")]
-    if any(x != 0 for x in dist_vals):
-        raise InputError(f"{where}: camera type {kind!r} with distortion {dist!r:.60}; undistort the images first "
-                         "(Meshroom's PrepareDenseScene writes undistorted images and cameras)")
+    if not all(np.isfinite(dist_vals)):
+        raise InputError(f"{where}: distortionParams {dist!r:.60} must be a list of numbers")
+    distorted = any(x != 0 for x in dist_vals)
+    if distorted and (kind not in _DISTORTION or len(dist_vals) != _N_COEFFS[kind]):
+        raise InputError(f"{where}: camera type {kind!r} with distortion {dist!r:.60} is not supported (radial1, "
+                         "radial3, brown and fisheye4 are); undistort the images first (Meshroom's PrepareDenseScene "
+                         "writes undistorted images and cameras)")
     if "pxFocalLength" in d:
         v = d["pxFocalLength"]
         f = _num(d, "pxFocalLength", where, 2) if isinstance(v, list) else np.array([_num(d, "pxFocalLength", where)] * 2)
@@ -101,7 +120,15 @@ def _intrinsic(d: dict, where: str, version: tuple[int, ...]) -> tuple[int, int,
         pp = _num(d, "principalPoint", where, 2)
         if version >= (1, 2, 1):  # an offset from the centre since file version 1.2.1
             pp = pp + centre
-    return w, h, np.array([[fx, 0.0, pp[0]], [0.0, fy, pp[1]], [0.0, 0.0, 1.0]])
+    K = np.array([[fx, 0.0, pp[0]], [0.0, fy, pp[1]], [0.0, 0.0, 1.0]])
+    if not distorted:
+        return w, h, K, None
+    model, coeffs = _DISTORTION[kind]
+    try:
+        lens = Distortion(model, coeffs(dist_vals), K)
+        return w, h, lens.pinhole(w, h), lens
+    except InputError as e:
+        raise InputError(f"{where}: {e}") from None
 
 
 def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | os.PathLike | None = None) -> Scene:
@@ -163,7 +190,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             continue
         if iid not in intr:
             raise InputError(f"{where} refers to intrinsic {iid!r}, which 'intrinsics' does not define")
-        w, h, K = _intrinsic(*intr[iid], version)
+        w, h, K, lens = _intrinsic(*intr[iid], version)
         R, C, pwhere = poses[pid]
         ext = np.eye(4)
         ext[:3, :3] = R
@@ -173,7 +200,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             cands = [img_root / src.name] + [img_root / f"{d.get('viewId')}{s}" for s in (".png", ".jpg", ".exr", ".tif")]
             img = next((c for c in cands if c.is_file()), img_root / src.name)
         try:
-            views.append(View(name=src.stem, image=img, intrinsic=K, extrinsic=ext, width=w, height=h))
+            views.append(View(name=src.stem, image=img, intrinsic=K, extrinsic=ext, width=w, height=h, distortion=lens))
         except InputError as e:
             raise InputError(f"{where} ({pwhere}): {e}") from None
     if skipped:

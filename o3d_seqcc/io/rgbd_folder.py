@@ -6,12 +6,15 @@
     root/depth/*.png          optional depth maps (uint16, ``depth_scale`` units per metre)
     root/scene/key.log        camera-to-world 4x4 poses, blocks of a header line + 4 rows
 
-The intrinsic is not in the files: PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5) unless
-given. The mesh is not part of the layout and must be passed.
+The intrinsic is not in the files: PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5, for
+640x480 images) unless given, as a matrix or a file (:func:`read_intrinsic`: Open3D's
+``PinholeCameraIntrinsic`` JSON); images of another size need it. The mesh is not part of the
+layout and must be passed.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -19,8 +22,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import PRIMESENSE_INTRINSIC, Scene, View
+from .files import check_image_file
 
-__all__ = ["IMAGE_EXTENSIONS", "detect", "load", "read_log_trajectory"]
+__all__ = ["IMAGE_EXTENSIONS", "detect", "load", "read_intrinsic", "read_log_trajectory"]
 
 IMAGE_EXTENSIONS = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp"})
 
@@ -63,6 +67,79 @@ def read_log_trajectory(path: str | os.PathLike) -> list[np.ndarray]:
     return poses
 
 
+def read_intrinsic(path: str | os.PathLike) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """Read a pinhole intrinsic file: Open3D's ``PinholeCameraIntrinsic`` JSON, or a 3x3 text matrix.
+
+    The JSON is what ``open3d.io.write_pinhole_camera_intrinsic`` writes: ``width``, ``height``
+    and ``intrinsic_matrix``, nine numbers in column-major order; a ``PinholeCameraParameters``
+    JSON (its ``intrinsic`` member) is read too. Pixel centres are at integer coordinates, as ours.
+
+    Returns
+    -------
+    intrinsic : (3, 3) float64
+    size : (width, height) or None
+        The image size the file states (None for a text matrix).
+
+    Raises
+    ------
+    InputError
+        Missing or malformed file.
+    """
+    path = Path(path)
+    where = f"intrinsic file {path}"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{where}: cannot read it ({getattr(e, 'strerror', None) or e}); give Open3D's "
+                         "PinholeCameraIntrinsic JSON or a 3x3 text matrix") from None
+    if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
+        try:
+            data = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as e:
+            raise InputError(f"{where}: not valid JSON ({e})") from None
+        if isinstance(data, dict) and isinstance(data.get("intrinsic"), dict):
+            data = data["intrinsic"]
+        try:
+            m = np.asarray(data["intrinsic_matrix"], dtype=np.float64)
+            w, h = int(data["width"]), int(data["height"])
+            if m.shape != (9,) or isinstance(data["width"], bool) or w != data["width"] or h != data["height"]:
+                raise ValueError
+        except (TypeError, KeyError, ValueError):
+            raise InputError(f"{where}: expected Open3D's PinholeCameraIntrinsic JSON: 'width', 'height' (integers) "
+                             "and 'intrinsic_matrix' (9 numbers, column-major)") from None
+        return m.reshape(3, 3).T.copy(), (w, h)
+    try:
+        K = np.loadtxt(path.open(encoding="utf-8"), dtype=np.float64, ndmin=2)
+    except ValueError:
+        K = None
+    if K is None or K.shape != (3, 3):
+        raise InputError(f"{where}: expected Open3D's PinholeCameraIntrinsic JSON or a 3x3 text matrix")
+    return K, None
+
+
+def _check_intrinsic_size(K: np.ndarray, size: tuple[int, int] | None, w: int, h: int, given: object,
+                          root: Path) -> None:
+    """An RGB-D folder's intrinsic must be for its images' size (the default is for 640x480)."""
+    if given is None and (w, h) != (640, 480):
+        scaled = ""
+        if w * 480 == h * 640:  # the PrimeSense camera at another resolution: its intrinsic scaled
+            k = w / 640.0
+            scaled = (f" (PrimeSense's scaled to {w}x{h}: fx = fy = {525 * k:g}, cx = {320 * k - 0.5:g}, "
+                      f"cy = {240 * k - 0.5:g})")
+        raise InputError(
+            f"{root}: image/ holds {w}x{h} images, but no intrinsic was given and the default (PrimeSense: fx = fy "
+            f"= 525, cx = 319.5, cy = 239.5) is for 640x480 images; give the colour camera's intrinsic{scaled}: "
+            "intrinsic=FILE (--intrinsic FILE), Open3D's PinholeCameraIntrinsic JSON as "
+            "open3d.io.write_pinhole_camera_intrinsic writes it")
+    where = f"intrinsic {given}" if isinstance(given, (str, os.PathLike)) else "the intrinsic given"
+    if size is not None and tuple(size) != (w, h):
+        raise InputError(f"{root}: {where} is for {size[0]}x{size[1]} images but image/ holds {w}x{h} images; give "
+                         "the intrinsic of these images (scale fx, fy, cx + 0.5, cy + 0.5 with the size)")
+    if not (-0.5 <= K[0, 2] <= w - 0.5 and -0.5 <= K[1, 2] <= h - 0.5):
+        raise InputError(f"{root}: {where} puts the principal point at ({K[0, 2]:g}, {K[1, 2]:g}), outside the "
+                         f"{w}x{h} images of image/: it is for another image size; give the intrinsic of these images")
+
+
 def _list_images(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and not p.name.startswith("."))
 
@@ -82,14 +159,16 @@ def load(
         The folder.
     mesh : path-like
         Mesh file, absolute or relative to ``root`` (required).
-    intrinsic : (3, 3) array, optional
-        Defaults to :data:`~o3d_seqcc.scene.PRIMESENSE_INTRINSIC`.
+    intrinsic : (3, 3) array or path-like, optional
+        The colour camera's pinhole matrix, or a file holding it (:func:`read_intrinsic`);
+        default :data:`~o3d_seqcc.scene.PRIMESENSE_INTRINSIC`, for 640x480 images only.
     depth_scale : float, default 1000.0
 
     Raises
     ------
     InputError
-        No mesh given, counts of images / depth maps / poses that differ, bad poses.
+        No mesh given, counts of images / depth maps / poses that differ, bad poses, an
+        intrinsic for another image size (the default one included).
     """
     if mesh is None:
         cands = sorted((root / "scene").glob("*.ply"))
@@ -107,17 +186,19 @@ def load(
         raise InputError(f"{root}: {len(images)} images in image/ but {len(poses)} poses in scene/key.log")
     if depths and len(depths) != len(images):
         raise InputError(f"{root}: {len(images)} images but {len(depths)} depth maps; they are paired in sorted order")
-    K = PRIMESENSE_INTRINSIC if intrinsic is None else np.asarray(intrinsic, dtype=np.float64)
+    size = None
+    if intrinsic is None:
+        K = PRIMESENSE_INTRINSIC
+    elif isinstance(intrinsic, (str, os.PathLike)):
+        K, size = read_intrinsic(intrinsic)
+    else:
+        K = np.asarray(intrinsic, dtype=np.float64)
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = root / mesh_path
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        with Image.open(images[0]) as im:
-            w, h = im.size
-    except (UnidentifiedImageError, OSError) as e:
-        raise InputError(f"cannot read image {images[0]}: {e}") from None
+    w, h, _ = check_image_file(images[0])  # the file layer: regular files only, pixel budget, header only
+    if np.shape(K) == (3, 3):
+        _check_intrinsic_size(K, size, w, h, intrinsic, root)
     views = []
     for i, (img, pose) in enumerate(zip(images, poses)):
         ext = np.linalg.inv(pose)

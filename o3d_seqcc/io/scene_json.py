@@ -8,28 +8,33 @@
                 "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]],
                 "extrinsic": [[r,r,r,t],[r,r,r,t],[r,r,r,t],[0,0,0,1]],
                 "depth": "depth/v00.png", "depth_scale": 1000.0,
-                "point_cloud": "scans/s0.ply"}]}
+                "point_cloud": "scans/s0.ply",
+                "distortion": {"model": "opencv", "coefficients": [k1, k2, p1, p2],
+                               "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]]}}]}
 
 Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
-1000) and ``point_cloud`` are optional. ``extrinsic`` is world-to-camera in OpenCV axes.
+1000), ``point_cloud`` and ``distortion`` are optional. ``extrinsic`` is world-to-camera in
+OpenCV axes. ``distortion`` (:class:`~o3d_seqcc.distortion.Distortion`: model, coefficients,
+the photo's own intrinsic) says the image is a distorted photo, undistorted when read to the
+pinhole camera ``intrinsic``.
 """
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
+from ..distortion import Distortion
 from ..errors import InputError
 from ..scene import FORMAT, Scene, View
-from .files import find_file, write_json
+from .files import find_file, join_path, parse_json, write_json
 
 __all__ = ["FORMAT", "detect", "load", "save"]
 
 _VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
-_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud")
+_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion")
 
 
 def detect(path: Path) -> Path | None:
@@ -40,7 +45,7 @@ def detect(path: Path) -> Path | None:
 def _join(root: Path, rel: object, where: str) -> Path:
     if not isinstance(rel, str) or not rel or "\x00" in rel:
         raise InputError(f"{where} must be a non-empty relative or absolute path string, got {rel!r}")
-    return Path(os.path.normpath(root / rel))
+    return join_path(root, rel)
 
 
 def _number(d: dict, key: str, where: str) -> float | int:
@@ -83,10 +88,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
         raise InputError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save the manifest as UTF-8") from None
     except OSError as e:
         raise InputError(f"{path}: cannot read the manifest ({e.strerror})") from None
-    try:
-        data = json.loads(text)
-    except (json.JSONDecodeError, RecursionError) as e:
-        raise InputError(f"{path}: not valid JSON ({e})") from None
+    data = parse_json(text, path)  # not valid JSON, or a key twice in one object: an InputError
     if not isinstance(data, dict):
         raise InputError(f"{path}: expected a JSON object with 'format', 'mesh' and 'views'")
     fmt = data.get("format")
@@ -127,6 +129,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
                     depth_scale=_number(d, "depth_scale", where) if d.get("depth_scale") is not None else 1000.0,
                     point_cloud=None if d.get("point_cloud") is None
                     else _join(root, d["point_cloud"], f"{where}: 'point_cloud'"),
+                    distortion=None if d.get("distortion") is None else Distortion.from_dict(d["distortion"]),
                 )
             )
         except InputError as e:
@@ -182,5 +185,7 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
             d["depth_scale"] = v.depth_scale
         if v.point_cloud is not None:
             d["point_cloud"] = _rel(v.point_cloud, root)
+        if v.distortion is not None:
+            d["distortion"] = v.distortion.to_dict()
         views.append(d)
     return write_json(path, {"format": FORMAT, "mesh": _rel(scene.mesh, root), "views": views})

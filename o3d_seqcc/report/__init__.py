@@ -5,6 +5,12 @@ works offline) that ``run``, ``correct`` and ``texture`` (and so ``demo``) write
 output folder, and that :func:`regenerate_report` (``o3d-seqcc report RUN_DIR``) writes again
 from an output folder. Sections, each only when the command produced its data:
 
+- the textured model in an interactive 3D viewer (:mod:`o3d_seqcc.report.viewer`: the GLB
+  inline, three.js bundled into the page; orbit, zoom, the texture corrected / as taken / the
+  selection colours);
+- what the correction changes (:mod:`o3d_seqcc.report.comparison`): one close-up of the model
+  as written, with each face its photo corrected and as taken, and the selection seams on a
+  colour scale of their step;
 - the colour-correction graph with edge weights and the Dijkstra paths, reference marked
   (paper Figures 4-5), and the path edges as a table;
 - the joint image histograms (JIH) and fitted colour mapping functions (CMF) of every path edge
@@ -17,11 +23,11 @@ from an output folder. Sections, each only when the command produced its data:
 - renders of the textured mesh from two views beside the photos (Figures 12-13);
 - seam metric, timings and the run's settings.
 
-At run time everything comes from memory. On fountain (33 views, 16k faces) the report costs
-about 1.3 s of CPU on one core: importing matplotlib's Figure 0.2 s, Table 2 on at most
-:data:`METRICS_MAX_PER_PAIR` mappings per pair 0.5 s (all 3.9 M mappings: 11 s), the page 0.6 s
-(figures, thumbnails, two small ray-cast renders; selection.png is reused);
-:meth:`~o3d_seqcc.pipeline.RunResult.save` runs the first two in a thread beside the export.
+At run time everything comes from memory. :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
+matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
+and measures the selection seams' steps in a thread beside the export; the page then draws the
+figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
+the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
 :func:`regenerate_report` reloads the scene, recomputes the visibility, mappings and correction
 with the settings ``report.json`` recorded (the per-edge CMFs are not saved) and reads the
 selection, the textured mesh and the numbers from the folder.
@@ -40,16 +46,48 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.files import atomic_write_bytes
+from ..io.output import add_output_file, check_output_file, write_output_file
 from .page import PageInputs, facts, render_page
+from .validate import page_bytes, read_report_json, read_selection
 
-__all__ = ["METRICS_MAX_PER_PAIR", "REPORT_FILE", "html_report", "regenerate_report", "write_report"]
+__all__ = ["IMAGE_CACHE_BYTES", "METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "REPORT_FILE", "cached_images",
+           "metrics_sample", "html_report", "regenerate_report", "write_report"]
 
 logger = logging.getLogger(__name__)
 
 #: file name of the report in an output folder
 REPORT_FILE = "report.html"
-#: mappings scored per pair for the Table 2 of ``run`` (evenly spaced; ``correct`` scores them all)
+#: mappings scored per pair for the Table 2 of ``run`` beyond :data:`METRICS_ALL_UP_TO` (evenly spaced)
 METRICS_MAX_PER_PAIR = 200
+#: ``run`` scores every mapping (its Table 2 is then ``correct``'s, number for number) up to this many in all
+METRICS_ALL_UP_TO = 100_000
+
+
+#: bytes of images a report keeps while it is made (each photo read, and corrected, once while they fit)
+IMAGE_CACHE_BYTES = 256 << 20
+
+
+def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
+    """``photos`` and ``corrected`` read through one shared cache; lazily corrected images from the cached photos.
+
+    What :meth:`~o3d_seqcc.pipeline.RunResult.save` hands to Table 2, the seam steps and the page,
+    so that together they read each photo once (``None`` stays ``None``).
+    """
+    from ..correction.base import CorrectedImages
+    from ..images import CachedImages, LRUCache
+
+    if isinstance(photos, CachedImages):
+        return photos, corrected
+    cache = LRUCache(IMAGE_CACHE_BYTES)
+    p = None if photos is None else CachedImages(photos, cache, "photos")
+    if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
+        corrected = CorrectedImages(p, corrected.transforms)  # the LUTs applied to the cached photos
+    return p, None if corrected is None else CachedImages(corrected, cache, "corrected")
+
+
+def metrics_sample(mappings) -> int | None:
+    """``max_per_pair`` of ``run``'s Table 2: None (all) up to :data:`METRICS_ALL_UP_TO` mappings, else the cap."""
+    return None if mappings.total <= METRICS_ALL_UP_TO else METRICS_MAX_PER_PAIR
 
 
 def _selection_png(folder: Path | None) -> bytes | None:
@@ -58,16 +96,19 @@ def _selection_png(folder: Path | None) -> bytes | None:
     return p.read_bytes() if p is not None and p.is_file() else None
 
 
-def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None) -> PageInputs:
+def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
+                        selection_seams: dict | None = None, images: tuple | None = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
         photos = result.originals if result.correction is not None else result.images
+        if images is not None:
+            photos, corrected = images
         return PageInputs(
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
-            usable=vis.usable_counts(), selection_png=_selection_png(folder))
+            usable=vis.usable_counts(), selection_png=_selection_png(folder), selection_seams=selection_seams)
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
@@ -100,33 +141,20 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
     return render_page(_inputs_from_result(result, report), width=int(thumb_width))
 
 
-def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160) -> Path:
+def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
+                 selection_seams: dict | None = None, images: tuple | None = None) -> Path:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
     (``report["selection"]["picture_view"]``, as :meth:`~o3d_seqcc.pipeline.RunResult.save`
-    writes it) is embedded as Figure 9 instead of being rendered again.
+    writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
+    (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
+    not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
+    result's (e.g. :func:`cached_images` shared with whoever read them before).
     """
     path = Path(path)
-    inp = _inputs_from_result(result, report, folder=path.parent)
-    return atomic_write_bytes(path, render_page(inp, width=int(thumb_width)).encode("utf-8"))
-
-
-def _read_report(run_dir: Path) -> dict:
-    if not run_dir.is_dir():
-        raise InputError(f"{run_dir} is not a folder; give the output folder (--out) of o3d-seqcc run, correct or "
-                         "texture")
-    rj = run_dir / "report.json"
-    if not rj.is_file():
-        raise InputError(f"{run_dir} is not an o3d-seqcc output folder (no report.json); give the --out folder of "
-                         "o3d-seqcc run, correct or texture")
-    try:
-        rep = json.loads(rj.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise InputError(f"{rj} is not readable JSON ({e}); run the command again to rewrite the folder") from None
-    if not isinstance(rep, dict):
-        raise InputError(f"{rj} is not an o3d-seqcc report (not a JSON object); run the command again")
-    return rep
+    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
+    return atomic_write_bytes(path, page_bytes(render_page(inp, width=int(thumb_width))))
 
 
 def _scene_frame(tm, rep: dict, fmt: str):
@@ -140,7 +168,12 @@ def _scene_frame(tm, rep: dict, fmt: str):
     return replace(tm, vertices=tm.vertices @ R, normals=None if tm.normals is None else tm.normals @ R)
 
 
-def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
+def _run_files(run_dir: Path) -> list[Path]:
+    """The files of an output folder the report reads."""
+    return [run_dir / n for n in ("report.json", "selection.npy", "selection.png", "mesh.glb", "mesh.obj", "mesh.ply")]
+
+
+def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None, output=None) -> PageInputs:
     from ..correction import correct
     from ..io.load import load_scene
     from ..mappings import compute_mappings
@@ -154,10 +187,17 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         raise InputError(f"{run_dir / 'report.json'} does not say where the scene is (a scene in memory, or an older "
                          "o3d-seqcc); pass --scene (and --mesh)")
     try:
-        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None))
+        opts = dict(rep.get("scene_options") or {})  # as the run loaded it (a moved scene: its conventions only)
+        if scene is not None:
+            opts = {k: v for k, v in opts.items() if k not in ("image_dir", "depth_dir", "depth_scale")}
+        if image_dir is not None:
+            opts["image_dir"] = image_dir
+        sc = load_scene(src, mesh=mesh if mesh is not None else (rep.get("mesh") or None), **opts)
     except InputError as e:
         raise InputError(f"cannot reload the scene {src} named in {run_dir / 'report.json'}: {e}; pass --scene "
                          "(and --mesh) to say where it is now") from None
+    if output is not None:  # before any work: the page may not replace a file the report reads
+        check_output_file(output, option="--output", inputs=[*sc.input_paths(), *_run_files(run_dir)])
     split = ((rep.get("visibility_stats") or {}).get("split") or {}).get("enabled", False)  # older runs: not split
     vis = compute_visibility(sc, split_faces=bool(split))
     photos = [v.load_image() for v in sc.views]
@@ -176,18 +216,17 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh) -> PageInputs:
         if f["metrics"] is None and f["command"] == "run":
             logger.info("report.json has no metrics (older o3d-seqcc): computing Table 2")
             rep = {**rep, "metrics": before_after(photos, corrected, maps, correction.paths,
-                                                  max_per_pair=METRICS_MAX_PER_PAIR)}
+                                                  max_per_pair=metrics_sample(maps))}
     selection = textured = None
     faces = vis.mesh.faces
-    if (run_dir / "selection.npy").is_file():
-        selection = np.load(run_dir / "selection.npy", allow_pickle=False)
-        if selection.shape != (len(faces),):
-            logger.warning("selection.npy has %s entries for %d faces: the selection is left out", selection.shape,
-                           len(faces))
-            selection = None
+    if os.path.lexists(run_dir / "selection.npy"):
+        selection = read_selection(run_dir / "selection.npy", len(faces), len(sc.views))
     tm_path = next((run_dir / n for n in ("mesh.glb", "mesh.obj", "mesh.ply") if (run_dir / n).is_file()), None)
     if tm_path is not None and selection is not None:
         textured = _scene_frame(load_textured_mesh(tm_path), rep, tm_path.suffix.lstrip("."))
+        if textured.face_view is None and len(textured.faces) == len(selection) \
+                and int((rep.get("atlas") or {}).get("pages", 1)) == 1:  # one page: the file keeps the faces' order
+            textured = replace(textured, face_view=np.where(selection >= 0, selection, -1))
     return PageInputs(rep=rep, scene=sc, photos=photos, corrected=corrected, correction=correction, mappings=maps,
                    selection=selection, mesh=(vis.mesh.vertices, faces), textured=textured,
                    usable=vis.usable_counts(), selection_png=_selection_png(run_dir))
@@ -199,6 +238,7 @@ def regenerate_report(
     scene: str | os.PathLike | None = None,
     mesh: str | os.PathLike | None = None,
     output: str | os.PathLike | None = None,
+    image_dir: str | os.PathLike | None = None,
     thumb_width: int = 160,
 ) -> Path:
     """Write the HTML report of an output folder of ``run``, ``correct`` or ``texture`` again.
@@ -215,6 +255,8 @@ def regenerate_report(
         The output folder.
     scene, mesh : path-like, optional
         Where the scene (and its mesh) are now, when not where ``report.json`` says.
+    image_dir : path-like, optional
+        Where the images of a COLMAP, Meshroom or OpenMVS scene are now (``load_scene``'s).
     output : path-like, optional
         Write the page there instead of ``run_dir/report.html`` (which is then also listed in
         the folder's manifest).
@@ -232,11 +274,15 @@ def regenerate_report(
         be found (the message says to pass ``scene``).
     """
     run_dir = Path(run_dir)
-    rep = _read_report(run_dir)
-    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh)
-    data = render_page(inp, width=int(thumb_width)).encode("utf-8")
+    rep = read_report_json(run_dir)
+    if output is not None and os.path.realpath(output) == os.path.realpath(run_dir / REPORT_FILE):
+        output = None  # the folder's own page: listed in its manifest as before
+    if output is not None:  # before any work (again with the scene's files once it is loaded)
+        check_output_file(output, option="--output", inputs=[p for p in (rep.get("scene_path"), rep.get("mesh"),
+                                                                         scene, mesh) if p] + _run_files(run_dir))
+    inp = _inputs_from_folder(run_dir, rep, scene=scene, mesh=mesh, image_dir=image_dir, output=output)
+    data = page_bytes(render_page(inp, width=int(thumb_width)))
     if output is not None:
-        return atomic_write_bytes(output, data)
-    from ..io.output import add_output_file
-
+        return write_output_file(output, data, option="--output",
+                                 inputs=[*inp.scene.input_paths(), *_run_files(run_dir)])
     return add_output_file(run_dir, REPORT_FILE, data)

@@ -7,12 +7,11 @@ in memory or recomputed); :func:`render_page` draws it. Figures come from
 
 from __future__ import annotations
 
-import base64
-import html
 import inspect
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,11 @@ from ..imageops import dtype_scale, img_as_uint8, sample_colors
 from ..metrics import thin_indices
 from ..render import render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
-from .figures import graph_figure, jih_cmf_figure, jih_thumbnail, jpeg, png, thumbnail, view_layout
+from ..seams import selection_seams
+from .comparison import correction_section
+from .figures import graph_figure, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
+from .html import esc, img, num
+from .viewer import model_section
 
 __all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "PageInputs", "facts",
            "render_page"]
@@ -32,7 +35,7 @@ logger = logging.getLogger(__name__)
 JIH_BITS = 7
 #: mappings per edge drawn in a JIH (evenly spaced)
 JIH_MAX_MAPPINGS = 2000
-#: width in pixels of the selection picture (the folder's selection.png is reused when the view is as wide)
+#: width in pixels of the selection picture drawn when the folder holds no selection.png of the same view (reused as is)
 SELECTION_WIDTH = 640
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
 MAX_DETAIL_EDGES = 3
@@ -53,19 +56,19 @@ class PageInputs:
     textured: Any = None  # TexturedMesh
     usable: np.ndarray | None = None  # (V,) faces usable per view
     selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
+    selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
 
 
-def _esc(x: Any) -> str:
-    return html.escape(str(x), quote=True)
+_esc, _img, _num = esc, img, num
 
 
-def _img(data: bytes, mime: str, alt: str, cls: str = "") -> str:
-    c = f' class="{cls}"' if cls else ""
-    return f'<img{c} src="data:{mime};base64,{base64.b64encode(data).decode("ascii")}" alt="{_esc(alt)}">'
-
-
-def _num(x: Any, digits: int = 2) -> str:
-    return "–" if x is None else (f"{x:.{digits}f}" if isinstance(x, float) else _esc(x))
+def _selection_seams(inp: PageInputs) -> dict:
+    """The colour steps at the selection seams, in the photos and in the corrected images (given or computed)."""
+    if inp.selection_seams is not None:
+        return inp.selection_seams
+    v, f = inp.mesh
+    return {k: selection_seams(v, f, inp.selection, inp.scene.views, imgs)
+            for k, imgs in (("photos", inp.photos), ("corrected", inp.corrected))}
 
 
 def _name(inp: PageInputs, v: int) -> str:
@@ -77,12 +80,29 @@ def facts(rep: dict) -> dict[str, Any]:
     """The fields the page needs, from a run / texture report.json or a correct report.json."""
     if "correction" in rep or rep.get("command") in ("run", "texture"):
         c = rep.get("correction") or {}
-        return {"command": rep.get("command", "run"), "method": c.get("method"), "t_npm": c.get("t_npm"),
-                "mappings": c.get("mappings"), "settings": c.get("settings") or {}, "timings": rep.get("timings_s", {}),
+        settings = c.get("settings") or {}
+        return {"command": rep.get("command", "run"), "method": c.get("method"),
+                "t_npm": settings.get("t_npm", c.get("t_npm")), "t_npm_effective": c.get("t_npm"),
+                "mappings": c.get("mappings"), "settings": settings, "timings": rep.get("timings_s", {}),
                 "correction_timings": c.get("timings_s", {}), "metrics": rep.get("metrics")}
     return {"command": rep.get("command", "correct"), "method": rep.get("method"), "t_npm": rep.get("t_npm"),
+            "t_npm_effective": rep.get("t_npm_effective", rep.get("t_npm")),
             "mappings": rep.get("mappings"), "settings": {k: rep[k] for k in ("seed", "graph_weight") if k in rep},
             "timings": rep.get("timings", {}), "correction_timings": {}, "metrics": rep.get("metrics")}
+
+
+def t_npm_text(f: dict) -> str:
+    """The graph threshold one way everywhere (HTML): the setting, and the count it means in this run's mappings."""
+    name = "t<sub>npm</sub>"
+    setting, eff, mode = f.get("t_npm"), f.get("t_npm_effective"), f.get("mappings") or ""
+    unit = "px of shared surface" if mode == "surface" else "mappings"
+    if eff is None or str(eff) == str(setting):
+        return f"{name} = {_esc(setting)} {unit}"
+    if mode in ("surface", "vertices"):  # only "auto" differs from its count
+        how = "1 % of a photo" if mode == "surface" else "the paper's"
+        return f"{name} = {_esc(setting)} ({how}) = {_esc(eff)} {unit}"
+    return (f"{name} = {_esc(setting)} (the setting, in vertex mappings) = {_esc(eff)} {_esc(mode)} "
+            f"mappings (the threshold this run's counts were held to)")
 
 
 # -------------------------------------------------------------------------------- graph (Fig 4-5)
@@ -90,7 +110,7 @@ def _path_edges(paths: dict) -> list[tuple[int, int]]:
     return list(dict.fromkeys((t, s) for v in sorted(paths) for t, s in zip(paths[v][:-1], paths[v][1:])))
 
 
-def _graph_section(inp: PageInputs) -> str:
+def _graph_section(inp: PageInputs, f: dict) -> str:
     c = inp.correction
     ref, names = c.reference, inp.scene.names
     xy = view_layout(np.array([v.center for v in inp.scene.views]))
@@ -106,7 +126,7 @@ def _graph_section(inp: PageInputs) -> str:
     cap = (f"Colour-correction graph (paper Figures 4-5). One node per view, numbered by index and placed by its "
            f"camera position (seen from above: the two main axes of the camera centres); the reference "
            f"<b>{_esc(names[ref])}</b> (#{ref}) in red. An edge joins two views sharing at least "
-           f"t<sub>npm</sub> = {c.t_npm} {unit}: its width grows with that count n, its colour is its "
+           f"{t_npm_text({**f, 't_npm_effective': c.t_npm})}: its width grows with that count n, its colour is its "
            f"weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
            f"Unreachable views (grey): {unreach}.")
     by_pair = {(e["a"], e["b"]): e for e in c.graph_edges}
@@ -159,14 +179,20 @@ def _jih_section(inp: PageInputs, path: list[int] | None, jihs: dict, thumbs: di
     if path:
         edges = list(zip(path[:-1], path[1:]))
         shown = edges if len(edges) <= MAX_DETAIL_EDGES else edges[:MAX_DETAIL_EDGES - 1] + edges[-1:]
-        rows = [{"title": f"#{t} → #{s}", "jih": jihs[(t, s)][0], "outliers": jihs[(t, s)][1], "lut": luts.get((t, s)),
-                 "xlabel": f"target #{t} value", "ylabel": f"source #{s} value"} for t, s in shown]
+        def panel(t: int, s: int, ch: int) -> bytes:
+            inl, out = jihs[(t, s)]
+            lut = luts.get((t, s))
+            return png(jih_panel(inl[ch], ch, None if lut is None else lut[ch], None if out is None else out[ch]))
+
+        cells = "".join(f'<figure>{_img(panel(t, s, ch), "image/png", f"JIH {t} {s} {ch}")}<figcaption>'
+                        f"{'RGB'[ch]}: x #{t}, y #{s}</figcaption></figure>"
+                        for t, s in shown for ch in range(3))
         which = "edge by edge" if len(shown) == len(edges) else f"{len(shown)} of its {len(edges)} edges (all below)"
-        detail = (f'<figure data-fig="6-7">{_img(jih_cmf_figure(rows), "image/png", "JIH and CMF of one path")}'
+        detail = (f'<figure data-fig="6-7"><div class="grid panels">{cells}</div>'
                   f"<figcaption>The path of {_esc(_name(inp, path[0]))} toward the reference, {which} (rows) and "
                   f"channel by channel (columns): the joint image histogram of the colours at the pair's mappings "
-                  f"(x: target view, y: source view; darker = more mappings, log scale; grey: mappings the outlier "
-                  f"pass discarded) and the fitted colour mapping function (curve; dotted: identity)."
+                  f"(x: the target view's value, y: the source view's, 0 to 1; darker = more mappings, log scale; grey: "
+                  f"mappings the outlier pass discarded) and the fitted colour mapping function (curve; dotted: identity)."
                   f"</figcaption></figure>")
     cells = "".join(
         f'<figure class="thumb">{_img(thumbs[e], "image/png", f"JIH {e[0]} to {e[1]}")}'
@@ -243,6 +269,26 @@ def _grid_section(inp: PageInputs, small: list, small_after: list | None) -> str
 
 
 # ------------------------------------------------------------------------------------- Table 2
+def correct_command(inp: PageInputs) -> str:
+    """The ``o3d-seqcc correct`` command line that runs this report's correction (and scores every mapping)."""
+    import shlex
+
+    rep, c = inp.rep, inp.correction
+    f = facts(rep)
+    s = f["settings"]
+    scene = rep.get("scene_path") or rep.get("scene") or "SCENE"
+    words = ["o3d-seqcc", "correct", scene]
+    if rep.get("mesh") and Path(scene).suffix.lower() not in (".json", ".mlp", ".sfm"):
+        words += ["--mesh", rep["mesh"]]  # formats without a mesh of their own
+    words += ["--reference", inp.scene.names[c.reference], "--method", c.method, "--t-npm", str(f["t_npm"]),
+              "--mappings", str(f["mappings"] or "vertices")]
+    if s.get("graph_weight", "paper") != "paper":
+        words += ["--graph-weight", s["graph_weight"]]
+    if int(s.get("seed", 0) or 0):
+        words += ["--seed", str(s["seed"])]
+    return " ".join(shlex.quote(str(w)) for w in words + ["--out", "OUT"])
+
+
 def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
     if not metrics or "before" not in metrics:
         return "<p>No metrics in report.json (the command ran with --no-metrics).</p>"
@@ -259,11 +305,20 @@ def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
 
     method = _esc(inp.correction.method) if inp.correction is not None else "corrected"
     scored = ""
-    if b.get("max_per_pair"):
-        scored = (f" Scored on at most {b['max_per_pair']} evenly spaced mappings per pair ({b['n_scored']} in all; the "
-                  f"weighted means still weight every pair by its full count); <code>o3d-seqcc correct</code> scores "
-                  f"every mapping.")
-    return (f'<table class="t2"><tr><th></th><th colspan="3">PSNR dB (higher: more similar)</th>'
+    if inp.rep.get("command") == "run" and inp.correction is not None:
+        cmd = f"<code>{_esc(correct_command(inp))}</code>"
+        if b.get("max_per_pair"):
+            scored = (f'<p class="callout">To get this table from <code>o3d-seqcc correct</code>, give it this run\'s '
+                      f"settings: {cmd} (its defaults, reference auto and vertex mappings, correct differently and so "
+                      f"score differently). It scores all {b['n_mappings']} mappings; this table, written beside the "
+                      f"run, a sample of at most {b['max_per_pair']} evenly spaced ones per pair ({b['n_scored']}; the "
+                      f"weighted means still weight every pair by its full count), so its means differ from correct's "
+                      f"by the sampling error.</p>")
+        else:
+            scored = (f'<p class="callout">{cmd} gives this very table: the same correction, scored on all '
+                      f"{b['n_mappings']} mappings (its defaults, reference auto and vertex mappings, correct "
+                      f"differently and so score differently).</p>")
+    return (f'{scored}<table class="t2"><tr><th></th><th colspan="3">PSNR dB (higher: more similar)</th>'
             f'<th colspan="3">CIEDE2000 (lower: more similar)</th><th colspan="2">contrast ratio (~1)</th></tr>'
             f"<tr><th></th>{'<th>mean</th><th>w. mean</th><th>std</th>' * 2}<th>mean</th><th>min</th></tr>"
             f"<tr><td>before (photos)</td>{cells(b, 'before')}{contrast('before')}</tr>"
@@ -272,7 +327,7 @@ def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
             f"mappings): mean, mean weighted by each pair's number of mappings, standard deviation over pairs. "
             f"Contrast ratio: std of the target view's colours over the source view's at the mappings of every pair at "
             f"different path depths, averaged over channels (below 1: the correction washes images out, which the "
-            f"pairwise scores reward at misregistered mappings).{scored}</p>")
+            f"pairwise scores reward at misregistered mappings).</p>")
 
 
 # -------------------------------------------------------------------- selection and renders (9, 12-13)
@@ -291,7 +346,7 @@ def _render_views(inp: PageInputs) -> tuple[int, int]:
 def _selection_section(inp: PageInputs, view: int) -> str:
     n = len(inp.scene.views)
     same = (inp.rep.get("selection") or {}).get("picture_view") == inp.scene.names[view]
-    if inp.selection_png is not None and same and inp.scene.views[view].width >= SELECTION_WIDTH:
+    if inp.selection_png is not None and same:
         picture = _img(inp.selection_png, "image/png", "selection")  # the folder's selection.png: the same picture
     else:
         cam = inp.scene.views[view]
@@ -354,7 +409,7 @@ def _kv_tables(d: dict) -> str:
     return f'<div class="tables">{"".join(out)}</div>'
 
 
-def _seams_section(rep: dict) -> str:
+def _seams_section(rep: dict, steps: dict | None = None) -> str:
     keys = ("mean", "median", "p99", "frac_above_5", "seam_mean", "n_edges", "n_seam_edges")
     cols = [("textured mesh", rep.get("seams"))]
     if rep.get("seams_original_images"):
@@ -365,18 +420,27 @@ def _seams_section(rep: dict) -> str:
     head = "".join(f"<th>{_esc(n)}</th>" for n, _ in cols)
     rows = "".join(f"<tr><th>{k}</th>" + "".join(f"<td>{_num(s.get(k), 3)}</td>" for _, s in cols) + "</tr>"
                    for k in keys)
+    note = ""
+    if steps is not None:
+        a, b = (steps[k].summary() for k in ("photos", "corrected"))
+        note = (f" Before any atlas and leveling, the {a['n_edges']} edges where the selection changes photo show a "
+                f"mean step of {_num(a['mean'])} in the photos as taken and {_num(b['mean'])} in the corrected ones "
+                f"(share above 5: {_num(a['frac_above_5'], 3)} → {_num(b['frac_above_5'], 3)}; see What the "
+                f"correction changes): the seam leveling removes what is left.")
     return (f'<table class="kv"><tr><th></th>{head}</tr>{rows}</table><p class="note">CIEDE2000 across every interior '
             f"mesh edge between the two faces' texture colours (mean, median, 99th percentile, share above 5; "
-            f"seam_mean: over the edges where the texture changes chart).</p>")
+            f"seam_mean: over the edges where the texture changes chart).{note}</p>")
 
 
 def _settings(inp: PageInputs, f: dict) -> dict:
     rep = inp.rep
-    s: dict[str, Any] = {"command": f["command"], "scene": rep.get("scene", ""), "mesh": rep.get("mesh", ""),
+    where = rep.get("scene") or rep.get("scene_path") or "(a scene in memory)"
+    s: dict[str, Any] = {"command": f["command"], "scene": where, "mesh": rep.get("mesh") or "(in memory)",
                          "views": len(inp.scene.views)}
     if f["method"]:
         s["correction"] = {"method": f["method"], "reference": rep.get("reference") or rep["correction"].get("reference"),
-                           "t_npm": f["t_npm"], "mappings": f["mappings"], **f["settings"]}
+                           "t_npm": f["t_npm"], "t_npm_effective": f["t_npm_effective"], "mappings": f["mappings"],
+                           **{k: v for k, v in f["settings"].items() if k != "t_npm"}}
     for key in ("texture_settings", "selection", "atlas"):
         if rep.get(key):
             s[key] = {k: v for k, v in rep[key].items() if k not in ("faces_per_view", "leveling", "local_leveling")}
@@ -397,7 +461,8 @@ nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
 border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
 figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}
 .grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
-.grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}.grid figure,.row figure{margin:0;background:#fff;
+.grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}
+.grid.panels{grid-template-columns:repeat(3,226px)}.grid figure,.row figure{margin:0;background:#fff;
 border:2px solid #e4e4e4;padding:3px}.grid figure img{width:100%}.grid figure img+img{margin-top:3px}
 .grid figcaption,.row figcaption{font-size:11px;word-break:break-all}figure.ref{border-color:#d62728}
 .row{display:flex;flex-wrap:wrap;gap:8px;margin-bottom:8px}.row figure{max-width:330px}
@@ -409,6 +474,12 @@ table.kv th{text-align:left;font-weight:normal;color:#444}.note{font-size:12.5px
 .legend{list-style:none;padding:0;margin:0;font-size:12px;columns:2}.sw{display:inline-block;width:12px;height:12px;
 margin-right:5px;vertical-align:middle;border:1px solid #999}details{margin:6px 0}code{font-size:12px}
 .tables{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}th.group{text-align:left;font-weight:bold}
+.viewer canvas{display:block;width:100%;height:520px;background:#f2f2f2;border:1px solid #ddd;border-radius:4px;
+touch-action:none}.viewer-modes{display:flex;flex-wrap:wrap;gap:14px;margin:6px 0;font-size:13px}
+.callout{background:#fff8e1;border:1px solid #e8c65a;border-radius:4px;padding:6px 10px;max-width:1100px;
+font-size:13px}.closeup .row figure{max-width:330px}.scale{display:flex;align-items:flex-start;gap:10px;font-size:12px;
+margin:6px 0}.scale .bar{display:block;width:240px;height:12px;border:1px solid #999}.scale .ticks{display:flex;
+justify-content:space-between;width:242px}
 """
 
 
@@ -421,10 +492,20 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
     c = inp.correction
     out: list[tuple[str, str, str]] = []
 
-    def add(sid: str, title: str, build, *args) -> None:
+    def add(sid: str, title: str, build, *args, **kw) -> None:
         t = time.perf_counter()
-        out.append((sid, title, build(*args)))
+        out.append((sid, title, build(*args, **kw)))
         logger.debug("report section %s: %.3f s", sid, time.perf_counter() - t)
+
+    textured = inp.textured is not None and inp.selection is not None and inp.mesh is not None
+    if textured:
+        a, b = _render_views(inp)
+        add("model", "The textured model", model_section, inp.textured, inp.scene.views[a], inp.scene, inp.photos,
+            inp.corrected, method=None if c is None else c.method)
+        if c is not None and inp.corrected is not None:
+            seams = _selection_seams(inp)
+            add("correction", "What the correction changes", correction_section, inp.textured, inp.scene.views[a],
+                inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method)
 
     before = [thumbnail(im, width) for im in inp.photos] if inp.photos is not None else None
     after = [thumbnail(im, width) for im in inp.corrected] if inp.corrected is not None and before else None
@@ -440,7 +521,7 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
         # Figure 8's path: a longest one, the view its correction changed most
         longest = [v for v in cands if len(c.paths[v]) == hops]
         path = c.paths[max(longest, key=lambda v: (change[v], -v))] if longest else None
-        add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp)
+        add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp, f)
         if inp.mappings is not None and c.paths:
             t = time.perf_counter()
             edges = _path_edges(c.paths)
@@ -452,11 +533,10 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
             if path:
                 add("steps", "Sequential pairwise correction of one path (Figure 8)", _steps_section, inp, path,
                     thumbs, 3 * width // 2)
-    if inp.textured is not None and inp.selection is not None and inp.mesh is not None:
-        a, b = _render_views(inp)
+    if textured:
         add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
         add("renders", "Textured mesh and photos (Figures 12-13)", _renders_section, inp, (a, b), 2 * width)
-        add("seams", "Seam metric", _seams_section, inp.rep)
+        add("seams", "Seam metric", _seams_section, inp.rep, inp.selection_seams)
     timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
     out.append(("timings", "Timings (s)", f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"))
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
@@ -476,8 +556,11 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
     if c is not None:
         cards.append(("reference", _name(inp, c.reference)))
         cards.append(("views without a path", str(len(c.unreachable))))
+    if inp.selection_seams is not None:
+        a, b = (inp.selection_seams[k].summary()["mean"] for k in ("photos", "corrected"))
+        cards.append(("colour step at the seams in the photos, uncorrected → corrected", f"{_num(a)} → {_num(b)}"))
     if inp.rep.get("seams"):
-        cards.append(("seam CIEDE2000, mean", _num(inp.rep["seams"]["mean"], 3)))
+        cards.append(("seam CIEDE2000 of the texture (after leveling), mean", _num(inp.rep["seams"]["mean"], 3)))
     a = inp.rep.get("atlas") or {}
     if a.get("atlas_size"):
         pages = int(a.get("pages", 1))
@@ -494,6 +577,13 @@ def render_page(inp: PageInputs, *, width: int = 160) -> str:
     from .. import __version__
 
     f = facts(inp.rep)
+    from . import cached_images
+
+    photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
+    inp = replace(inp, photos=photos, corrected=corrected)
+    if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
+            and inp.corrected is not None and inp.selection_seams is None:
+        inp = replace(inp, selection_seams=_selection_seams(inp))  # the cards and two sections show them
     sections = _sections(inp, f, width)
     c = inp.correction
     faces = "" if inp.selection is None else f", {len(inp.selection)} faces"

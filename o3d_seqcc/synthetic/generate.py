@@ -41,6 +41,7 @@ from ..imageops import img_as_dtype
 from ..io import files as iofiles
 from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image, write_json
 from ..io.load import load_scene, save_scene
+from ..io.output import check_output, output_folder
 from ..photometric import HARD_CHANGE_RANGES, apply_photometric, identity_photometric, sample_camera_change, \
     sample_photometric
 from ..scene import Scene, View
@@ -155,18 +156,6 @@ def _write_mesh(path: Path, geom: RoomGeometry) -> Path:
 
 
 _SUBDIRS = {"images": ".png", "gt": ".png", "depth": ".png", "face_ids": ".npy", "points": ".npy"}
-_VIEW_FILE = re.compile(r"^v\d+\.(png|npy)$")
-
-
-def _remove_stale(out_dir: Path, names: set[str]) -> None:
-    """Delete view files of an earlier generation that the new one does not have (overwrite)."""
-    for sub, ext in _SUBDIRS.items():
-        d = out_dir / sub
-        if not d.is_dir():
-            continue
-        for p in d.iterdir():
-            if p.is_file() and _VIEW_FILE.match(p.name) and p.stem not in names:
-                p.unlink()
 
 
 def make_synthetic_scene(
@@ -209,8 +198,9 @@ def make_synthetic_scene(
         independently per channel, S-curve 0-0.6; :func:`~o3d_seqcc.photometric.sample_camera_change`);
         ``"none"``: the images are the ground-truth renders.
     overwrite : bool, default False
-        Allow writing into a non-empty ``out_dir`` (files of earlier views are replaced,
-        view files the new scene does not have are removed; nothing else is touched).
+        Replace an existing ``out_dir`` that holds an earlier output of o3d_seqcc (a folder
+        with files o3d_seqcc did not write is never replaced). The folder is written as a
+        whole (:func:`o3d_seqcc.io.output.output_folder`: staged beside it, then swapped in).
     cell_size : float, default 0.06
         Edge length (metres) of the square cells (two triangles each) tessellating walls, floor
         and furniture (ceiling 3x coarser): 0.06 gives about 46k faces; larger is coarser
@@ -255,10 +245,7 @@ def make_synthetic_scene(
     if int(width) * int(height) > iofiles.MAX_IMAGE_PIXELS:
         raise InputError(f"width x height = {int(width) * int(height)} pixels, over the limit of "
                          f"{iofiles.MAX_IMAGE_PIXELS} pixels (--max-image-pixels); choose smaller images")
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"output folder {out_dir} is a file; give a folder path")
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not overwrite:
-        raise InputError(f"output folder {out_dir} is not empty; choose another folder or pass overwrite=True (--overwrite)")
+    check_output(out_dir, overwrite=overwrite)  # before the work: never into a file or over files not ours
     import open3d as o3d
 
     n_views, width, height = int(n_views), int(width), int(height)
@@ -291,62 +278,60 @@ def make_synthetic_scene(
         extrinsics = [_moved(E, shift) for E in extrinsics]
         cams = [(c + shift, yaw, pitch, roll) for c, yaw, pitch, roll in cams]
         renders = [(face, pts.astype(np.float64) + shift, *rest) for face, pts, *rest in renders]
-    out_dir.mkdir(parents=True, exist_ok=True)
-    mesh_path = _write_mesh(out_dir / "mesh.ply", geom)
-    _remove_stale(out_dir, set(names))
-    views, gt_paths, fid_paths, pt_paths, transforms, per_view = [], {}, {}, {}, {}, []
-    for name, (c, yaw, pitch, roll), ext, (face, pts, depth, gt), prm in zip(names, cams, extrinsics, renders, params):
-        img = gt if photometric == "none" or name == names[0] else img_as_dtype(apply_photometric(gt, prm), np.uint8)
-        gt_paths[name] = write_image(out_dir / "gt" / f"{name}.png", gt)
-        img_path = write_image(out_dir / "images" / f"{name}.png", img)
-        depth_path = _write_depth(out_dir / "depth" / f"{name}.png", depth, 1000.0)
-        fid_paths[name] = _save_npy(out_dir / "face_ids" / f"{name}.npy", face)
-        pt_paths[name] = _save_npy(out_dir / "points" / f"{name}.npy", pts)
-        transforms[name] = prm
-        hit = face >= 0
-        if not hit.all():
-            logger.warning("synthetic view %s: %d pixels hit nothing", name, int((~hit).sum()))
-        groups_seen = sorted(g for g, (a, b) in geom.groups.items() if np.any((face >= a) & (face < b)))
-        per_view.append(
-            {
-                "name": name,
-                "center": c.tolist(),
-                "yaw_deg": float(np.rad2deg(yaw)),
-                "pitch_deg": float(np.rad2deg(pitch)),
-                "roll_deg": float(np.rad2deg(roll)),
-                "photometric": prm,
-                "groups_seen": groups_seen,
-                "mean_abs_diff": float(np.abs(img.astype(np.float64) - gt).mean()),
-            }
-        )
-        views.append(
-            View(name=name, image=img_path, intrinsic=K, extrinsic=ext, width=width, height=height, depth=depth_path, depth_scale=1000.0)
-        )
-    scene = Scene(mesh=mesh_path, views=tuple(views))
-    save_scene(scene, out_dir / "scene.json")
-    meta = {
-        "format": SYNTHETIC_FORMAT,
-        "seed": int(seed),
-        "n_views": n_views,
-        "width": width,
-        "height": height,
-        "photometric": photometric,
-        "cell_size": float(cell_size),
-        "layout": layout,
-        "seen_only": bool(seen_only),
-        "origin": shift.tolist(),
-        "room": list(ROOM),
-        "n_faces": int(len(geom.faces)),
-        "n_vertices": int(len(geom.vertices)),
-        "face_groups": {k: list(v) for k, v in geom.groups.items()},
-        "surfaces": [{"name": s.name, "group": s.group, "tiles": list(s.tiles), "textures": list(s.textures)} for s in geom.surfaces],
-        "photometric_model": "y = (1-s)*x' + s*x'^2*(3-2x'), x' = clip(x*gain*wb[c], 0, 1)**gamma[c]; uint8 = round(255*y)",
-        "views": per_view,
-    }
-    write_json(out_dir / "synthetic.json", meta)
+    with output_folder(out_dir, overwrite=overwrite, command="synthetic") as stage:  # written as a whole
+        mesh_path = _write_mesh(stage / "mesh.ply", geom)
+        views, gt_paths, fid_paths, pt_paths, transforms, per_view = [], {}, {}, {}, {}, []
+        for name, (c, yaw, pitch, roll), ext, (face, pts, depth, gt), prm in zip(names, cams, extrinsics, renders, params):
+            img = gt if photometric == "none" or name == names[0] else img_as_dtype(apply_photometric(gt, prm), np.uint8)
+            gt_paths[name] = write_image(stage / "gt" / f"{name}.png", gt)
+            img_path = write_image(stage / "images" / f"{name}.png", img)
+            depth_path = _write_depth(stage / "depth" / f"{name}.png", depth, 1000.0)
+            fid_paths[name] = _save_npy(stage / "face_ids" / f"{name}.npy", face)
+            pt_paths[name] = _save_npy(stage / "points" / f"{name}.npy", pts)
+            transforms[name] = prm
+            hit = face >= 0
+            if not hit.all():
+                logger.warning("synthetic view %s: %d pixels hit nothing", name, int((~hit).sum()))
+            groups_seen = sorted(g for g, (a, b) in geom.groups.items() if np.any((face >= a) & (face < b)))
+            per_view.append(
+                {
+                    "name": name,
+                    "center": c.tolist(),
+                    "yaw_deg": float(np.rad2deg(yaw)),
+                    "pitch_deg": float(np.rad2deg(pitch)),
+                    "roll_deg": float(np.rad2deg(roll)),
+                    "photometric": prm,
+                    "groups_seen": groups_seen,
+                    "mean_abs_diff": float(np.abs(img.astype(np.float64) - gt).mean()),
+                }
+            )
+            views.append(
+                View(name=name, image=img_path, intrinsic=K, extrinsic=ext, width=width, height=height, depth=depth_path, depth_scale=1000.0)
+            )
+        scene = Scene(mesh=mesh_path, views=tuple(views))
+        save_scene(scene, stage / "scene.json")
+        meta = {
+            "format": SYNTHETIC_FORMAT,
+            "seed": int(seed),
+            "n_views": n_views,
+            "width": width,
+            "height": height,
+            "photometric": photometric,
+            "cell_size": float(cell_size),
+            "layout": layout,
+            "seen_only": bool(seen_only),
+            "origin": shift.tolist(),
+            "room": list(ROOM),
+            "n_faces": int(len(geom.faces)),
+            "n_vertices": int(len(geom.vertices)),
+            "face_groups": {k: list(v) for k, v in geom.groups.items()},
+            "surfaces": [{"name": s.name, "group": s.group, "tiles": list(s.tiles), "textures": list(s.textures)} for s in geom.surfaces],
+            "photometric_model": "y = (1-s)*x' + s*x'^2*(3-2x'), x' = clip(x*gain*wb[c], 0, 1)**gamma[c]; uint8 = round(255*y)",
+            "views": per_view,
+        }
+        write_json(stage / "synthetic.json", meta)
     logger.info("synthetic scene: %d views %dx%d, %d faces -> %s", n_views, width, height, len(geom.faces), out_dir)
-    return SyntheticScene(scene=scene, gt_images=gt_paths, transforms=transforms, face_ids=fid_paths, points=pt_paths,
-                          root=out_dir, face_groups=dict(geom.groups), metadata=meta)
+    return load_synthetic(out_dir)
 
 
 def load_synthetic(out_dir: str | os.PathLike) -> SyntheticScene:

@@ -105,6 +105,7 @@ class TextureSettings:
     fallback: str = "smooth"
 
     def __post_init__(self) -> None:
+        _check_types(self)
         if self.fallback not in FALLBACKS:
             raise ValueError(f"unknown fallback {self.fallback!r}; valid: {', '.join(map(repr, FALLBACKS))}")
         if self.overflow not in OVERFLOWS:
@@ -132,6 +133,25 @@ class TextureSettings:
         if bad:
             raise TypeError(f"unknown texture setting(s) {bad}; valid: {sorted(f.name for f in fields(self))}")
         return replace(self, **changes)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+_TYPES = {"int": (_is_int, "an integer"),
+          "float": (lambda v: _is_int(v) or isinstance(v, (float, np.floating)), "a number"),
+          "bool": (lambda v: isinstance(v, (bool, np.bool_)) or _is_int(v) and v in (0, 1), "True or False"),
+          "str": (lambda v: isinstance(v, str), "a string")}
+
+
+def _check_types(settings: Any) -> None:
+    """Every field of the type it is declared with (``atlas_size="big"`` names the field, not ``int()``)."""
+    for f in fields(settings):
+        kind = _TYPES.get(str(f.type))
+        v = getattr(settings, f.name)
+        if kind is not None and not kind[0](v):
+            raise InputError(f"{f.name} must be {kind[1]}, got {v!r:.60} ({type(v).__name__})")
 
 
 def parse_texels_per_pixel(value: Any) -> float | str:

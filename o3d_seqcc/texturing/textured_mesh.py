@@ -196,13 +196,64 @@ def _image_to_rgb_array(img: Any, where: str) -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
+def _stack_materials(geoms: list, where: str) -> TexturedMesh:
+    """One TexturedMesh from several textured meshes (one per material): their images stacked, exactly.
+
+    trimesh's own merge (``Scene.to_mesh``) packs the images with UVs scaled by
+    ``(size - 1) / atlas``, which moves lookups by up to a texel across each image (and shrinks
+    images when the packed atlas would exceed 8192²). Here the images are stacked vertically
+    at full size, left-aligned (width = the widest), and each UV is mapped to the same texel
+    position in the stack: ``x = u w_g`` and ``y = y0_g + (1 - v) h_g`` in texel-edge units,
+    no resampling. Equal square images (our own pages) give ``pages`` = their number.
+    """
+    texs = [_image_to_rgb_array(getattr(g.visual.material, "baseColorTexture", None)
+                                or g.visual.material.image, where) for g in geoms]
+    if len({t.dtype for t in texs}) > 1:
+        texs = [t.astype(np.uint16) * 257 if t.dtype == np.uint8 else t for t in texs]
+    width = max(t.shape[1] for t in texs)
+    heights = np.array([t.shape[0] for t in texs])
+    y0 = np.concatenate([[0], np.cumsum(heights)[:-1]])
+    total = int(heights.sum())
+    stack = np.zeros((total, width, 3), dtype=texs[0].dtype)
+    verts, faces, uvs, base = [], [], [], 0
+    for g, t, y in zip(geoms, texs, y0):
+        h, w = t.shape[:2]
+        stack[y:y + h, :w] = t
+        uv = np.asarray(g.visual.uv, dtype=np.float64)
+        uvs.append(np.stack([uv[:, 0] * w / width, 1.0 - (y + (1.0 - uv[:, 1]) * h) / total], axis=1))
+        verts.append(np.asarray(g.vertices, dtype=np.float64))
+        faces.append(np.asarray(g.faces, dtype=np.int64) + base)
+        base += len(g.vertices)
+    square = all(t.shape[:2] == (width, width) for t in texs)
+    return TexturedMesh(vertices=np.concatenate(verts), faces=np.concatenate(faces), uv=np.concatenate(uvs),
+                        texture=stack, pages=len(texs) if square else 1)
+
+
+def _textured_parts(scene: Any) -> list | None:
+    """The scene's meshes (transforms applied) when there are several and every one has a texture and UVs."""
+    import trimesh
+
+    geoms = [g for g in scene.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    if len(geoms) < 2:
+        return None
+    for g in geoms:
+        vis, mat = g.visual, getattr(g.visual, "material", None)
+        img = None if mat is None else (getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None))
+        if getattr(vis, "kind", None) != "texture" or vis.uv is None or len(vis.uv) != len(g.vertices) or img is None:
+            return None
+    return geoms
+
+
 def load_textured_mesh(mesh_or_path: Any) -> TexturedMesh:
     """Read a textured (or vertex-coloured) mesh with trimesh.
 
     Parameters
     ----------
     mesh_or_path : path-like, trimesh.Trimesh, trimesh.Scene or TexturedMesh
-        OBJ (+MTL+image), GLB/glTF, PLY, ... A scene is merged into one mesh.
+        OBJ (+MTL+image), GLB/glTF, PLY, ... A scene is merged into one mesh. Several textured
+        parts (an OBJ with several materials, as texrecon writes, or a GLB with one primitive
+        per page, as ours) keep their images texel for texel, stacked vertically (see
+        ``pages``).
 
     Returns
     -------
@@ -223,13 +274,19 @@ def load_textured_mesh(mesh_or_path: Any) -> TexturedMesh:
             raise InputError(f"mesh not found: {p}")
         where = str(p)
         try:
-            mesh = trimesh.load(str(p), force="mesh", process=False)
+            mesh = trimesh.load_scene(str(p), process=False)  # what trimesh.load(force="mesh") merges
         except Exception as e:  # trimesh raises many types on malformed files
             raise InputError(f"cannot read mesh {p}: {e}") from None
     else:
         mesh, where = mesh_or_path, type(mesh_or_path).__name__
-        if isinstance(mesh, trimesh.Scene):
+    if isinstance(mesh, trimesh.Scene):
+        parts = _textured_parts(mesh)
+        if parts is not None:
+            return _stack_materials(parts, where)
+        try:
             mesh = mesh.to_mesh() if hasattr(mesh, "to_mesh") else mesh.dump(concatenate=True)
+        except Exception as e:  # an empty scene, or geometry trimesh cannot merge
+            raise InputError(f"{where}: no triangles found ({e}); give a triangle mesh with faces") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{where}: no triangles found; give a triangle mesh with faces")
     v = np.asarray(mesh.vertices, dtype=np.float64)
