@@ -415,8 +415,8 @@ def coverage(vis, labels: np.ndarray) -> dict:
     Returns
     -------
     dict
-        ``input_faces``, ``split_input_faces`` (split into parts), ``unseen_input_faces`` (no
-        part textured), ``partly_seen_input_faces`` (some parts textured, some not) and
+        ``input_faces`` (those kept: far-away junk dropped by the visibility is not counted),
+        ``split_input_faces`` (split into parts), ``unseen_input_faces`` (no part textured), ``partly_seen_input_faces`` (some parts textured, some not) and
         ``unseen_area`` (the untextured share of the surface area, in [0, 1]).
     """
     X = np.asarray(vis.mesh.vertices, dtype=np.float64)
@@ -428,6 +428,7 @@ def coverage(vis, labels: np.ndarray) -> dict:
     some = np.bincount(parent, weights=seen, minlength=n_in) > 0
     gaps = np.bincount(parent, weights=~seen, minlength=n_in) > 0
     parts = np.bincount(parent, minlength=n_in)
-    return {"input_faces": n_in, "split_input_faces": int((parts > 1).sum()),
-            "unseen_input_faces": int((~some).sum()), "partly_seen_input_faces": int((some & gaps).sum()),
+    kept = parts > 0  # far-away junk left out of the visibility (stray.py) is not counted
+    return {"input_faces": int(kept.sum()), "split_input_faces": int((parts > 1).sum()),
+            "unseen_input_faces": int((kept & ~some).sum()), "partly_seen_input_faces": int((some & gaps).sum()),
             "unseen_area": round(float(area[~seen].sum() / max(area.sum(), 1e-300)), 6)}

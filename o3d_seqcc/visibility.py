@@ -575,27 +575,30 @@ def compute_visibility(
     records: list[ViewRecord] = ex.map(view_record, range(len(views)), ex.share(job), desc="visibility", unit="view")
     timings["views"] = time.perf_counter() - t1
     parent, split = None, {"rounds": 0, "input_faces": int(len(faces)), "faces_split": 0, "faces_added": 0}
-    if split_faces:
-        t1 = time.perf_counter()
-        ref = refine_visibility(job, records, ex, vertex_normals=mesh.vertex_normals, min_px=split_min_px,
-                                max_distortion=split_max_distortion, max_rounds=split_max_rounds)
-        split = ref.stats
-        if split["faces_added"]:
-            mesh = Mesh(vertices=ref.vertices, faces=ref.faces, vertex_normals=ref.vertex_normals)
-            records, degenerate, parent = ref.records, ref.degenerate, ref.parent
-            logger.info("split %d faces no view holds whole into parts (%d faces more, %d rounds)",
-                        split["faces_split"], split["faces_added"], split["rounds"])
-        timings["split_faces"] = time.perf_counter() - t1
-    del job
-    stray = stray_faces(mesh.vertices, mesh.faces, records, np.array([v.center for v in views]).reshape(-1, 3))
-    if stray.any():  # far-away junk no photo sees: it would set the scene's scale and take the atlas
+    stray = stray_faces(X, faces, records, np.array([v.center for v in views]).reshape(-1, 3))
+    if stray.any():  # far-away junk no photo sees: it would set the scene's scale (the split's too) and take the atlas
         mesh, records, far = drop_faces(mesh, records, stray)
-        parent = (np.flatnonzero(~stray) if parent is None else parent[~stray]).astype(np.int64)
-        n, degenerate = int(stray.sum()), degenerate[~stray]
+        n, degenerate, parent = int(stray.sum()), degenerate[~stray], np.flatnonzero(~stray).astype(np.int64)
+        if split_faces:  # the kept faces, ray cast against the whole mesh as before (its tree and depth images)
+            job = VisibilityJob(views, mesh.vertices, mesh.faces, np.stack(job.fn, axis=1)[~stray], degenerate, opts,
+                                occluder=job)
         where = f" {scene.mesh}" if isinstance(getattr(scene, "mesh", None), (str, os.PathLike)) else ""
         warn(f"{n} face{'s' if n > 1 else ''} of the mesh{where} lie far from everything the photos see (up to "
              f"{far:.3g} scene units away: floating junk of the scan?) and no photo sees them: left out of the "
              "visibility, the atlas and the textured mesh; remove them from the mesh to silence this")
+    if split_faces:
+        t1 = time.perf_counter()
+        ref = refine_visibility(job, records, ex, vertex_normals=mesh.vertex_normals, min_px=split_min_px,
+                                max_distortion=split_max_distortion, max_rounds=split_max_rounds)
+        split = {**ref.stats, "input_faces": int(len(faces))}
+        if split["faces_added"]:
+            mesh = Mesh(vertices=ref.vertices, faces=ref.faces, vertex_normals=ref.vertex_normals)
+            records, degenerate = ref.records, ref.degenerate
+            parent = ref.parent if parent is None else parent[ref.parent]
+            logger.info("split %d faces no view holds whole into parts (%d faces more, %d rounds)",
+                        split["faces_split"], split["faces_added"], split["rounds"])
+        timings["split_faces"] = time.perf_counter() - t1
+    del job
     stats = summarize_records(views, records, opts, scene_mesh=getattr(scene, "mesh", ""))
     timings.update(stats["timings"])
     stats.update(n_faces=int(len(mesh.faces)), degenerate_faces=int(degenerate.sum()), normals_flipped=flipped,
