@@ -202,7 +202,7 @@ def _correction_parameters(run_defaults: dict, run_docs: dict) -> list[FilterPar
     return [
         _param("reference", "Reference raster", run_defaults, run_docs, kind=str),
         _param("method", "Correction method", run_defaults, run_docs, values=tuple(available_methods())),
-        _param("t_npm", "Minimum mappings per graph edge", run_defaults, run_docs, kind=int),  # or "auto"
+        _param("t_npm", "Minimum overlap per graph edge", run_defaults, run_docs, kind=int),  # or "auto"
         _param("mappings", "Pairwise mappings", run_defaults, run_docs, values=tuple(MODES)),
     ]
 
