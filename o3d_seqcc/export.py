@@ -50,8 +50,9 @@ from .meshops import float32_offset, vertex_normals
 from .orientation import UP_AXES
 
 __all__ = [
-    "DEFAULT_FORMATS", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture", "export_glb", "export_meshlab_ply", "export_obj",
-    "export_ply", "export_textured_mesh", "float32_offset", "parse_formats", "texture_file_names",
+    "DEFAULT_FORMATS", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture",
+    "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh", "float32_offset",
+    "parse_formats", "texture_file_names",
 ]
 
 logger = logging.getLogger(__name__)
