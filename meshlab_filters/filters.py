@@ -110,8 +110,11 @@ class FilterParameter:
                 raise InputError(f"{where} must be True or False, got {value!r}")
             return bool(value)
         if self.type is int:
+            if isinstance(value, str) and value == "auto" and self.default == "auto":  # a derived default (t_npm)
+                return value
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-                raise InputError(f"{where} must be an int, got {value!r}")
+                alt = " or 'auto'" if self.default == "auto" else ""
+                raise InputError(f"{where} must be an int{alt}, got {value!r}")
             return int(value)
         if self.type is float:
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
@@ -199,7 +202,7 @@ def _correction_parameters(run_defaults: dict, run_docs: dict) -> list[FilterPar
     return [
         _param("reference", "Reference raster", run_defaults, run_docs, kind=str),
         _param("method", "Correction method", run_defaults, run_docs, values=tuple(available_methods())),
-        _param("t_npm", "Minimum mappings per graph edge", run_defaults, run_docs),
+        _param("t_npm", "Minimum overlap per graph edge", run_defaults, run_docs, kind=int),  # or "auto"
         _param("mappings", "Pairwise mappings", run_defaults, run_docs, values=tuple(MODES)),
     ]
 

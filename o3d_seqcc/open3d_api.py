@@ -254,8 +254,8 @@ def correct_images(
     depths: Sequence[Any] | None = None,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
-    mappings: str = "vertices",
+    t_npm: int | str = "auto",
+    mappings: str = "surface",
     depth_scale: float = 1000.0,
     return_report: bool = False,
 ) -> list | tuple[list, dict]:
@@ -269,9 +269,11 @@ def correct_images(
         Index of the reference image, or ``"auto"`` (the view with the smallest total path cost).
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         A colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
-    mappings : {"vertices", "dense"}, default "vertices"
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge: with surface mappings pixels of shared surface
+        (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
+        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.graph.resolve_t_npm`.
+    mappings : {"surface", "vertices", "dense"}, default "surface"
     depth_scale : float, default 1000.0
         Units per metre of integer depth images.
     return_report : bool, default False
@@ -302,7 +304,7 @@ def texture_mesh(
     atlas_size: int | str = TextureSettings.atlas_size,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     depth_scale: float = 1000.0,
     return_result: bool = False,
     **texture_options: Any,

@@ -37,18 +37,20 @@ import numpy as np
 from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import FORMATS, TEXTURE_FORMATS, export_meshlab_ply, export_textured_mesh, texture_file_names
+from .export import DEFAULT_FORMATS, check_export_options, export_meshlab_ply, export_textured_mesh, float32_offset, \
+    parse_formats, texture_file_names
 from .images import SceneImages
 from .io.files import atomic_write_bytes, write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
-from .mappings import MODES, Mappings, compute_mappings
+from .mappings import DEFAULT_MODE, MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import before_after
-from .orientation import UP_AXES, up_axis_transform
+from .orientation import up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
+from .refine import coverage
 from .render import write_selection_picture
 from .report import REPORT_FILE, cached_images, metrics_sample, write_report
 from .report.figures import warm_up
@@ -60,35 +62,6 @@ from .visibility import Visibility, compute_visibility
 __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
 
 logger = logging.getLogger(__name__)
-
-#: export formats written by default
-DEFAULT_FORMATS = ("glb", "obj")
-
-
-def parse_formats(formats: str | Iterable[str]) -> list[str]:
-    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
-    items = formats.split(",") if isinstance(formats, str) else list(formats)
-    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
-    bad = [f for f in out if f not in FORMATS]
-    if bad or not out:
-        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
-    return out
-
-
-def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
-    """Validate :meth:`RunResult.save`'s export options (the command line calls it before any work).
-
-    Returns the texture format's canonical name; raises InputError naming the bad option.
-    """
-    if str(up_axis).lower() not in UP_AXES:
-        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
-    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
-    if fmt not in TEXTURE_FORMATS:
-        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
-    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
-        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
-    return fmt
-
 
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
     check_scene_argument(scene, mesh)
@@ -309,13 +282,14 @@ class RunResult:
                 written["images"] = stage / "images"
             # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
             layer = stage / "mesh_meshlab.ply"
-            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters)
+            shift = float32_offset(self.textured.vertices)  # MeshLab holds float32: the layer matrix adds it back
+            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters, offset=shift)
             if project is not None:
                 written["meshlab_project"] = project
                 reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
                 written["meshlab_mesh"] = export_meshlab_ply(
                     self.textured, layer, texture=[stage / n for n in texture_file_names(
-                        "mesh", tfmt, self.textured.pages)] if reuse else None)
+                        "mesh", tfmt, self.textured.pages)] if reuse else None, offset=shift)
             written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
             self.timings["export"] = time.perf_counter() - t
             export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
@@ -359,7 +333,7 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
     if want_seams:
         with _stage("seams", timings):
             seams = seam_metric(tm)
-    return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
+    return labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm, seams
 
 
 def texture(
@@ -368,7 +342,7 @@ def texture(
     images: Sequence[np.ndarray] | None = None,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True,
+    seams: bool = True, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -386,6 +360,8 @@ def texture(
         Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
     seams : bool, default True
         Compute the seam metric of the result.
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
     **texture_options
@@ -407,7 +383,7 @@ def texture(
         imgs = check_images_argument(images, sc.views)
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
@@ -420,11 +396,11 @@ def run(
     *,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
-    mappings: str = "vertices",
+    t_npm: int | str = "auto",
+    mappings: str = DEFAULT_MODE,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True, compare_original: bool = False,
+    seams: bool = True, compare_original: bool = False, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -438,10 +414,11 @@ def run(
         Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
-    mappings : {"vertices", "dense"}, default "vertices"
-        Pairwise mapping mode.
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): pixels of
+        shared surface, ``"auto"`` = 1 % of a photo (surface mappings), or vertex mappings.
+    mappings : {"surface", "vertices", "dense"}, default "surface"
+        Pairwise mapping mode (:func:`o3d_seqcc.mappings.compute_mappings`; vertices: the paper's).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
     settings : TextureSettings, optional
@@ -450,6 +427,9 @@ def run(
         Compute the seam metric of the result.
     compare_original : bool, default False
         Also bake the uncorrected images (in memory) and report their seam metric.
+    split_faces : bool, default True
+        Split the faces no photo holds whole (clipped, partly hidden, too large, or whose texture
+        would slide inside them) into parts (:mod:`o3d_seqcc.refine`); False keeps the input's.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
         scene's files must be readable at the same paths on every worker); default local
@@ -482,7 +462,7 @@ def run(
     _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         with _stage("mappings", timings):
             maps = compute_mappings(sc, visibility=vis, mode=mappings)
         with _stage("correction", timings):
@@ -552,11 +532,11 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int = 400, mappings: str = "vertices",
+    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int | str = "auto", mappings: str = DEFAULT_MODE,
     graph_weight: str = "paper",
     seed: int = 0,
     metrics: bool = True,
-    mesh: str | os.PathLike | None = None,
+    mesh: str | os.PathLike | None = None, split_faces: bool = True,
     client: Any = None,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
@@ -573,6 +553,8 @@ def correct_scene(
     metrics : bool, default True
         Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
 
@@ -589,7 +571,7 @@ def correct_scene(
     t = time.perf_counter()
     with use_executor(client):
         with _stage("mappings"):
-            maps = compute_mappings(sc, mode=mappings)
+            maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
         with _stage("correction"):

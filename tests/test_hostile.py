@@ -450,6 +450,11 @@ def test_far_junk_does_not_veto_or_change_the_scene(S, kind):
         vis = sc.compute_visibility(sc.load_scene(S))
     assert vis.stats["usable"] == clean.stats["usable"] and vis.stats["valid"] == clean.stats["valid"]
     assert len(vis.mesh.faces) == len(clean.mesh.faces) and np.ptp(vis.mesh.vertices, axis=0).max() < 100
+    from o3d_seqcc.refine import coverage  # junk dropped, then the faces split: not counted as unseen input faces
+
+    none = np.full(len(vis.mesh.faces), -1)
+    assert coverage(vis, none)["input_faces"] == coverage(clean, none)["input_faces"] == coverage(clean, none)[
+        "unseen_input_faces"]
 
 
 # ---------------------------------------------------------------------------------------- 5. library arguments
