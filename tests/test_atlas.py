@@ -92,8 +92,10 @@ def test_flat_plane_reproduced_in_a_tilted_chart(rng, density, min_psnr):
     img = np.clip(img, 0, 255).astype(np.uint8)
     lab = select_views(vis, method="largest-area")
     tm = bake_texture(mesh, [img], vis, lab, atlas_size=512, texels_per_pixel=density, **RAW)
-    f0 = mesh.faces[0]
-    e_img = vis.uv[0][f0[1]] - vis.uv[0][f0[0]]
+    # the texturing's corners are the projections rounded to 1/8 px (Visibility.face_uv: the same
+    # bytes far from the origin); the texel grid is that grid scaled
+    fuv = vis.face_uv(lab)  # (F, 3, 2)
+    e_img = fuv[0, 1] - fuv[0, 0]
     e_tex = tm.texel_xy()[tm.faces[0, 1]] - tm.texel_xy()[tm.faces[0, 0]]
     assert np.linalg.norm(e_tex) == pytest.approx(density * np.linalg.norm(e_img), rel=1e-6)
     ang = np.degrees(np.arctan2(e_tex[1], e_tex[0]) - np.arctan2(e_img[1], e_img[0])) % 90.0
@@ -101,7 +103,7 @@ def test_flat_plane_reproduced_in_a_tilted_chart(rng, density, min_psnr):
                                                  + np.degrees(np.arctan2(e_img[1], e_img[0]))) % 90.0) < 1e-4, ang
     b = rng.dirichlet(np.ones(3), size=(len(mesh.faces), 20))  # (F, 20, 3)
     p_tex = np.einsum("fsk,fkd->fsd", b, tm.texel_xy()[tm.faces]).reshape(-1, 2)
-    p_img = np.einsum("fsk,fkd->fsd", b, vis.uv[0][mesh.faces].astype(np.float64)).reshape(-1, 2)
+    p_img = np.einsum("fsk,fkd->fsd", b, fuv).reshape(-1, 2)
     got = bilinear(tm.texture, p_tex[:, 0], p_tex[:, 1])
     want = bilinear(img, p_img[:, 0], p_img[:, 1])
     psnr = 10 * np.log10(255.0 ** 2 / max(np.mean((got - want) ** 2), 1e-12))
@@ -288,8 +290,9 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     assert r[2]["p99"] <= 1.0 and r[2]["share_gt2"] <= 0.001, r
     assert r[1]["p99"] <= r[2]["p99"] + 1e-9
     # counted as foreign, the gutters still hardly change level 2: they continue the photo (a level-2
-    # texel spans 4 x 4 photo pixels at one texel per pixel: 2.3 at the 1.64 of a 2048 budget)
-    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 4.0
+    # texel spans 4 x 4 photo pixels at one texel per pixel: 2.3 at the 1.64 of a 2048 budget; 4.72 with
+    # the faces split into parts (issue 20): more small faces along the chart borders)
+    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 5.0
     # gutters removed (every texel outside the faces black, as an atlas without gutter fill): bleeds
     from dataclasses import replace
 
