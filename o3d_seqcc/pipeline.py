@@ -478,7 +478,8 @@ def run(
     if reference != "auto":
         resolve_view(sc.names, reference)
     originals = SceneImages(sc.views)  # read when a task needs them, released after
-    _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
+    if method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
+        _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc)
