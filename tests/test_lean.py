@@ -1,0 +1,78 @@
+"""Speed and memory work of issue 21 that must not change a result: same values, same bytes, no dense arrays.
+
+Speed itself is measured by ``benchmarks/profile_run.py`` and ``benchmarks/peers.py``, not here.
+"""
+
+from __future__ import annotations
+
+import struct
+import warnings
+import zlib
+
+import numpy as np
+import pytest
+
+import o3d_seqcc as sc
+
+
+def _png_with_exif_after_pixels(path, img: np.ndarray, orientation: int) -> None:
+    """A PNG whose eXIf chunk follows its IDAT (allowed by the PNG 1.5 extension; Pillow writes it before)."""
+    from PIL import Image
+
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    payload = exif.tobytes()[6:] if exif.tobytes().startswith(b"Exif\x00\x00") else exif.tobytes()
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    h, w = img.shape[:2]
+    raw = b"".join(b"\x00" + img[y].tobytes() for y in range(h))
+    data = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"eXIf", payload) + chunk(b"IEND", b""))
+    path.write_bytes(data)
+
+
+def test_png_exif_orientation_found_without_decoding_twice(tmp_path, monkeypatch):
+    """read_image decodes a PNG once (OpenCV): its eXIf chunk, even after the pixels, is found from the chunk
+    headers, not by Pillow decoding the image (which doubled every photo read)."""
+    from PIL import ImageFile
+
+    from o3d_seqcc.io.files import read_image
+
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    _png_with_exif_after_pixels(tmp_path / "rot.png", img, 6)
+    from PIL import Image
+
+    Image.fromarray(img).save(tmp_path / "plain.png")
+    with Image.open(tmp_path / "rot.png") as im:  # Pillow itself sees the tag only by decoding the image
+        assert im.getexif().get(0x0112) == 6
+
+    def no_decode(self, *a, **k):
+        raise AssertionError("Pillow decoded the image")
+
+    monkeypatch.setattr(ImageFile.ImageFile, "load", no_decode)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        a = read_image(tmp_path / "rot.png")
+        b = read_image(tmp_path / "plain.png")
+    assert np.array_equal(a, img) and np.array_equal(b, img)
+    msgs = [str(w.message) for w in rec if "EXIF orientation" in str(w.message)]
+    assert len(msgs) == 1 and "rot.png has EXIF orientation 6" in msgs[0]
+
+
+def test_colour_samples_from_uint8_are_the_float_samples():
+    """The colour sampling of seqcc-global reads uint8 / uint16 photos directly, bit for bit the float path."""
+    from o3d_seqcc.correction.edge_summaries import _sample_flat, _sample_levels
+    from o3d_seqcc.imageops import img_as_float
+
+    rng = np.random.default_rng(1)
+    for dtype, top in ((np.uint8, 256), (np.uint16, 65536)):
+        img = rng.integers(0, top, (37, 53, 3)).astype(dtype)
+        uv = np.concatenate([rng.uniform(-2, 55, (500, 2)), [[0, 0], [52, 36], [52.5, 36.7], [51.999, 35.2]]])
+        for interp in ("bilinear", "nearest"):
+            want = _sample_flat(img_as_float(img), uv, interp)
+            got = _sample_levels(img, uv, interp)
+            assert got.dtype == want.dtype == np.float32
+            assert np.array_equal(got, want), (dtype, interp)
