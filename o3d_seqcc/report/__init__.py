@@ -142,7 +142,7 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
-                 selection_seams: dict | None = None, images: tuple | None = None) -> Path:
+                 selection_seams: dict | None = None, images: tuple | None = None, write: bool = True) -> Path | str:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
@@ -150,11 +150,13 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
     (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
-    result's (e.g. :func:`cached_images` shared with whoever read them before).
+    result's (e.g. :func:`cached_images` shared with whoever read them before). ``write=False``
+    returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).
     """
     path = Path(path)
     inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
-    return atomic_write_bytes(path, page_bytes(render_page(inp, width=int(thumb_width))))
+    page = render_page(inp, width=int(thumb_width))
+    return atomic_write_bytes(path, page_bytes(page)) if write else page
 
 
 def _scene_frame(tm, rep: dict, fmt: str):

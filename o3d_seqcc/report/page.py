@@ -532,10 +532,17 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
         add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
         add("renders", "Textured mesh and photos (Figures 12-13)", _renders_section, inp, (a, b), 2 * width)
         add("seams", "Seam metric", _seams_section, inp.rep, inp.selection_seams)
-    timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
-    out.append(("timings", "Timings (s)", f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"))
+    out.append(("timings", "Timings (s)", timings_block(inp.rep)))
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
     return out
+
+
+def timings_block(rep: dict) -> str:
+    """The timings section's body from a report.json dict, between ``<!-- timings -->`` markers (the one part of
+    a page that differs between two identical runs; the run's writer fills it in last)."""
+    f = facts(rep)
+    timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
+    return f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"
 
 
 def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
