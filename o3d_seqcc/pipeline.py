@@ -36,7 +36,7 @@ from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
 from .export import FORMATS, TEXTURE_FORMATS
-from .images import SceneImages
+from .images import scene_photos
 from .io.files import write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
@@ -355,7 +355,7 @@ def texture(
     s = _settings(settings, texture_options)
     sc = _as_scene(scene, mesh)
     if images is None:
-        imgs = SceneImages(sc.views)  # read when the bake needs them
+        imgs = scene_photos(sc.views)  # read when the bake needs them, kept while they fit
     else:
         imgs = check_images_argument(images, sc.views)
     with use_executor(client):
@@ -431,7 +431,7 @@ def run(
     sc = _as_scene(scene, mesh)
     if reference != "auto":
         resolve_view(sc.names, reference)
-    originals = SceneImages(sc.views)  # read when a task needs them, released after
+    originals = scene_photos(sc.views)  # read when a task first needs them, kept while they fit
     if method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
         _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them  # the colour mapping fits need them
     with use_executor(client):

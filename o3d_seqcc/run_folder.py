@@ -15,6 +15,7 @@ started, waits for the running ones, and leaves the folder unswapped.
 from __future__ import annotations
 
 import io
+import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -25,10 +26,21 @@ import numpy as np
 from .export import export_meshlab_ply, export_textured_mesh, texture_file_names
 from .io.files import atomic_write_bytes, write_json
 from .io.result_files import meshlab_project, write_images
+from .parallel import carried
 from .render import write_selection_picture
 from .report import REPORT_FILE, cached_images
 
 __all__ = ["write_run_folder"]
+
+logger = logging.getLogger(__name__)
+
+
+def _timed(name: str, fn, *args, **kw):
+    t = time.perf_counter()
+    try:
+        return fn(*args, **kw)
+    finally:
+        logger.debug("save: %s %.3f s", name, time.perf_counter() - t)
 
 
 def _mesh_files(res: Any, stage: Path, *, fmts: list[str], tfmt: str, quality: int, unlit: bool, rotation: Any,
@@ -89,11 +101,12 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
               "orientation": {**orientation, "applies_to": [f for f in fmts]}}
     pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="o3d_seqcc-save")
     try:
-        files = pool.submit(_mesh_files, res, stage, fmts=fmts, tfmt=tfmt, quality=quality, unlit=unlit,
-                            rotation=rotation, save_images=save_images)
-        pic = pool.submit(write_selection_picture, res.scene, res.visibility, res.selection, stage / "selection.png",
-                          view) if picture else None
-        prelude = pool.submit(res._report_prelude, table2, images) if report else None
+        files = pool.submit(carried(_timed), "mesh files", _mesh_files, res, stage, fmts=fmts, tfmt=tfmt,
+                            quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
+        pic = pool.submit(carried(_timed), "selection picture", write_selection_picture, res.scene, res.visibility,
+                          res.selection, stage / "selection.png", view) if picture else None
+        prelude = pool.submit(carried(_timed), "table 2 and seam steps", res._report_prelude, table2,
+                              images) if report else None
         rep = page = None
         t = time.perf_counter()
         if report:  # the page, while the files are written: everything but the export's seconds is known
