@@ -8,6 +8,7 @@ from __future__ import annotations
 import struct
 import warnings
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -76,3 +77,21 @@ def test_colour_samples_from_uint8_are_the_float_samples():
             got = _sample_levels(img, uv, interp)
             assert got.dtype == want.dtype == np.float32
             assert np.array_equal(got, want), (dtype, interp)
+
+
+def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch):
+    """raycast casts rows in chunks (memory): every array is bit for bit the one-chunk cast."""
+    from o3d_seqcc import render
+    from o3d_seqcc.synthetic.room import build_geometry
+
+    room = build_geometry(0.3)
+    view = sc.View(name="v", image=Path("v.png"), intrinsic=np.array([[90.0, 0, 79.5], [0, 90.0, 59.5], [0, 0, 1]]),
+                   extrinsic=np.eye(4), width=160, height=120)
+    mesh = (room.vertices, room.faces)
+    monkeypatch.setattr(render, "RAY_CHUNK", 1 << 30)
+    whole = render.raycast(mesh, view)
+    monkeypatch.setattr(render, "RAY_CHUNK", 1000)  # 6 rows per chunk, the last one short
+    parts = render.raycast(mesh, view)
+    assert whole.mask.all() and len(np.unique(whole.face_ids)) > 20  # inside the closed room: walls, furniture
+    for name in ("face_ids", "bary", "depth", "cos_angle"):
+        assert np.array_equal(getattr(whole, name), getattr(parts, name)), name
