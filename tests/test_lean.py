@@ -93,3 +93,31 @@ def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch, tmp_path):
     assert len(np.unique(whole.face_ids)) > 100
     for name in ("face_ids", "bary", "depth", "cos_angle"):
         assert np.array_equal(getattr(whole, name), getattr(parts, name)), name
+
+
+#: the dense (V, F) views of a Visibility, for tests and figures only
+DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth")
+
+
+def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
+    """`o3d-seqcc run`'s path (pipeline.run + save, report included) reads the sparse per-view records only:
+    every dense (V, F) property of Visibility raises inside the run."""
+    from o3d_seqcc.visibility import Visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
+    used = []
+
+    def forbidden(name):
+        def get(self):
+            used.append(name)
+            raise AssertionError(f"dense Visibility.{name} read on the default path")
+        return property(get)
+
+    for name in (*DENSE, "stage_masks"):
+        monkeypatch.setattr(Visibility, name, forbidden(name))
+    res = sc.pipeline.run(tmp_path / "room", t_npm=50)
+    res.save(tmp_path / "out")
+    assert used == []
+    assert (tmp_path / "out" / "report.html").is_file()
+    monkeypatch.undo()
+    assert res.visibility.usable.shape == (6, len(res.selection))  # the dense views still exist for tests
