@@ -8,10 +8,8 @@ from __future__ import annotations
 import struct
 import warnings
 import zlib
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 import o3d_seqcc as sc
 
