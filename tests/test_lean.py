@@ -119,3 +119,42 @@ def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
     assert (tmp_path / "out" / "report.html").is_file()
     monkeypatch.undo()
     assert res.visibility.usable.shape == (6, len(res.selection))  # the dense views still exist for tests
+
+
+def _digest(folder) -> dict:
+    """sha1 of every output file; report.json without its timings, report.html without its timings table."""
+    import hashlib
+    import json
+    import re
+
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if not (k.startswith("timings") or k == "time_s" or k == "files")}
+        return [strip(v) for v in x] if isinstance(x, list) else x
+
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if not p.is_file() or p.name == ".o3d_seqcc.json":
+            continue
+        data = p.read_bytes()
+        if p.name == "report.html":
+            data = re.sub(rb"<!-- timings -->.*?<!-- /timings -->", b"", data, flags=re.S)
+        if p.name == "report.json":
+            data = json.dumps(strip(json.loads(data)), sort_keys=True).encode()
+        out[str(p.relative_to(folder))] = hashlib.sha1(data).hexdigest()
+    return out
+
+
+def test_same_bytes_for_any_jobs(tmp_path):
+    """`o3d-seqcc run -j 1` and `-j 2` (threads in every stage, the export beside the report) write the same files."""
+    from o3d_seqcc.cli import main
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
+    digests = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        assert main(["-q", "-j", jobs, "run", str(tmp_path / "room"), "--out", str(out), "--t-npm", "50",
+                     "--save-images"]) == 0
+        digests.append(_digest(out))
+    assert {"mesh.glb", "mesh.obj", "mesh.png", "report.html", "report.json", "selection.png"} <= set(digests[0])
+    assert digests[0] == digests[1]
