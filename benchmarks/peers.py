@@ -79,7 +79,7 @@ class PeerResult:
     Attributes
     ----------
     name : str
-        ``"texrecon"``, ``"ours"``, ``"meshlab"`` or ``"open3d"``.
+        ``"texrecon"``, ``"ours"``, ``"ours-texture"``, ``"meshlab"`` or ``"open3d"``.
     mesh : pathlib.Path
         Textured OBJ (with its MTL and PNG next to it).
     texture : pathlib.Path
@@ -909,8 +909,13 @@ def run_ours(
     mesh: str | os.PathLike | None = None,
     args: Sequence[str] = (),
     timeout: float = 3600.0,
+    command: str = "run",
 ) -> PeerResult:
     """``o3d-seqcc run SCENE [--mesh MESH] --out OUT --overwrite [ARGS]`` in a child process (defaults unless ``args``).
+
+    ``command="texture"``: ``o3d-seqcc texture`` instead, the same texturing from the photos as
+    taken (no colour correction): what the correction's change of the photos' contrast costs the
+    sharpness measured against the photos.
 
     The child is ``python -m o3d_seqcc`` of this interpreter, so it runs the o3d_seqcc this
     process imports (``PYTHONPATH`` is passed on).
@@ -924,16 +929,18 @@ def run_ours(
     """
     out = Path(out_dir).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", "o3d_seqcc", "run", str(scene_path), *(["--mesh", str(mesh)] if mesh else []),
+    if command not in ("run", "texture"):
+        raise ValueError(f"command must be 'run' or 'texture', got {command!r}")
+    cmd = [sys.executable, "-m", "o3d_seqcc", command, str(scene_path), *(["--mesh", str(mesh)] if mesh else []),
            "--out", str(out), "--overwrite", *args]
     run = run_measured(cmd, log_prefix=out.parent / f"{out.name}_log", timeout=timeout)
     if run.returncode != 0 or not (out / "report.json").is_file():
-        raise RuntimeError(f"o3d-seqcc run failed (exit {run.returncode}):\n{run.tail()}")
+        raise RuntimeError(f"o3d-seqcc {command} failed (exit {run.returncode}):\n{run.tail()}")
     rep = json.loads((out / "report.json").read_text())
     rotation = (rep.get("export") or {}).get("orientation", {}).get("rotation", np.eye(3).tolist())
     obj = out / "mesh.obj"
     pages = sorted(out.glob("mesh*.png")) + sorted(out.glob("mesh*.jpg"))
-    return PeerResult(name="ours", mesh=obj if obj.is_file() else out / "mesh.glb", texture=pages[0] if pages else obj,
+    return PeerResult(name="ours" if command == "run" else "ours-texture", mesh=obj if obj.is_file() else out / "mesh.glb", texture=pages[0] if pages else obj,
                       seconds=run.seconds, total_seconds=run.seconds, peak_rss=run.peak_rss,
                       info={"report": str(out / "report.json"), "rotation": rotation, "cpu_seconds": run.cpu_seconds,
                             "cmd": run.cmd, "timings_s": rep.get("timings_s"), "atlas": rep.get("atlas")})
@@ -999,7 +1006,8 @@ DATA = REPO.parent / "shared" / "datasets" / "fountain_small"
 MESHES = {"16k": "scene/mesh_decimated_uv_blender.ply", "300k": "scene/tsdf_mesh.ply"}
 #: synthetic scenes (key -> ``o3d-seqcc synthetic`` options), made once under ``--out``; timed, not rendered
 SYNTHETIC = {"6mp": ("--views", "10", "--width", "3000", "--height", "2000", "--seen-only")}
-TOOLS = ("texrecon", "ours", "meshlab", "open3d")
+#: "ours-texture": ``o3d-seqcc texture`` (ours without the colour correction, the photos as taken)
+TOOLS = ("texrecon", "ours", "ours-texture", "meshlab", "open3d")
 DEFAULT_VIEWS = (0, 5, 10, 15, 17, 20, 25, 30)
 #: Fixed crops of the picture: (mesh, view, x, y, w, h, what); artefact windows are added per mesh.
 CROPS = (
@@ -1024,8 +1032,8 @@ def _run_tool(tool: str, key: str, scene: Scene, data: Path, mesh: Path, out: Pa
     d = out / key / tool
     if tool == "texrecon":
         return run_texrecon(scene, d, overwrite=True, align_texels=not args.texrecon_exact_cameras)
-    if tool == "ours":
-        return run_ours(data, d, mesh=None if key in SYNTHETIC else mesh)
+    if tool in ("ours", "ours-texture"):
+        return run_ours(data, d, mesh=None if key in SYNTHETIC else mesh, command="run" if tool == "ours" else "texture")
     return run_peer_measured(tool, data, d, mesh=mesh)
 
 
@@ -1076,7 +1084,7 @@ def _print_mesh(key: str, res: dict, views: list[int]) -> None:
         for t in tools:
             vals = [res["tools"][t][metric][k] for k in views]
             print(f"  {t:<16}" + "".join(f"{v:7.2f}" for v in vals) + f"{np.median(vals):8.2f}")
-        for a in ("ours",):
+        for a in ("ours", "ours-texture"):
             if a in tools and "texrecon" in tools:
                 r = [res["tools"][a][metric][k] / res["tools"]["texrecon"][metric][k] for k in views]
                 print(f"  {a + '/texrecon':<16}" + "".join(f"{v:7.2f}" for v in r) + f"{np.median(r):8.2f}")

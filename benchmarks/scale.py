@@ -341,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     reference_timing()
     results = []
-    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
     for F in [_faces(s) for s in args.faces.split(",")]:
         for V in [int(s) for s in args.views.split(",")]:
             tmp = Path(tempfile.mkdtemp(prefix="o3d_seqcc_scale_", dir=args.tmp))

@@ -71,7 +71,8 @@ sys.path.insert(0, str(REPO))
 from o3d_seqcc.io.files import write_json  # noqa: E402
 from o3d_seqcc.mappings import compute_mappings  # noqa: E402
 from o3d_seqcc.evaluation import evaluate_method  # noqa: E402
-from o3d_seqcc.graph import build_graph, correction_paths, scale_t_npm  # noqa: E402
+from o3d_seqcc.cli.common import t_npm_value  # noqa: E402
+from o3d_seqcc.graph import build_graph, correction_paths, resolve_t_npm  # noqa: E402
 from o3d_seqcc.metrics import contrast_ratios as library_contrast_ratios  # noqa: E402
 from o3d_seqcc.metrics import image_delta_e  # noqa: E402
 
@@ -107,7 +108,8 @@ def _header(extra: str = "") -> str:
 def contrast_ratios(corrected, mappings, reference: int, *, t_npm: int, min_n: int = 50) -> np.ndarray:
     """:func:`o3d_seqcc.metrics.contrast_ratios` along the Dijkstra paths of the graph at ``t_npm``
     (the target of a pair is the view farther from the reference, the source the nearer one)."""
-    g = build_graph({k: int(v) for k, v in mappings.counts.items()}, len(corrected), t_npm=scale_t_npm(t_npm, mappings))
+    g = build_graph({k: int(v) for k, v in mappings.counts.items()}, len(corrected),
+                    t_npm=resolve_t_npm(t_npm, mappings)[0])
     return library_contrast_ratios(corrected, mappings, correction_paths(g, reference), min_n=min_n)
 
 
@@ -186,7 +188,7 @@ def run_scene(
     print("contrast = mean over pairs of std(corrected target) / std(corrected source) at the mappings, the target "
           "being the view farther from the reference (ideal ~1.0; < 1 = washed out, see contrast_ratios)")
     print(f"\n=== {label}: reference {scene.names[ref]!r} (index {ref}), {len(mappings.pairs)} pairs, "
-          f"{mappings.total} {mappings.mode} mappings, t_npm {t_npm} (vertex units), blur {blur:g} px (scoring only) ===")
+          f"{mappings.total} {mappings.mode} mappings, {resolve_t_npm(t_npm, mappings)[1]}, blur {blur:g} px (scoring only) ===")
     gt_extra = f" | {'dE00 to GT':>10} {'max view':>8}" if gt is not None else ""
     cr_extra = f" | {'contrast':>8} {'min':>5}"
     for proto in ("in-sample", f"held-out {holdout:g}") if holdout > 0 else ("in-sample",):
@@ -453,8 +455,9 @@ def main(argv=None) -> int:
         action="store_true",
         help="also run 'gain-compensation' with a weak gain prior (sigma_g=1) as 'gain-comp s_g=1'",
     )
-    ap.add_argument("--t-npm", type=int, default=400, help="fountain edge threshold (vertex units, default 400)")
-    ap.add_argument("--fountain-mappings", choices=("vertices", "dense"), default="vertices")
+    ap.add_argument("--t-npm", type=t_npm_value, default=400,
+                    help="fountain edge threshold (default 400: vertex units; 'auto': the library's default)")
+    ap.add_argument("--fountain-mappings", choices=("vertices", "dense", "surface"), default="vertices")
     ap.add_argument("--depth-edge-margin", type=float, default=0.0,
                     help="fountain: also drop faces within this many px of a depth jump (default 0 = paper's filters)")
     ap.add_argument("--synthetic-views", type=int, default=15)
@@ -463,11 +466,11 @@ def main(argv=None) -> int:
         help="synthetic photometric changes (default camera-hard: issue 12's hard room)",
     )
     ap.add_argument(
-        "--synthetic-mappings", choices=("vertices", "dense"), default="dense",
+        "--synthetic-mappings", choices=("vertices", "dense", "surface"), default="dense",
         help="synthetic mapping mode (default dense: the ring of views shares few vertices per pair)",
     )
     ap.add_argument(
-        "--synthetic-t-npm", type=int, default=20,
+        "--synthetic-t-npm", type=t_npm_value, default=20,
         help="synthetic edge threshold in vertex units (default 20, scaled for dense; keeps the ring connected)",
     )
     ap.add_argument(

@@ -39,11 +39,9 @@ def main() -> int:
     if args.scene is None:
         root = Path(tempfile.mkdtemp(prefix="o3d_seqcc_room_"))
         scene = o3d_seqcc.make_synthetic_scene(root / "room", n_views=12, width=320, height=240).scene
-        t_npm = 100
     else:
         scene = o3d_seqcc.load_scene(args.scene, mesh=args.mesh)
-        t_npm = 400
-    result = o3d_seqcc.pipeline.run(scene, t_npm=t_npm, atlas_size=args.atlas_size)
+    result = o3d_seqcc.pipeline.run(scene, atlas_size=args.atlas_size)  # t_npm="auto": any scene, any mesh
     result.save(args.out, overwrite=True, formats="glb", selection_view="none", up_axis="y",
                 texture_format=args.texture_format)
     glb = args.out / "mesh.glb"

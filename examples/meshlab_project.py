@@ -51,7 +51,7 @@ def run(argv: list[str] | None = None) -> int:
     print(f"{project}: {ms.mesh_number()} mesh, {ms.raster_number()} rasters")
 
     meshlab_filters.print_filter_parameter_list("seqcc_color_correct_rasters")
-    res = meshlab_filters.apply(ms, "seqcc_color_correct_rasters", reference="auto", tnpm=50, metrics=False,
+    res = meshlab_filters.apply(ms, "seqcc_color_correct_rasters", reference="auto", metrics=False,
                                 savedir=str(out / "corrected"), overwrite=True)
     print(f"corrected {len(res['images'])} rasters toward {res['reference']} -> {res['savedir']}")
     if args.texture:

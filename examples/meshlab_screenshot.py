@@ -6,7 +6,7 @@ the layer panel. MeshLab runs headless on a private virtual display (Xvfb) and t
 screenshot of its window (docs/meshlab_project.png was made this way). The same, in a shell:
 
     o3d-seqcc synthetic S --views 6 --width 160 --height 120
-    o3d-seqcc run S --out O --t-npm 50 --save-images
+    o3d-seqcc run S --out O --save-images
     meshlab O/project.mlp view.xml      # view.xml: the reference camera
 
 How to run (from any folder; needs the Debian/Ubuntu packages meshlab xvfb xdotool imagemagick,
@@ -42,7 +42,7 @@ def run(argv: list[str] | None = None) -> int:
         if o3d_seqcc(["-q", "synthetic", str(S), "--views", "6", "--width", "160", "--height", "120",
                       "--overwrite"]) != 0:
             return 1
-        if o3d_seqcc(["-q", "run", str(S), "--out", str(O), "--t-npm", "50", "--save-images", "--overwrite"]) != 0:
+        if o3d_seqcc(["-q", "run", str(S), "--out", str(O), "--save-images", "--overwrite"]) != 0:
             return 1
         project = O / "project.mlp"
         scene = load_mlp(project)

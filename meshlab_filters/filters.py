@@ -110,8 +110,11 @@ class FilterParameter:
                 raise InputError(f"{where} must be True or False, got {value!r}")
             return bool(value)
         if self.type is int:
+            if isinstance(value, str) and value == "auto" and self.default == "auto":  # a derived default (t_npm)
+                return value
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-                raise InputError(f"{where} must be an int, got {value!r}")
+                alt = " or 'auto'" if self.default == "auto" else ""
+                raise InputError(f"{where} must be an int{alt}, got {value!r}")
             return int(value)
         if self.type is float:
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
@@ -199,7 +202,7 @@ def _correction_parameters(run_defaults: dict, run_docs: dict) -> list[FilterPar
     return [
         _param("reference", "Reference raster", run_defaults, run_docs, kind=str),
         _param("method", "Correction method", run_defaults, run_docs, values=tuple(available_methods())),
-        _param("t_npm", "Minimum mappings per graph edge", run_defaults, run_docs),
+        _param("t_npm", "Minimum overlap per graph edge", run_defaults, run_docs, kind=int),  # or "auto"
         _param("mappings", "Pairwise mappings", run_defaults, run_docs, values=tuple(MODES)),
     ]
 
@@ -219,7 +222,7 @@ def _registry() -> dict[str, MeshLabFilter]:
     from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
     from o3d_seqcc.graph import WEIGHTS
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
-    from o3d_seqcc.texturing.settings import FALLBACKS, OVERFLOWS
+    from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
     from . import meshset
 
@@ -229,7 +232,8 @@ def _registry() -> dict[str, MeshLabFilter]:
     save_docs = _doc_entries(pipeline.RunResult.save, "Parameters")
     ts_defaults = {f.name: getattr(TextureSettings(), f.name) for f in fields(TextureSettings)}
     ts_docs = _doc_entries(TextureSettings, "Attributes")
-    enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS)}
+    enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS),
+             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS)}
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
         "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
@@ -237,6 +241,7 @@ def _registry() -> dict[str, MeshLabFilter]:
         "fill_background": "Fill the background", "leveling": "Global seam leveling",
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",
+        "data_term": "Selection data term", "outlier_removal": "Photometric outlier removal",
     }
     if set(labels) != set(ts_defaults):
         raise RuntimeError(f"label the TextureSettings fields {sorted(set(ts_defaults) ^ set(labels))}")

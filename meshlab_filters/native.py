@@ -134,6 +134,8 @@ def _kind(p: FilterParameter) -> str:
         return "raster"  # an enum of "auto" and the document's rasters
     if p.values:
         return "enum"
+    if p.type is int and p.default == "auto":  # a derived default (t_npm): "auto" or a number, typed as text
+        return "string"
     return {bool: "bool", int: "int", float: "float"}.get(p.type, "string")
 
 

@@ -243,7 +243,12 @@ def _families(name: str) -> set[str]:
 
 
 def _centre(geo: _Geometry, E: np.ndarray) -> np.ndarray:
-    return -E[:3, :3].T @ E[:3, 3] - geo.origin
+    """The camera centre in the local frame, solved (``-R^-1 t``, as ``View.center``: files hold rotations
+    orthonormal to ~1e-6 only, and ``-R^T t`` is then 0.5 m off at 5e5 m from the origin)."""
+    try:
+        return -np.linalg.solve(E[:3, :3], E[:3, 3]) - geo.origin
+    except np.linalg.LinAlgError:  # a singular reading (a bad alternative): as transposed
+        return -E[:3, :3].T @ E[:3, 3] - geo.origin
 
 
 def _front_fractions(geo: _Geometry, views, checked: np.ndarray, name: str, grid: int) -> np.ndarray:

@@ -30,7 +30,7 @@ from .datasets import DatasetUnavailable, fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
 from .texturing import TextureSettings
 
-__all__ = ["DemoResult", "run_demo"]
+__all__ = ["DemoResult", "run_demo", "texture_ground_truth"]
 
 logger = logging.getLogger(__name__)
 
@@ -85,7 +85,7 @@ def run_demo(
     out: str | os.PathLike = "out/demo",
     *,
     dataset: str = "synthetic", data_root: str | os.PathLike | None = None,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     overwrite: bool = False,
     settings: TextureSettings | None = None,
     save_options: dict[str, Any] | None = None,
@@ -104,8 +104,10 @@ def run_demo(
         else Open3D's download).
     data_root : path-like, optional
         Fountain only: a local copy of the set.
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge: with surface mappings pixels of shared surface
+        (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
+        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.graph.resolve_t_npm`.
     overwrite : bool, default False
         Regenerate the synthetic scene.
     settings : TextureSettings, optional
@@ -165,6 +167,7 @@ def run_demo(
         "reference": scene.names[c.reference], "unreachable": [scene.names[i] for i in c.unreachable],
         "selection": res.settings.selection, "transitions": res.selection_stats["transitions"],
         "faces": res.selection_stats["faces"], "unseen_faces": res.selection_stats["unseen_faces"],
+        **{k: res.selection_stats[k] for k in ("input_faces", "unseen_input_faces", "unseen_area")},
         "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "pages", "texels_per_pixel", "charts", "coverage",
                                                       "utilization")},
         "seams": None if res.seams is None else res.seams.to_dict(),
@@ -182,6 +185,48 @@ def run_demo(
     write_output_json(out / "demo_summary.json", {"summary": summary, "timings": timings}, option="--out",
                       inputs=scene.input_paths())
     return DemoResult(out=out, synthetic=syn, result=res, summary=summary, timings=timings)
+
+
+def texture_ground_truth(syn: SyntheticScene, textured, *, views=None) -> dict[str, Any]:
+    """A textured mesh of a synthetic scene against the true albedo: rendered from each view, scored like the photos.
+
+    Each view's camera renders ``textured`` (:func:`o3d_seqcc.render.render_textured`, one ray per
+    pixel) and the render is compared with the view's ground-truth render over the pixels the
+    mesh covers (:func:`o3d_seqcc.metrics.image_delta_e`, as the corrected photos are in
+    :func:`run_demo`); *holes* are the covered pixels whose ray hits a face textured by no photo
+    (the fallback colour; ``TexturedMesh.face_view`` -1).
+
+    Parameters
+    ----------
+    syn : SyntheticScene
+    textured : TexturedMesh or path
+        E.g. ``RunResult.textured``, or an exported GLB / OBJ.
+    views : sequence of int, optional
+        Default all.
+
+    Returns
+    -------
+    dict
+        ``views`` (per view ``name``, ``ciede2000``, ``holes``), ``mean`` (CIEDE2000 over the
+        views), ``holes`` (share of the covered pixels, all views together).
+    """
+    from .render import raycast, render_textured
+    from .texturing import load_textured_mesh
+
+    tm = load_textured_mesh(textured)
+    rows, hole_px, px = [], 0, 0
+    for i in range(len(syn.scene.views)) if views is None else views:
+        v = syn.scene.views[i]
+        mask = syn.load_face_ids(i) >= 0
+        hits = raycast(tm, v)
+        de = image_delta_e(render_textured(tm, v, hits=hits), syn.load_gt(i), mask=mask)
+        on = mask & hits.mask
+        holes = int(np.count_nonzero(tm.face_view[hits.face_ids[on]] < 0)) if tm.face_view is not None else 0
+        rows.append({"name": v.name, "ciede2000": round(de, 3), "holes": round(holes / max(int(mask.sum()), 1), 5)})
+        hole_px += holes
+        px += int(mask.sum())
+    return {"views": rows, "mean": round(float(np.mean([r["ciede2000"] for r in rows])), 3),
+            "holes": round(hole_px / max(px, 1), 5)}
 
 
 def _ground_truth(syn: SyntheticScene, res: RunResult) -> dict[str, Any]:
@@ -203,5 +248,6 @@ def _ground_truth(syn: SyntheticScene, res: RunResult) -> dict[str, Any]:
                     "face_groups": {k: list(g) for k, g in syn.face_groups.items()}, "views": per_view,
                     "mean_abs_diff_mean": round(float(np.mean([r["mean_abs_diff"] for r in per_view])), 2)},
         "ground_truth": {"views": rows, "mean_before": round(float(np.mean([r["before"] for r in rows])), 2),
-                         "mean_after": round(float(np.mean([r["after"] for r in rows])), 2)},
+                         "mean_after": round(float(np.mean([r["after"] for r in rows])), 2),
+                         "texture": {k: v for k, v in texture_ground_truth(syn, res.textured).items() if k != "views"}},
     }

@@ -17,6 +17,7 @@ import numpy as np
 
 from .correction import correct
 from .errors import InputError
+from .graph import PAPER_T_NPM
 from .metrics import Evaluation, blur_images, evaluate
 
 __all__ = ["MethodEvaluation", "evaluate_method", "evaluate_scene"]
@@ -82,7 +83,7 @@ def evaluate_method(
     reference: str | int = "auto",
     holdout: float = 0.5,
     seed: int = 0,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     blur: float = 0.0,
     interpolation: str = "bilinear",
     min_n: int = 1,
@@ -108,10 +109,11 @@ def evaluate_method(
         Fraction of mesh faces whose mappings are held out for scoring; 0 skips the held-out run.
     seed : int, default 0
         Seed of the face split.
-    t_npm : int, default 400
-        Minimum mappings per graph edge (passed to ``correct``). With ``holdout`` the fit half
-        has fewer mappings per pair; ``t_npm`` is scaled by ``1 - holdout`` for the held-out
-        fit so the graph keeps the same edges.
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count per graph edge (passed to ``correct``;
+        :func:`o3d_seqcc.graph.resolve_t_npm`). With ``holdout`` the fit half has fewer
+        mappings per pair; ``t_npm`` (``"auto"`` resolved first) is scaled by ``1 - holdout``
+        for the held-out fit so the graph keeps the same edges.
     blur : float, default 0.0
         Gaussian sigma (px) applied to the corrected images before scoring only.
     interpolation, min_n
@@ -141,6 +143,8 @@ def evaluate_method(
     ho_seconds = None
     if holdout > 0:
         fit, test = mappings.split(float(holdout), seed=seed)
+        if t_npm == "auto":  # in the units correct() takes: pixels (surface) or vertex mappings
+            t_npm = res.t_npm if getattr(mappings, "mode", "vertices") == "surface" else PAPER_T_NPM
         t_fit = max(1, int(round(t_npm * (1.0 - float(holdout)))))
         t0 = time.perf_counter()
         res_h = correct(scene, reference=ref, method=method, t_npm=t_fit, mappings=fit, images=images, **options)
@@ -163,7 +167,7 @@ def evaluate_scene(
     reference: str | int = "auto",
     holdout: float = 0.0,
     seed: int = 0,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     blur: float = 0.0,
     min_n: int = 1,
 ) -> dict[str, Any]:

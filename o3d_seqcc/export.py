@@ -15,6 +15,12 @@ PLY. Textures are PNG (lossless), JPEG (``quality``) or WebP (``quality``; in th
 ``EXT_texture_webp`` extension, required). ``transform`` (a 3 x 3 rotation, e.g. from
 :func:`o3d_seqcc.orientation.up_axis_transform`) is applied to positions and normals.
 
+Far from the origin (geo-referenced scans: UTM-like coordinates of 1e5-1e7 m) the files keep the
+input's frame at full precision: OBJ writes as many digits as the coordinates need, PLY writes
+``double`` positions, and the GLB, whose positions are float32, stores them relative to the
+node's ``translation`` (the bounding box's centre, :func:`float32_offset`). MeshLab's PLY layer
+(:func:`export_meshlab_ply`) takes an ``offset`` the project's layer matrix adds back.
+
 Every file is written atomically (temporary file in the destination folder, then rename), and
 for OBJ the textures and material are written before the ``.obj`` that refers to them.
 
@@ -40,11 +46,13 @@ import numpy as np
 from .errors import InputError
 from .imageops import sample_bilinear
 from .io.files import atomic_write_bytes
-from .meshops import vertex_normals
+from .meshops import float32_offset, vertex_normals
+from .orientation import UP_AXES
 
 __all__ = [
-    "FORMATS", "TEXTURE_FORMATS", "encode_png", "encode_texture", "export_glb", "export_meshlab_ply", "export_obj",
-    "export_ply", "export_textured_mesh", "texture_file_names",
+    "DEFAULT_FORMATS", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture",
+    "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh", "float32_offset",
+    "parse_formats", "texture_file_names",
 ]
 
 logger = logging.getLogger(__name__)
@@ -53,6 +61,33 @@ logger = logging.getLogger(__name__)
 FORMATS = ("glb", "obj", "ply")
 #: texture image formats: name -> (file extension, MIME type)
 TEXTURE_FORMATS = {"png": ("png", "image/png"), "jpg": ("jpg", "image/jpeg"), "webp": ("webp", "image/webp")}
+#: export formats written by default (:meth:`o3d_seqcc.pipeline.RunResult.save`)
+DEFAULT_FORMATS = ("glb", "obj")
+
+
+def parse_formats(formats: str | Iterable[str]) -> list[str]:
+    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
+    items = formats.split(",") if isinstance(formats, str) else list(formats)
+    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
+    bad = [f for f in out if f not in FORMATS]
+    if bad or not out:
+        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
+    return out
+
+
+def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
+    """Validate :meth:`o3d_seqcc.pipeline.RunResult.save`'s export options (the command line calls it before any work).
+
+    Returns the texture format's canonical name; raises InputError naming the bad option.
+    """
+    if str(up_axis).lower() not in UP_AXES:
+        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
+    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
+    if fmt not in TEXTURE_FORMATS:
+        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
+        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
+    return fmt
 
 
 def _check(textured: Any) -> None:
@@ -146,6 +181,15 @@ def _normals(textured: Any) -> np.ndarray:
     return vertex_normals(textured.vertices, textured.faces, getattr(textured, "normals", None))
 
 
+def _digits(verts: np.ndarray) -> int:
+    """Significant digits an OBJ needs for these positions: 9 near the origin, more far from it (up to 17)."""
+    if not len(verts):
+        return 9
+    size = float(np.max(np.ptp(verts, axis=0)))
+    far = float(np.max(np.abs(verts)))
+    return int(min(17, 9 + max(0, int(np.ceil(np.log10(max(far / max(size, 1e-12), 1.0)))))))
+
+
 def _geometry(textured: Any, transform: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Positions and unit normals with ``transform`` (3 x 3) applied."""
     v = np.asarray(textured.vertices, dtype=np.float64)
@@ -226,7 +270,7 @@ def export_obj(
     parts = [
         "# o3d_seqcc textured mesh\n",
         f"mtllib {mtl_name}\n",
-        _fmt_rows("v", verts, "%.9g"),
+        _fmt_rows("v", verts, f"%.{_digits(verts)}g"),
         _fmt_rows("vt", vt, "%.7f"),
         _fmt_rows("vn", normals, "%.5f"),
     ]
@@ -254,7 +298,8 @@ def glb_bytes(
         encoded = [png]
     images_data = _encoded_pages(textured, fmt, quality, png_compression, encoded)
     verts, normals = _geometry(textured, transform)
-    pos = np.ascontiguousarray(verts, dtype=np.float32)
+    shift = float32_offset(verts)  # float32 positions: relative to the node's translation when far away
+    pos = np.ascontiguousarray(verts - shift, dtype=np.float32)
     nrm = np.ascontiguousarray(normals, dtype=np.float32)
     # float32 rounding can leave |n| a hair off 1; renormalise in float32
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
@@ -312,7 +357,8 @@ def glb_bytes(
         "asset": {"version": "2.0", "generator": "o3d_seqcc"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
-        "nodes": [{"mesh": 0, "name": "textured_mesh"}],
+        "nodes": [{"mesh": 0, "name": "textured_mesh",
+                   **({"translation": shift.tolist()} if shift.any() else {})}],
         "meshes": [{"name": "textured_mesh", "primitives": primitives}],
         "materials": materials,
         "textures": textures,
@@ -377,11 +423,15 @@ def export_glb(
     return path
 
 
-def _ply_vertices(textured: Any, colours: np.ndarray | None,
-                  transform: np.ndarray | None = None) -> tuple[str, bytes]:
-    """PLY header lines and binary block of the vertices: x y z nx ny nz [red green blue] (float32, uint8)."""
+def _ply_vertices(textured: Any, colours: np.ndarray | None, transform: np.ndarray | None = None, *,
+                  offset: np.ndarray | None = None) -> tuple[str, bytes]:
+    """PLY header lines and binary block of the vertices: x y z nx ny nz [red green blue] (float32, uint8;
+    x y z double when float32 would not hold them, :func:`float32_offset`), minus ``offset``."""
     verts, n = _geometry(textured, transform)
-    fields = [(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz")]
+    if offset is not None:
+        verts = verts - np.asarray(offset, dtype=np.float64)
+    pos = "<f8" if float32_offset(verts).any() else "<f4"
+    fields = [(k, pos) for k in ("x", "y", "z")] + [(k, "<f4") for k in ("nx", "ny", "nz")]
     if colours is not None:
         fields += [(k, "u1") for k in ("red", "green", "blue")]
     va = np.empty(len(verts), dtype=np.dtype(fields))
@@ -392,8 +442,11 @@ def _ply_vertices(textured: Any, colours: np.ndarray | None,
         c8 = np.clip(np.rint(colours), 0, 255).astype(np.uint8)
         va["red"], va["green"], va["blue"] = c8[:, 0], c8[:, 1], c8[:, 2]
     header = f"element vertex {len(va)}\n" + "".join(
-        f"property {'float' if t == '<f4' else 'uchar'} {k}\n" for k, t in fields)
+        f"property {_PLY_TYPES[t]} {k}\n" for k, t in fields)
     return header, va.tobytes()
+
+
+_PLY_TYPES = {"<f4": "float", "<f8": "double", "u1": "uchar"}
 
 
 def export_ply(textured: Any, path: str | os.PathLike, *, transform: np.ndarray | None = None) -> Path:
@@ -427,6 +480,7 @@ def export_meshlab_ply(
     texture: str | os.PathLike | list | None = None,
     png_compression: int = 1,
     png: bytes | None = None,
+    offset: np.ndarray | None = None,
 ) -> Path:
     """Write MeshLab's own textured PLY: per-face texture coordinates and ``TextureFile`` comments.
 
@@ -452,6 +506,9 @@ def export_meshlab_ply(
     png_compression : int, default 1
     png : bytes, optional
         Already encoded single-page PNG texture (:func:`encode_png`), when ``texture`` is not given.
+    offset : (3,) float, optional
+        Subtracted from the positions (MeshLab holds them in float32: a project far from the
+        origin places the layer with a matrix that adds it back).
 
     Returns
     -------
@@ -477,7 +534,7 @@ def export_meshlab_ply(
     tex_names = [Path(os.path.relpath(f.resolve(), path.parent.resolve())).as_posix() for f in files]
     if any(c in n for n in tex_names for c in "\r\n"):
         raise InputError(f"texture: the file names {tex_names!r} cannot go into a PLY header")
-    vheader, vblock = _ply_vertices(textured, None)
+    vheader, vblock = _ply_vertices(textured, None, offset=offset)
     fields = [("n", "u1"), ("i", "<i4", (3,)), ("m", "u1"), ("t", "<f4", (6,))]
     if pages > 1:
         fields.append(("k", "<i4"))

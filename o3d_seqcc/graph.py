@@ -10,15 +10,24 @@ in the paper's equation; so weights are in [0, 1) and a pair holding many mappin
 cross. Dijkstra's algorithm then gives each view the path to the reference with the highest sum
 of mappings (lowest total cost).
 
-``t_npm`` and dense mappings
-----------------------------
+``t_npm`` and its units
+-----------------------
+In the default ``"surface"`` mappings a pair's count is the area of the surface both views see,
+in pixels of the view where it is smaller (:func:`o3d_seqcc.pairs.shared_area`): the same on a
+300-face and a 3M-face mesh of one scene. ``t_npm`` is then a number of pixels, and its default
+``"auto"`` is :data:`AUTO_T_NPM_FRACTION` (1 %) of the median photo's pixels (3,072 px for
+640 x 480 photos; on Fountain's 16k-face mesh the paper's 400 vertex mappings are 2,600-4,400 px
+of shared surface, and 514 of its 528 pairs reach 3,072 px where 511 reach 400 vertex mappings).
+:func:`resolve_t_npm` turns ``t_npm`` into the threshold in the mappings' units.
+
 The paper's ``t_npm = 400`` counts *vertex* mappings (3 per face seen by both views, so about
 133 shared faces). Dense (per-pixel) mappings produce roughly (projected face area in px) mappings
 per face instead of 3, so the same overlap gives a much larger count. :func:`scale_t_npm` converts
 a threshold given in vertex-mapping units into the units of the mappings at hand: for dense
 mappings it multiplies ``t_npm`` by the mean number of mappings per (shared face x 3 vertices),
 i.e. the threshold keeps meaning "about t_npm / 3 shared faces". :func:`o3d_seqcc.correction.correct`
-applies it automatically, so ``t_npm`` is always given in vertex-mapping units.
+applies it automatically, so with vertex and dense mappings ``t_npm`` is given in vertex-mapping
+units (``"auto"``: the paper's 400).
 """
 
 from __future__ import annotations
@@ -31,13 +40,77 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["WEIGHTS", "build_graph", "choose_reference", "correction_paths", "graph_edges", "scale_t_npm"]
+__all__ = ["AUTO_T_NPM_FRACTION", "PAPER_T_NPM", "WEIGHTS", "build_graph", "check_t_npm", "choose_reference",
+           "correction_paths", "graph_edges", "resolve_t_npm", "scale_t_npm", "t_npm_units"]
 
 logger = logging.getLogger(__name__)
 
 
 #: edge weight formulas of :func:`build_graph`
 WEIGHTS = ("paper", "log")
+#: ``t_npm="auto"`` with surface mappings: this fraction of the median photo's pixels
+AUTO_T_NPM_FRACTION = 0.01
+#: the paper's threshold in vertex mappings (``t_npm="auto"`` with vertex and dense mappings)
+PAPER_T_NPM = 400
+
+
+def check_t_npm(t_npm) -> None:
+    """Raise ``InputError`` unless ``t_npm`` is ``"auto"`` or a positive integer."""
+    if isinstance(t_npm, str) and t_npm == "auto":
+        return
+    if isinstance(t_npm, bool) or not isinstance(t_npm, (int, np.integer)) or t_npm < 1:
+        raise InputError(f"t_npm must be 'auto' or a positive integer (minimum pairwise mappings for a graph edge; "
+                         f"pixels of shared surface with surface mappings), got {t_npm!r}")
+
+
+def t_npm_units(mode: str) -> str:
+    """The unit of a pair count (and of ``t_npm``) for a mapping mode: ``"px"`` (surface) or ``"mappings"``."""
+    return "px" if mode == "surface" else "mappings"
+
+
+def resolve_t_npm(t_npm, mappings, *, image_sizes=None) -> tuple[int, str]:
+    """The edge threshold in the units of ``mappings``, and how it was obtained.
+
+    Parameters
+    ----------
+    t_npm : "auto" or int
+        ``"auto"``: with surface mappings :data:`AUTO_T_NPM_FRACTION` of the median photo's
+        pixel count (1 %: 3,072 px for 640 x 480 photos), with vertex and dense mappings the
+        paper's 400 vertex mappings. A number: pixels of shared surface (surface mappings) or
+        vertex mappings (vertex and dense mappings; :func:`scale_t_npm` converts for dense).
+    mappings : o3d_seqcc.mappings.Mappings
+    image_sizes : sequence of (width, height), optional
+        Default ``mappings.image_sizes`` (surface ``"auto"`` only).
+
+    Returns
+    -------
+    (int, str)
+        The threshold and a sentence saying how it was derived (for messages and reports).
+
+    Raises
+    ------
+    InputError
+        ``t_npm`` is neither ``"auto"`` nor a positive integer; ``"auto"`` with surface mappings
+        whose image sizes are unknown.
+    """
+    check_t_npm(t_npm)
+    mode = getattr(mappings, "mode", "vertices")
+    if mode != "surface":
+        base = PAPER_T_NPM if t_npm == "auto" else int(t_npm)
+        eff = scale_t_npm(base, mappings)
+        how = f"t_npm={t_npm!r}: {base} vertex mappings" + (f" = {eff} {mode} mappings" if eff != base else "")
+        return eff, how
+    if t_npm != "auto":
+        return int(t_npm), f"t_npm={int(t_npm)} px of shared surface"
+    sizes = image_sizes if image_sizes is not None else getattr(mappings, "image_sizes", None)
+    if not sizes:
+        raise InputError("t_npm='auto' needs the photos' sizes, which these mappings do not record; give t_npm as a "
+                         "number of pixels of shared surface")
+    px = np.array([int(w) * int(h) for w, h in sizes], dtype=np.float64)
+    med = float(np.median(px))
+    eff = max(1, int(round(AUTO_T_NPM_FRACTION * med)))
+    w, h = min(sizes, key=lambda s: abs(int(s[0]) * int(s[1]) - med))
+    return eff, f"t_npm='auto': {AUTO_T_NPM_FRACTION:.0%} of a {w}x{h} photo = {eff} px of shared surface"
 
 
 def build_graph(

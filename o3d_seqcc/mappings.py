@@ -4,7 +4,16 @@ A *pairwise mapping* is a pair of pixel coordinates, one in view ``a`` and one i
 of the same surface point of the mesh. The paper uses the projections of the three vertices of
 every face that is valid and unfiltered in both views (``mode="vertices"``); ``mode="dense"``
 additionally samples points inside each face (sub-triangle centroids) whose number adapts to the
-face's projected size (more observations for small overlaps).
+face's projected size (more observations for small overlaps). Both count mappings, so a count
+(and the graph threshold ``t_npm``) depends on how finely the mesh is tessellated.
+
+``mode="surface"`` (the default) samples the surface both views see at least at the photos'
+resolution: the vertices of every shared face (as the paper) and, inside faces larger than
+``sample_spacing``^2 px in the smaller of the two projections, about one point per
+``sample_spacing``^2 px (sub-triangle centroids), and counts a pair by the area of that surface
+in pixels
+(:func:`~o3d_seqcc.pairs.shared_area`), so the counts, the graph and ``t_npm`` (pixels) mean
+the same on a 300-face and a 3M-face mesh of one scene.
 
 Storage is lazy: :func:`compute_mappings` keeps the per-view sparse visibility records and builds
 a pair's arrays when ``mappings.pairs[(a, b)]`` is read (a few milliseconds; the last
@@ -28,6 +37,7 @@ from .errors import InputError
 from .pairs import LazyPairs, Pair, PairMapping, PairSource, norm_key
 
 __all__ = [
+    "DEFAULT_MODE",
     "MODES",
     "Mappings",
     "PairMapping",
@@ -38,7 +48,9 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 #: mapping modes accepted by :func:`compute_mappings`
-MODES = ("vertices", "dense")
+MODES = ("surface", "vertices", "dense")
+#: the default mapping mode (:func:`compute_mappings`, :func:`o3d_seqcc.pipeline.run`, the command line)
+DEFAULT_MODE = "surface"
 
 
 
@@ -53,15 +65,18 @@ class Mappings:
         From :func:`compute_mappings` this is a lazy read-only mapping (values built on access).
     view_names : tuple of str
     mode : str
-        ``"vertices"`` or ``"dense"`` (or a free label for hand-built mappings).
+        ``"surface"``, ``"vertices"`` or ``"dense"`` (or a free label for hand-built mappings).
     filter_stats : dict
         What each filter removed (see :func:`o3d_seqcc.visibility.compute_visibility`).
     visibility : Visibility or None
         The visibility the mappings were derived from (None when loaded from a file).
     counts : dict[(int, int), int]
-        Number of mappings per pair (same keys as ``pairs``); computed when not given.
+        Number of mappings per pair (same keys as ``pairs``); computed when not given. In
+        ``"surface"`` mode: the pair's shared surface in pixels (not its number of samples).
     n_views : int
         Number of views (from ``view_names`` when not given).
+    image_sizes : tuple of (width, height), optional
+        The photos' sizes (``t_npm="auto"``; from the visibility when not given).
     """
 
     pairs: Mapping[Pair, PairMapping]
@@ -71,6 +86,7 @@ class Mappings:
     visibility: Any = None
     counts: dict | None = None
     n_views: int | None = None
+    image_sizes: tuple | None = None
 
     def __post_init__(self) -> None:
         pairs = self.pairs
@@ -104,6 +120,14 @@ class Mappings:
             object.__setattr__(self, "counts", {k: pm.n for k, pm in pairs.items()})
         else:
             object.__setattr__(self, "counts", dict(self.counts))
+        sizes = self.image_sizes
+        if sizes is None:
+            sizes = getattr(self.visibility, "image_sizes", None)
+        if sizes is not None:
+            sizes = tuple((int(w), int(h)) for w, h in sizes)
+            if len(sizes) != n_views:
+                raise ValueError(f"{len(sizes)} image sizes for {n_views} views")
+        object.__setattr__(self, "image_sizes", sizes)
 
     # ---------------------------------------------------------------------------------------
 
@@ -152,6 +176,7 @@ class Mappings:
             visibility=self.visibility,
             counts=counts,
             n_views=self.n_views,
+            image_sizes=self.image_sizes,
         )
 
     def subset(self, pairs: Iterable[Pair]) -> "Mappings":
@@ -226,10 +251,11 @@ class Mappings:
             test[k] = pm.take(is_test)
         fit = {k: v for k, v in fit.items() if v.n}
         test = {k: v for k, v in test.items() if v.n}
-        return (
-            self._replace(fit, {k: v.n for k, v in fit.items()}),
-            self._replace(test, {k: v.n for k, v in test.items()}),
-        )
+
+        def share(part: dict) -> dict:  # counts in the mappings' units (pixels for surface mappings)
+            return {k: int(round(self.counts[k] * v.n / max(self.pairs[k].n, 1))) for k, v in part.items()}
+
+        return self._replace(fit, share(fit)), self._replace(test, share(test))
 
     def materialize(self) -> "Mappings":
         """A copy whose ``pairs`` is a plain dict (builds every pair now)."""
@@ -254,8 +280,9 @@ def _max_usable_area(vis) -> np.ndarray:
 def compute_mappings(
     scene,
     *,
-    mode: str = "vertices",
+    mode: str = DEFAULT_MODE,
     visibility=None,
+    sample_spacing: float = 3.0,
     dense_spacing: float = 3.0,
     dense_max_level: int = 6,
     cache_size: int = 8,
@@ -267,9 +294,11 @@ def compute_mappings(
     ----------
     scene : Scene or None
         May be None when ``visibility`` is given.
-    mode : {"vertices", "dense"}, default "vertices"
-        ``"vertices"``: the projections of the 3 vertices of every face usable in both views
-        (the paper). ``"dense"``: the 3 vertices plus the centroids of the ``L**2`` sub-triangles
+    mode : {"surface", "vertices", "dense"}, default "surface"
+        ``"surface"``: the vertices of every face usable in both views and points inside the
+        larger ones, about one per ``sample_spacing``^2 pixels of the smaller projection; pairs
+        counted by their shared surface in pixels (see the module docstring). ``"vertices"``: the projections of the 3
+        vertices of every face usable in both views (the paper). ``"dense"``: the 3 vertices plus the centroids of the ``L**2`` sub-triangles
         of a level-``L`` subdivision of each such face, ``L = clip(ceil(sqrt(2 * A) /
         dense_spacing), 1, dense_max_level)`` where ``A`` is the face's largest projected area
         (px^2) over the views where it is usable; so dense is a superset of vertices mode with
@@ -277,6 +306,9 @@ def compute_mappings(
     visibility : Visibility, optional
         Precomputed :func:`~o3d_seqcc.visibility.compute_visibility` result (then
         ``filter_options`` must be empty).
+    sample_spacing : float, default 3.0
+        Surface mode: spacing in pixels (of the view where the face is smaller) of the samples
+        inside faces larger than ``sample_spacing**2`` px, besides their vertices.
     dense_spacing : float, default 3.0
         Target spacing of dense samples in pixels (in the view where the face is largest).
     dense_max_level : int, default 6
@@ -314,13 +346,15 @@ def compute_mappings(
             f"the visibility is for {visibility.n_views} views but the scene has {len(scene.views)}; recompute it"
         )
     level = None
+    if mode == "surface" and not sample_spacing > 0:
+        raise ValueError(f"sample_spacing must be > 0, got {sample_spacing}")
     if mode == "dense":
         if dense_spacing <= 0:
             raise ValueError(f"dense_spacing must be > 0, got {dense_spacing}")
         max_area = _max_usable_area(visibility)
         level = np.clip(np.ceil(np.sqrt(2.0 * max_area.astype(np.float64)) / dense_spacing), 1, int(dense_max_level))
         level = level.astype(np.int64)
-    src = PairSource(visibility, mode, level, None)
+    src = PairSource(visibility, mode, level, None, spacing=sample_spacing)
     counts = src.counts()
     names = tuple(visibility.view_names) or tuple(v.name for v in scene.views)
     if len(names) != visibility.n_views:
@@ -333,7 +367,8 @@ def compute_mappings(
         )
     n_pairs = len(names) * (len(names) - 1) // 2
     logger.info(
-        "mappings (%s): %d of %d pairs overlap, %d mappings in total", mode, len(counts), n_pairs, sum(counts.values())
+        "mappings (%s): %d of %d pairs overlap, %d %s in total", mode, len(counts), n_pairs, sum(counts.values()),
+        "px of shared surface" if mode == "surface" else "mappings",
     )
     return Mappings(
         pairs=LazyPairs(src, counts.keys(), cache_size=cache_size),
@@ -343,18 +378,29 @@ def compute_mappings(
         visibility=visibility,
         counts=counts,
         n_views=len(names),
+        image_sizes=getattr(visibility, "image_sizes", None)
+        or (tuple((v.width, v.height) for v in scene.views) if scene is not None else None),
     )
 
 
-def mappings_summary(mappings: Mappings, *, t_npm: int = 400) -> dict[str, Any]:
-    """A JSON-friendly summary: pairs, pairs with at least ``t_npm`` mappings, totals, filter counts, timings."""
+def mappings_summary(mappings: Mappings, *, t_npm: int | str = "auto") -> dict[str, Any]:
+    """A JSON-friendly summary: pairs, pairs with at least ``t_npm`` (see
+    :func:`~o3d_seqcc.graph.resolve_t_npm`), totals, filter counts, timings."""
+    from .graph import resolve_t_npm, t_npm_units
+
     st = mappings.filter_stats
     counts = sorted(mappings.counts.values())
+    try:
+        t_eff, _ = resolve_t_npm(t_npm, mappings)
+    except InputError:
+        t_eff = None
     return {
         "mode": mappings.mode,
         "views": mappings.n_views,
+        "count_units": t_npm_units(mappings.mode),
         "pairs_with_mappings": len(counts),
-        f"pairs_at_least_{t_npm}": sum(c >= t_npm for c in counts),
+        "t_npm": t_eff,
+        "pairs_at_least_t_npm": None if t_eff is None else sum(c >= t_eff for c in counts),
         "mappings_total": mappings.total,
         "mappings_per_pair_median": counts[len(counts) // 2] if counts else 0,
         "filters (face-view incidences)": {

@@ -22,10 +22,47 @@ __all__ = [
     "face_normals",
     "oriented_face_normals",
     "vertex_normals",
+    "FLOAT32_FAR",
+    "float32_offset",
+    "local_origin",
     "weld_vertices",
 ]
 
 logger = logging.getLogger(__name__)
+
+
+def local_origin(vertices: np.ndarray) -> np.ndarray:
+    """(3,) float64: the centre of the vertices' bounding box (zeros when there are none).
+
+    Every single-precision step (Open3D ray casting, xatlas, GLB positions) takes coordinates
+    minus this origin, so a scene far from the world origin (UTM-like coordinates) keeps the
+    precision of one at the origin: float32 holds 1e7 only to the metre, 5 m to the micrometre.
+    """
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if not len(v):
+        return np.zeros(3)
+    return 0.5 * (v.min(axis=0) + v.max(axis=0))
+
+
+#: positions are written relative to their bounding box's centre when they lie more than this many
+#: times its size from the origin (float32 keeps ~7 digits: 1e-5 of the size at this distance)
+FLOAT32_FAR = 100.0
+
+
+def float32_offset(vertices: np.ndarray) -> np.ndarray:
+    """(3,) float64: what to subtract from ``vertices`` before a float32 format holds them.
+
+    The bounding box's centre when the vertices lie more than :data:`FLOAT32_FAR` times the box's
+    size from the origin (float32 would lose their shape there: at 1e7 m it holds metres), else
+    zeros (files of scenes near the origin are written as they are).
+    """
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if not len(v):
+        return np.zeros(3)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    size = float(np.max(hi - lo))
+    far = float(np.max(np.abs(np.concatenate([lo, hi]))))
+    return local_origin(v) if far > FLOAT32_FAR * max(size, 1e-12) else np.zeros(3)
 
 
 def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarray:
@@ -42,7 +79,8 @@ def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarr
     Returns
     -------
     (N,) int64
-        Welded vertex id per vertex, in ``0 .. n_unique - 1``.
+        Welded vertex id per vertex, in ``0 .. n_unique - 1``, numbered in the order of each
+        group's first vertex.
     """
     v = np.asarray(vertices, dtype=np.float64)
     if len(v) == 0:
@@ -58,7 +96,12 @@ def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarr
     new[1:] = (qs[1:] != qs[:-1]).any(axis=1)
     inv = np.empty(len(q), dtype=np.int64)
     inv[order] = np.cumsum(new) - 1
-    return inv
+    # ids in the order of each group's first vertex, not of the rounded positions: the same ids wherever the mesh
+    # lies (far from the origin a coordinate's last bit can move a vertex to a neighbouring cell of the same group)
+    first = order[new]  # lexsort is stable: a run's first entry is its smallest vertex index
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inv]
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,14 +24,16 @@ def bary_grid(level: int, *, interior_only: bool) -> np.ndarray:
     return w
 
 
-def _rays_to(C: np.ndarray, P: np.ndarray, tol: float, atol: float) -> np.ndarray:
+def _rays_to(C: np.ndarray, P: np.ndarray, tol: float, atol: float, origin: np.ndarray | None = None) -> np.ndarray:
     """(n, 6) float32 rays from ``C`` toward the points ``P``, scaled so that ``t = 1`` is the first
-    distance that counts as "in front of the point" (``d * (1 - tol) - atol``)."""
+    distance that counts as "in front of the point" (``d * (1 - tol) - atol``); in the local frame
+    of a ray-casting scene built minus ``origin`` (the directions in float64 before rounding)."""
     d = P - C[None, :]
     dist = np.linalg.norm(d, axis=1, keepdims=True)
     reach = np.maximum(dist * (1.0 - tol) - atol, 0.0)
     d = d * np.divide(reach, dist, out=np.zeros_like(dist), where=dist > 0)
-    return np.concatenate([np.broadcast_to(C, d.shape), d], axis=1).astype(np.float32)
+    c = C if origin is None else np.asarray(C, np.float64) - origin
+    return np.concatenate([np.broadcast_to(c, d.shape), d], axis=1).astype(np.float32)
 
 
 def _hidden(rs, rays: np.ndarray) -> np.ndarray:
@@ -46,7 +48,8 @@ def _hidden(rs, rays: np.ndarray) -> np.ndarray:
 
 
 def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray, center: np.ndarray,
-                  front: np.ndarray, area: np.ndarray, opts: dict) -> tuple[np.ndarray, int]:
+                  front: np.ndarray, area: np.ndarray, opts: dict, *,
+                  origin: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Which of a view's front-facing valid faces are hidden by the mesh.
 
     Parameters
@@ -65,6 +68,8 @@ def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray
         Their projected areas in px^2.
     opts : dict
         ``occlusion_tol``, ``occlusion_atol``, ``occlusion_spacing``, ``occlusion_max_level``.
+    origin : (3,) float64, optional
+        The ray-casting scene's local origin (it holds the mesh minus ``origin``).
 
     Returns
     -------
@@ -81,7 +86,7 @@ def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray
     tri = faces[front]
     need[tri.ravel()] = True
     ids = np.flatnonzero(need)
-    hid = _hidden(rs, _rays_to(center, X[ids], tol, atol))
+    hid = _hidden(rs, _rays_to(center, X[ids], tol, atol, origin))
     n_rays = len(hid)
     vh = np.zeros(len(X), dtype=bool)
     vh[ids] = hid
@@ -98,7 +103,7 @@ def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray
                 w = bary_grid(int(L), interior_only=True)  # (m, 3)
                 pts.append(np.einsum("mj,kjc->kmc", w, X[tri[sel]]).reshape(-1, 3))
                 own.append(np.repeat(sel, len(w)))
-            hid = _hidden(rs, _rays_to(center, np.concatenate(pts), tol, atol))
+            hid = _hidden(rs, _rays_to(center, np.concatenate(pts), tol, atol, origin))
             n_rays += len(hid)
             occluded[np.concatenate(own)[hid]] = True
     return occluded, n_rays

@@ -47,6 +47,7 @@ from .errors import InputError, warn
 from .imageops import img_as_dtype
 from .meshops import vertex_normals
 from .scene import Mesh, Scene, View
+from .texturing.settings import TextureSettings
 
 __all__ = ["correct_images", "scene_from_open3d", "texture_mesh"]
 
@@ -253,8 +254,8 @@ def correct_images(
     depths: Sequence[Any] | None = None,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
-    mappings: str = "vertices",
+    t_npm: int | str = "auto",
+    mappings: str = "surface",
     depth_scale: float = 1000.0,
     return_report: bool = False,
 ) -> list | tuple[list, dict]:
@@ -268,9 +269,11 @@ def correct_images(
         Index of the reference image, or ``"auto"`` (the view with the smallest total path cost).
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         A colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
-    mappings : {"vertices", "dense"}, default "vertices"
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge: with surface mappings pixels of shared surface
+        (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
+        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.graph.resolve_t_npm`.
+    mappings : {"surface", "vertices", "dense"}, default "surface"
     depth_scale : float, default 1000.0
         Units per metre of integer depth images.
     return_report : bool, default False
@@ -298,10 +301,10 @@ def texture_mesh(
     depths: Sequence[Any] | None = None,
     correct: bool = True,
     selection: str = "mrf",
-    atlas_size: int = 2048,
+    atlas_size: int | str = TextureSettings.atlas_size,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     depth_scale: float = 1000.0,
     return_result: bool = False,
     **texture_options: Any,
@@ -317,8 +320,9 @@ def texture_mesh(
         :func:`correct_images`); False textures with the images as they are.
     selection : {"mrf", "largest-area", "random"}, default "mrf"
         Per-face image selection.
-    atlas_size : int, default 2048
-        Side of the texture atlas in texels.
+    atlas_size : int or "auto", default "auto"
+        ``"auto"``: the atlas is sized to the charts at the photos' resolution; an integer: its
+        largest side in texels, a budget (:class:`~o3d_seqcc.texturing.TextureSettings`).
     depth_scale : float, default 1000.0
     return_result : bool, default False
         Also return the :class:`~o3d_seqcc.pipeline.RunResult` (selection, seams, timings, and

@@ -35,18 +35,19 @@ import numpy as np
 from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import FORMATS, TEXTURE_FORMATS
+from .export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .images import scene_photos
 from .io.files import write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
-from .mappings import MODES, Mappings, compute_mappings
+from .mappings import DEFAULT_MODE, MODES, Mappings, compute_mappings
 from .meshops import face_adjacency
 from .metrics import before_after
-from .orientation import UP_AXES, up_axis_transform
+from .orientation import up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
+from .refine import coverage
 from .run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
@@ -58,35 +59,6 @@ from .visibility import Visibility, compute_visibility
 __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
 
 logger = logging.getLogger(__name__)
-
-#: export formats written by default
-DEFAULT_FORMATS = ("glb", "obj")
-
-
-def parse_formats(formats: str | Iterable[str]) -> list[str]:
-    """``"glb,obj"`` or ``["glb", "obj"]`` -> ``["glb", "obj"]``; unknown names raise InputError listing the valid ones."""
-    items = formats.split(",") if isinstance(formats, str) else list(formats)
-    out = list(dict.fromkeys(str(f).strip().lower() for f in items if str(f).strip()))
-    bad = [f for f in out if f not in FORMATS]
-    if bad or not out:
-        raise InputError(f"unknown export format(s) {bad or formats!r}; valid: {', '.join(FORMATS)}")
-    return out
-
-
-def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpeg_quality: int = 90) -> str:
-    """Validate :meth:`RunResult.save`'s export options (the command line calls it before any work).
-
-    Returns the texture format's canonical name; raises InputError naming the bad option.
-    """
-    if str(up_axis).lower() not in UP_AXES:
-        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
-    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
-    if fmt not in TEXTURE_FORMATS:
-        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
-    if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
-        raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
-    return fmt
-
 
 def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
     check_scene_argument(scene, mesh)
@@ -305,14 +277,15 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
     with _stage("selection", timings):
         adjacency = face_adjacency(mesh.faces, mesh.vertices)
         opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
-        labels = select_views(vis, method=s.selection, seed=s.seed, **opts)
+        labels = select_views(vis, method=s.selection, seed=s.seed, images=images, data_term=s.data_term,
+                              outlier_removal=s.outlier_removal, **opts)
     with _stage("bake", timings):
         tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
     seams = None
     if want_seams:
         with _stage("seams", timings):
             seams = seam_metric(tm)
-    return labels, selection_stats(labels, adjacency, len(scene.views)), tm, seams
+    return labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm, seams
 
 
 def texture(
@@ -321,7 +294,7 @@ def texture(
     images: Sequence[np.ndarray] | None = None,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True,
+    seams: bool = True, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -339,6 +312,8 @@ def texture(
         Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
     seams : bool, default True
         Compute the seam metric of the result.
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
     **texture_options
@@ -360,7 +335,7 @@ def texture(
         imgs = check_images_argument(images, sc.views)
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
@@ -373,11 +348,11 @@ def run(
     *,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
-    mappings: str = "vertices",
+    t_npm: int | str = "auto",
+    mappings: str = DEFAULT_MODE,
     mesh: str | os.PathLike | None = None,
     settings: TextureSettings | None = None,
-    seams: bool = True, compare_original: bool = False,
+    seams: bool = True, compare_original: bool = False, split_faces: bool = True,
     client: Any = None,
     **texture_options: Any,
 ) -> RunResult:
@@ -391,10 +366,11 @@ def run(
         Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : int, default 400
-        Minimum pairwise mappings (vertex units) for a graph edge.
-    mappings : {"vertices", "dense"}, default "vertices"
-        Pairwise mapping mode.
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): pixels of
+        shared surface, ``"auto"`` = 1 % of a photo (surface mappings), or vertex mappings.
+    mappings : {"surface", "vertices", "dense"}, default "surface"
+        Pairwise mapping mode (:func:`o3d_seqcc.mappings.compute_mappings`; vertices: the paper's).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
     settings : TextureSettings, optional
@@ -403,6 +379,9 @@ def run(
         Compute the seam metric of the result.
     compare_original : bool, default False
         Also bake the uncorrected images (in memory) and report their seam metric.
+    split_faces : bool, default True
+        Split the faces no photo holds whole (clipped, partly hidden, too large, or whose texture
+        would slide inside them) into parts (:mod:`o3d_seqcc.refine`); False keeps the input's.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
         scene's files must be readable at the same paths on every worker); default local
@@ -433,10 +412,10 @@ def run(
         resolve_view(sc.names, reference)
     originals = scene_photos(sc.views)  # read when a task first needs them, kept while they fit
     if method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
-        _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them  # the colour mapping fits need them
+        _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc)
+            vis = compute_visibility(sc, split_faces=split_faces)
         with _stage("mappings", timings):
             maps = compute_mappings(sc, visibility=vis, mode=mappings)
         with _stage("correction", timings):
@@ -506,11 +485,11 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int = 400, mappings: str = "vertices",
+    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int | str = "auto", mappings: str = DEFAULT_MODE,
     graph_weight: str = "paper",
     seed: int = 0,
     metrics: bool = True,
-    mesh: str | os.PathLike | None = None,
+    mesh: str | os.PathLike | None = None, split_faces: bool = True,
     client: Any = None,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
@@ -527,6 +506,8 @@ def correct_scene(
     metrics : bool, default True
         Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
+    split_faces : bool, default True
+        As :func:`run`.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
 
@@ -543,7 +524,7 @@ def correct_scene(
     t = time.perf_counter()
     with use_executor(client):
         with _stage("mappings"):
-            maps = compute_mappings(sc, mode=mappings)
+            maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
         with _stage("correction"):

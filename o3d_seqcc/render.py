@@ -21,6 +21,7 @@ import numpy as np
 
 from .errors import InputError
 from .io.files import atomic_write_bytes, write_image
+from .meshops import local_origin
 from .scene import View
 from .sharpness import gradient_similarity, sharpness  # noqa: F401 - public here too
 from .texturing.textured_mesh import load_textured_mesh, sample_texture
@@ -107,9 +108,10 @@ def raycast(mesh: Any, view: View) -> RayHits:
     import open3d as o3d
 
     v, f = _arrays(mesh)
+    origin = local_origin(v)  # ray casting is float32: in a local frame, so far-away scenes stay precise
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
-        o3d.core.Tensor(np.ascontiguousarray(v, dtype=np.float32)),
+        o3d.core.Tensor(np.ascontiguousarray(v - origin, dtype=np.float32)),
         o3d.core.Tensor(np.ascontiguousarray(f, dtype=np.uint32)),
     )
     K, R, C = view.intrinsic, view.rotation, view.center
@@ -124,7 +126,7 @@ def raycast(mesh: Any, view: View) -> RayHits:
         pix = np.stack([xs, ys, np.ones_like(xs)], axis=-1)  # pixel centres at integers
         d_cam = pix @ kinv  # z = 1: t_hit is the camera depth
         d_world = d_cam @ R  # R^T d for each pixel
-        rays = np.concatenate([np.broadcast_to(C, d_world.shape), d_world], axis=-1).astype(np.float32)
+        rays = np.concatenate([np.broadcast_to(C - origin, d_world.shape), d_world], axis=-1).astype(np.float32)
         ans = scene.cast_rays(o3d.core.Tensor(rays))
         prim = ans["primitive_ids"].numpy().astype(np.int64)
         hit = prim != _INVALID

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .export import export_meshlab_ply, export_textured_mesh, texture_file_names
+from .export import export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
 from .io.files import atomic_write_bytes, write_json
 from .io.result_files import meshlab_project, write_images
 from .parallel import carried
@@ -61,13 +61,14 @@ def _mesh_files(res: Any, stage: Path, *, fmts: list[str], tfmt: str, quality: i
         after["images"] = stage / "images"
     # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
     layer = stage / "mesh_meshlab.ply"
-    project = meshlab_project(res.scene, stage, mesh=layer, images=rasters)
+    shift = float32_offset(res.textured.vertices)  # MeshLab holds float32: the layer matrix adds it back
+    project = meshlab_project(res.scene, stage, mesh=layer, images=rasters, offset=shift)
     if project is not None:
         after["meshlab_project"] = project
         reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
         after["meshlab_mesh"] = export_meshlab_ply(
             res.textured, layer, texture=[stage / n for n in texture_file_names("mesh", tfmt, res.textured.pages)]
-            if reuse else None)
+            if reuse else None, offset=shift)
     return written, after, time.perf_counter() - t
 
 

@@ -322,7 +322,7 @@ def evaluate_semireal(
     mappings=None,
     images: Sequence[np.ndarray] | None = None,
     masks: Sequence[np.ndarray] | None = None,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     ranges: dict[str, Any] | None = None,
     stride: int = 2,
     unchanged: bool = True,
@@ -344,7 +344,8 @@ def evaluate_semireal(
         The photos (default: the scene's).
     masks : sequence of (H, W) bool arrays, optional
         Scored pixels (default :func:`coverage_masks`).
-    t_npm : int, default 400
+    t_npm : "auto" or int, default "auto"
+        Graph threshold (:func:`o3d_seqcc.graph.resolve_t_npm`).
     ranges : dict, optional
         Ranges of the hidden change (:func:`make_semireal`).
     stride : int, default 2
@@ -357,7 +358,7 @@ def evaluate_semireal(
     SemiRealResult
     """
     from .correction import LutTransform, correct
-    from .graph import build_graph, choose_reference, scale_t_npm
+    from .graph import build_graph, choose_reference, resolve_t_npm
     from .mappings import compute_mappings
     from .scene import resolve_view
 
@@ -365,7 +366,8 @@ def evaluate_semireal(
         mappings = compute_mappings(scene)
     originals = [v.load_image() for v in scene.views] if images is None else [np.asarray(im) for im in images]
     masks = coverage_masks(scene) if masks is None else list(masks)
-    graph = build_graph(dict(mappings.counts), len(originals), t_npm=scale_t_npm(t_npm, mappings))
+    t_eff = resolve_t_npm(t_npm, mappings, image_sizes=[(v.width, v.height) for v in scene.views])[0]
+    graph = build_graph(dict(mappings.counts), len(originals), t_npm=t_eff)
     ref = choose_reference(graph) if isinstance(reference, str) and reference == "auto" else resolve_view(scene.names, reference)
     specs = [(m, m, {}) if isinstance(m, str) else (str(m[0]), str(m[1]), dict(m[2])) for m in methods]
     if not specs:

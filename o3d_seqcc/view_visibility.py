@@ -19,6 +19,7 @@ full per-face computation gives.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -27,15 +28,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .camera import project_columns
+from .meshops import local_origin
 from .depthmaps import depth_edges, depth_from_point_cloud
+from .errors import InputError, warn
+from .images import LRUCache
 from .occlusion import occluded_view
 
-__all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "view_record"]
+__all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
+           "view_record"]
+
+logger = logging.getLogger("o3d_seqcc.visibility")  # the visibility's log (its warnings name views)
 
 #: filter bits of :attr:`ViewRecord.flags`
 OCCLUDED, DEPTH, OBLIQUE = 1, 2, 4
 #: faces per spatial chunk of the frustum culling
 CHUNK_FACES = 1024
+#: bytes of depth images a job keeps for the later passes over the views (the split faces' parts)
+DEPTH_CACHE_BYTES = 256 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,14 +114,24 @@ class VisibilityJob:
     degenerate : (F,) bool
     opts : dict
         The filter options of :func:`~o3d_seqcc.visibility.compute_visibility`.
+    occluder : VisibilityJob, optional
+        The job whose mesh hides faces from the cameras (default: this one's). A job over some
+        faces of a mesh (the parts of split faces, :mod:`o3d_seqcc.refine`) casts its rays
+        against the whole mesh this way, and shares its ray-casting tree.
+
+    Ray casting is single precision (Open3D): it works in a local frame, the mesh and the rays
+    minus :attr:`origin` (the centre of the mesh's bounding box), so a scene 1e7 m from the world
+    origin is hit-tested as precisely as one at the origin.
     """
 
     def __init__(self, views, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, degenerate: np.ndarray,
-                 opts: dict) -> None:
+                 opts: dict, *, occluder: "VisibilityJob | None" = None) -> None:
         X = np.asarray(vertices, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
         self.views = tuple(views)
         self.opts = dict(opts)
+        self.occluder = occluder
+        self.origin = occluder.origin if occluder is not None else local_origin(X)
         self.X = X
         self.faces = f
         self.XT = np.ascontiguousarray(X.T)
@@ -124,6 +143,14 @@ class VisibilityJob:
         self._chunk(cen)
         self._rs = None
         self._lock = threading.Lock()
+        self._depths = LRUCache(DEPTH_CACHE_BYTES)
+
+    def depth(self, i: int):
+        """View ``i``'s (depth image or None, source name or None), read once per process while it fits
+        :data:`DEPTH_CACHE_BYTES` (:attr:`occluder`'s cache, when given)."""
+        if self.occluder is not None:
+            return self.occluder.depth(i)
+        return self._depths.get(i, lambda: _depth_image(self.views[i], self.opts))
 
     def _chunk(self, cen: np.ndarray) -> None:
         F = len(self.faces)
@@ -175,7 +202,10 @@ class VisibilityJob:
         return np.sort(np.concatenate([self.chunk_perm[ptr[c]:ptr[c + 1]] for c in ks]))
 
     def raycaster(self):
-        """Open3D's ``RaycastingScene`` of the mesh, built once per process and committed."""
+        """Open3D's ``RaycastingScene`` of the mesh (of :attr:`occluder`'s, when given) in the local frame
+        (minus :attr:`origin`), built once per process and committed."""
+        if self.occluder is not None:
+            return self.occluder.raycaster()
         if self._rs is None:
             with self._lock:
                 if self._rs is None:
@@ -183,7 +213,7 @@ class VisibilityJob:
                     import open3d.core as o3c
 
                     rs = o3d.t.geometry.RaycastingScene()
-                    rs.add_triangles(o3c.Tensor(np.ascontiguousarray(self.X, dtype=np.float32)),
+                    rs.add_triangles(o3c.Tensor(np.ascontiguousarray(self.X - self.origin, dtype=np.float32)),
                                      o3c.Tensor(np.ascontiguousarray(self.faces, dtype=np.uint32)))
                     rs.test_occlusions(o3c.Tensor(np.zeros((1, 6), np.float32)))  # commit before concurrent use
                     self._rs = rs
@@ -271,7 +301,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     info: dict = {"name": view.name, "depth_source": None}
     bad_v = known_v = near_v = None
     if "depth" in filters:
-        D, info["depth_source"] = _depth_image(view, opts)
+        D, info["depth_source"] = job.depth(i)
         if D is not None:
             vid = np.flatnonzero(inside)
             c = np.clip(np.floor(u[vid] + 0.5), 0, W - 1).astype(np.intp)
@@ -292,7 +322,8 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     if "occlusion" in filters:
         front = np.flatnonzero(~back)
         ids = idx[front] if cand is None else cand[idx[front]]
-        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, view.center, ids, area[front], opts)
+        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, view.center, ids, area[front], opts,
+                                                origin=job.origin)
     t2 = time.perf_counter()
     depth_bad = np.zeros(len(idx), dtype=bool)
     n_known = 0
@@ -313,3 +344,65 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     return ViewRecord(faces=faces, flags=flags, area=area, cos_angle=cos.astype(np.float32), info=info,
                       n_rays=int(n_rays), n_known=n_known,
                       seconds={"project+depth": t1 - t0, "occlusion": t2 - t1, "compare": time.perf_counter() - t2})
+
+
+def summarize_records(views, records: list, opts: dict, *, scene_mesh: object = "") -> dict:
+    """The statistics of all views' records (``Visibility.stats`` without the mesh's counts), with the warnings.
+
+    Warns about views whose depth data disagrees with the mesh, a scene without depth, views that
+    see no face; raises :class:`~o3d_seqcc.errors.InputError` when no view sees any face.
+    """
+    filters = opts["filters"]
+    V = len(views)
+    timings = {f"{step} (sum over views)": float(sum(r.seconds.get(step, 0.0) for r in records))
+               for step in ("project+depth", "occlusion", "compare")}  # CPU of all workers
+    per_view = [dict(r.info) for r in records]
+    for view, r, entry in zip(views, records, per_view):
+        if "depth_disagreement" in entry:
+            frac = entry["depth_disagreement"]
+            if r.n_known >= 30 and frac > opts["max_depth_disagreement"]:
+                src = (view.depth if entry["depth_source"] == "depth" else view.point_cloud) or "(in memory)"
+                warn(
+                    f"view {view.name!r}: {frac:.0%} of the visible mesh vertices disagree with its "
+                    f"{entry['depth_source'].replace('_', ' ')} {src} by more than "
+                    f"max({opts['depth_atol']}, {opts['depth_tol']:.0%} of depth); is it registered to the mesh "
+                    "(same units / depth_scale, same pose)?"
+                )
+        elif "depth" in filters:
+            logger.info("view %r has neither a depth map nor a point cloud: depth-consistency filter skipped", view.name)
+    if "depth" in filters and V and not any(v.has_depth for v in views):
+        warn("no view has a depth map or a point cloud: the depth-consistency filter is off, so surfaces hidden "
+             "from a camera by geometry the mesh lacks may be mapped wrongly; give depth maps (--depth-dir, "
+             "load_scene(..., depth_dir=)) when you have them")
+    nothing = [views[v].name for v in range(V) if not len(records[v].faces)]
+    for name in nothing:
+        warn(f"view {name!r} sees no face of the mesh (wrong pose, or looking away?); it gets no mappings")
+    if V and len(nothing) == V:
+        raise InputError(
+            f"no overlap: none of the {V} views sees a face of the mesh {scene_mesh}; "
+            "check that the camera poses (extrinsic, world-to-camera) and the mesh use the same coordinate frame"
+        )
+    for view, entry in zip(views, per_view):
+        if entry["valid"] and not entry["usable"]:
+            logger.warning("view %r: all %d visible faces were removed by the filters", view.name, entry["valid"])
+
+    def total(key: str) -> int:
+        return int(sum(e[key] for e in per_view))
+
+    m1 = int(sum(np.count_nonzero((r.flags & OCCLUDED) == 0) for r in records))
+    m2 = int(sum(np.count_nonzero((r.flags & (OCCLUDED | DEPTH)) == 0) for r in records))
+    return {
+        "n_views": V,
+        "n_faces": None,
+        "valid": total("valid"),
+        "occluded": total("occluded"),
+        "depth_inconsistent": total("depth_inconsistent"),
+        "oblique": total("oblique"),
+        "usable": total("usable"),
+        "cumulative": {"valid": total("valid"), "+occlusion": m1, "+depth": m2, "+oblique": total("usable")},
+        "views_seeing_nothing": nothing,
+        "views_without_depth": [e["name"] for e in per_view if e["depth_source"] is None],
+        "rays": int(sum(r.n_rays for r in records)),
+        "per_view": per_view,
+        "timings": timings,
+    }

@@ -58,8 +58,9 @@ from .images import LRUCache
 from .meshops import oriented_face_normals
 from .parallel import current as current_executor
 from .scene import Mesh, load_mesh
+from .refine import refine_visibility
 from .stray import drop_faces, stray_faces
-from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
+from .view_visibility import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, summarize_records, view_record
 
 __all__ = [
     "FILTERS",
@@ -78,6 +79,8 @@ FILTERS = ("occlusion", "depth", "oblique")
 
 _DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT",
           "_cache")
+#: :meth:`Visibility.face_uv` rounds pixel coordinates to 1 / this
+FACE_UV_STEPS = 8
 #: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
 CACHE_BYTES = 128 * 2**20
 
@@ -123,6 +126,11 @@ class Visibility(UsableFaces):
         Intrinsics and extrinsics: vertex projections are computed from them on demand.
     uv_table : tuple of ((V, N, 2), (V, N)) float32 arrays, optional
         Stored vertex projections and depths instead (:meth:`from_arrays`).
+    image_sizes : tuple of (width, height), optional
+        Every view's image size in pixels (what ``t_npm="auto"`` is derived from).
+    parent_faces : (F,) int64, optional
+        The face of the input mesh each face of ``mesh`` is part of, when faces were split
+        (``split_faces``); None when ``mesh`` is the input mesh.
 
     Dense views, built on first access and cached (memory V x F; for small scenes and tests):
     ``valid``, ``occluded``, ``depth_inconsistent``, ``oblique``, ``usable`` (V, F) bool;
@@ -138,6 +146,8 @@ class Visibility(UsableFaces):
     options: dict[str, Any] = field(default_factory=dict)
     cameras: tuple | None = None
     uv_table: tuple | None = None
+    image_sizes: tuple | None = None
+    parent_faces: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
@@ -204,6 +214,11 @@ class Visibility(UsableFaces):
         """(k,) int64 ascending ids of the faces usable in view ``v`` (cached; do not modify)."""
         r = self.records[v]
         return self._cache.get(("usable", v), lambda: r.faces[r.flags == 0].astype(np.int64))
+
+    def usable_area(self, v: int) -> np.ndarray:
+        """(k,) float32 projected areas (px^2) of :meth:`usable_faces` in view ``v`` (cached; do not modify)."""
+        r = self.records[v]
+        return self._cache.get(("usable_area", v), lambda: r.area[r.flags == 0])
 
     def usable_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every usable (view, face) incidence, view-major (CSR rows = views).
@@ -282,7 +297,11 @@ class Visibility(UsableFaces):
         Returns
         -------
         (F, 3, 2) float64
-            NaN for faces with no view (and corners behind the camera).
+            NaN for faces with no view (and corners behind the camera). Rounded to 1/8 px
+            (:data:`FACE_UV_STEPS`): the texturing's charts are these, and its atlas packing reacts
+            to any change of them, so the ~1e-7 px that float64 rounding moves a projection of a
+            scene 1e7 m from the origin must not reach it (the same scene at the origin then gives
+            the same bytes).
         """
         labels = np.asarray(selection, dtype=np.int64).reshape(-1)
         if labels.shape != (self.n_faces,):
@@ -298,7 +317,7 @@ class Visibility(UsableFaces):
         for v, s0, s1 in zip(views, starts, ends):
             fs = order[s0:s1]
             out[fs] = self.vertex_uv(int(v), faces[fs].reshape(-1)).reshape(-1, 3, 2)
-        return out
+        return np.round(out * FACE_UV_STEPS) / FACE_UV_STEPS
 
     def stage_masks(self) -> dict[str, np.ndarray]:
         """Cumulative (V, F) masks as in the paper's Figure 3.
@@ -410,6 +429,10 @@ def compute_visibility(
     oblique_reference: str = "ray",
     two_sided: bool = False,
     filters: Iterable[str] = FILTERS,
+    split_faces: bool = True,
+    split_min_px: float = 4.0,
+    split_max_distortion: float = 0.5,
+    split_max_rounds: int = 8,
     n_jobs: int | None = None,
 ) -> Visibility:
     """Project the mesh into every view and apply the paper's three filters.
@@ -459,6 +482,19 @@ def compute_visibility(
     filters : iterable of str, default all of ``FILTERS``
         Filters to apply (``"occlusion"``, ``"depth"``, ``"oblique"``); disabled filters give
         all-False masks.
+    split_faces : bool, default True
+        Split the faces that no view can use whole but some view sees in part (clipped by the
+        image border, partly hidden, larger than any photo) until their parts are usable
+        (:mod:`o3d_seqcc.refine`: conforming longest-edge bisection); the result's ``mesh`` is
+        then the refined mesh and ``parent_faces`` maps its faces to the input's.
+    split_min_px : float, default 4.0
+        ... down to parts whose longest edge is this many pixels in the views seeing them.
+    split_max_distortion : float, default 0.5
+        Also split faces whose texture would slide by more than this many pixels inside them
+        (their corners' projections interpolated linearly vs the photo's perspective:
+        :func:`o3d_seqcc.refine.distortion`; large faces seen in depth); ``inf`` turns it off.
+    split_max_rounds : int, default 8
+        ... in at most this many rounds (each divides a split face's area by about 4).
     n_jobs : int, optional
         Threads for the per-view tasks (projection, depth maps, ray queries), joblib semantics
         (None: the active ``joblib.parallel_config`` or 1; -1: all cores). Inside
@@ -468,7 +504,7 @@ def compute_visibility(
     -------
     Visibility
         One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
-        ``normals_flipped``, the totals (face-view incidences) ``valid``, ``occluded``,
+        ``normals_flipped``, ``split`` (:class:`~o3d_seqcc.refine.Refinement` stats), the totals (face-view incidences) ``valid``, ``occluded``,
         ``depth_inconsistent``, ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
         ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
         ``views_seeing_nothing`` (names), ``rays`` and ``timings`` (seconds per stage).
@@ -530,88 +566,52 @@ def compute_visibility(
     if flipped:
         logger.info("%d face normals flipped to agree with the vertex normals", flipped)
     views = scene.views
-    V, F = len(views), len(faces)
     job = VisibilityJob(views, X, faces, fn, degenerate, opts)
     del fn
     timings["prepare"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
     ex = current_executor(n_jobs)
-    records: list[ViewRecord] = ex.map(view_record, range(V), ex.share(job), desc="visibility", unit="view")
-    del job
+    records: list[ViewRecord] = ex.map(view_record, range(len(views)), ex.share(job), desc="visibility", unit="view")
     timings["views"] = time.perf_counter() - t1
-    for step in ("project+depth", "occlusion", "compare"):  # summed over the views' tasks (CPU of all workers)
-        timings[f"{step} (sum over views)"] = float(sum(r.seconds.get(step, 0.0) for r in records))
-
-    stray = stray_faces(mesh.vertices, mesh.faces, records, np.array([v.center for v in views]).reshape(-1, 3))
-    if stray.any():  # far-away junk no photo sees: it would set the scene's scale and take the atlas
+    parent, split = None, {"rounds": 0, "input_faces": int(len(faces)), "faces_split": 0, "faces_added": 0}
+    stray = stray_faces(X, faces, records, np.array([v.center for v in views]).reshape(-1, 3))
+    if stray.any():  # far-away junk no photo sees: it would set the scene's scale (the split's too) and take the atlas
         mesh, records, far = drop_faces(mesh, records, stray)
-        degenerate, F = degenerate[~stray], len(mesh.faces)
-        n = int(stray.sum())
+        n, degenerate, parent = int(stray.sum()), degenerate[~stray], np.flatnonzero(~stray).astype(np.int64)
+        if split_faces:  # the kept faces, ray cast against the whole mesh as before (its tree and depth images)
+            job = VisibilityJob(views, mesh.vertices, mesh.faces, np.stack(job.fn, axis=1)[~stray], degenerate, opts,
+                                occluder=job)
         where = f" {scene.mesh}" if isinstance(getattr(scene, "mesh", None), (str, os.PathLike)) else ""
         warn(f"{n} face{'s' if n > 1 else ''} of the mesh{where} lie far from everything the photos see (up to "
              f"{far:.3g} scene units away: floating junk of the scan?) and no photo sees them: left out of the "
              "visibility, the atlas and the textured mesh; remove them from the mesh to silence this")
-    per_view = [dict(r.info) for r in records]
-    for view, r, entry in zip(views, records, per_view):
-        if "depth_disagreement" in entry:
-            frac = entry["depth_disagreement"]
-            if r.n_known >= 30 and frac > opts["max_depth_disagreement"]:
-                src = (view.depth if entry["depth_source"] == "depth" else view.point_cloud) or "(in memory)"
-                warn(
-                    f"view {view.name!r}: {frac:.0%} of the visible mesh vertices disagree with its "
-                    f"{entry['depth_source'].replace('_', ' ')} {src} by more than "
-                    f"max({opts['depth_atol']}, {opts['depth_tol']:.0%} of depth); is it registered to the mesh "
-                    "(same units / depth_scale, same pose)?"
-                )
-        elif "depth" in filters:
-            logger.info("view %r has neither a depth map nor a point cloud: depth-consistency filter skipped", view.name)
-    if "depth" in filters and V and not any(v.has_depth for v in views):
-        warn("no view has a depth map or a point cloud: the depth-consistency filter is off, so surfaces hidden "
-             "from a camera by geometry the mesh lacks may be mapped wrongly; give depth maps (--depth-dir, "
-             "load_scene(..., depth_dir=)) when you have them")
-
-    nothing = [views[v].name for v in range(V) if not len(records[v].faces)]
-    for name in nothing:
-        warn(f"view {name!r} sees no face of the mesh entirely (wrong pose, or looking away?); it gets no mappings")
-    if V and len(nothing) == V:
-        raise InputError(
-            f"no overlap: none of the {V} views sees a whole face of the mesh {getattr(scene, 'mesh', '')}; "
-            "check that the camera poses (extrinsic, world-to-camera) and the mesh use the same coordinate frame"
-        )
-    for view, entry in zip(views, per_view):
-        if entry["valid"] and not entry["usable"]:
-            logger.warning("view %r: all %d visible faces were removed by the filters", view.name, entry["valid"])
-
-    def total(key: str) -> int:
-        return int(sum(e[key] for e in per_view))
-
-    m1 = int(sum(np.count_nonzero((r.flags & OCCLUDED) == 0) for r in records))
-    m2 = int(sum(np.count_nonzero((r.flags & (OCCLUDED | DEPTH)) == 0) for r in records))
-    stats = {
-        "n_views": V,
-        "n_faces": F,
-        "degenerate_faces": int(degenerate.sum()),
-        "normals_flipped": flipped,
-        "valid": total("valid"),
-        "occluded": total("occluded"),
-        "depth_inconsistent": total("depth_inconsistent"),
-        "oblique": total("oblique"),
-        "usable": total("usable"),
-        "cumulative": {"valid": total("valid"), "+occlusion": m1, "+depth": m2, "+oblique": total("usable")},
-        "views_seeing_nothing": nothing,
-        "views_without_depth": [e["name"] for e in per_view if e["depth_source"] is None],
-        "rays": int(sum(r.n_rays for r in records)),
-        "per_view": per_view,
-        "timings": timings,
-    }
+    if split_faces:
+        t1 = time.perf_counter()
+        ref = refine_visibility(job, records, ex, vertex_normals=mesh.vertex_normals, min_px=split_min_px,
+                                max_distortion=split_max_distortion, max_rounds=split_max_rounds)
+        split = {**ref.stats, "input_faces": int(len(faces))}
+        if split["faces_added"]:
+            mesh = Mesh(vertices=ref.vertices, faces=ref.faces, vertex_normals=ref.vertex_normals)
+            records, degenerate = ref.records, ref.degenerate
+            parent = ref.parent if parent is None else parent[ref.parent]
+            logger.info("split %d faces no view holds whole into parts (%d faces more, %d rounds)",
+                        split["faces_split"], split["faces_added"], split["rounds"])
+        timings["split_faces"] = time.perf_counter() - t1
+    del job
+    stats = summarize_records(views, records, opts, scene_mesh=getattr(scene, "mesh", ""))
+    timings.update(stats["timings"])
+    stats.update(n_faces=int(len(mesh.faces)), degenerate_faces=int(degenerate.sum()), normals_flipped=flipped,
+                 split={"enabled": bool(split_faces), **split}, stray_faces=int(stray.sum()), timings=timings)
     timings["total"] = time.perf_counter() - t0
     logger.info(
         "visibility: %d views x %d faces: valid %d, occluded %d, depth-inconsistent %d, oblique %d -> usable %d (%.2f s)",
-        V, F, stats["valid"], stats["occluded"], stats["depth_inconsistent"], stats["oblique"], stats["usable"],
-        timings["total"],
+        len(views), len(mesh.faces), stats["valid"], stats["occluded"], stats["depth_inconsistent"], stats["oblique"],
+        stats["usable"], timings["total"],
     )
+    V = len(views)
     cams = (np.stack([np.asarray(v.intrinsic, np.float64) for v in views]) if V else np.zeros((0, 3, 3)),
             np.stack([np.asarray(v.extrinsic, np.float64) for v in views]) if V else np.zeros((0, 4, 4)))
     return Visibility(mesh=mesh, records=tuple(records), stats=stats, view_names=tuple(v.name for v in views),
-                      options=opts, cameras=cams)
+                      options=opts, cameras=cams, image_sizes=tuple((int(v.width), int(v.height)) for v in views),
+                      parent_faces=parent)

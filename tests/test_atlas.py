@@ -32,11 +32,15 @@ def _needs_validator():
 # ------------------------------------------------------------------------------ packing
 
 
-def test_pack_synthetic_charts_dense_exact_and_disjoint(rng):
-    """60 charts (random quads of 2-40 px, two triangles each): one power-of-two page, every chart at
-    exactly the chosen density (xatlas never shrinks one silently), >= 55 % of the page covered by
-    triangles, and no texel covered by two charts."""
-    n = 60
+def test_pack_synthetic_charts_exact_aligned_and_apart(rng):
+    """60 charts (random quads of 2-40 px at fractional positions, two triangles each): one page, the
+    smallest power of two that holds them at exactly one texel per pixel; every chart is its photo
+    coordinates moved by whole texels (x and y at most swapped: the texel grid is the pixel grid,
+    nothing resampled or stretched); no texel is covered by two charts and charts are at least
+    2 x padding texels apart."""
+    import cv2
+
+    n, pad = 60, 2
     wh = rng.uniform(2, 40, size=(n, 2))
     off = rng.uniform(0, 500, size=(n, 2))
     corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
@@ -44,34 +48,38 @@ def test_pack_synthetic_charts_dense_exact_and_disjoint(rng):
     base = 4 * np.arange(n)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
     chart = np.r_[np.arange(n), np.arange(n)]
-    pk = pack_charts(uv, faces, chart, atlas_size=1024, padding=2)
+    pk = pack_charts(uv, faces, chart, atlas_size="auto", padding=pad)
     S, t = pk.size, pk.texels_per_pixel
-    assert pk.pages == 1 and S & (S - 1) == 0 and S <= 1024 and 1.0 <= t <= 2.0
-    area = lambda p: 0.5 * np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
-    a_src = np.bincount(chart, weights=area(uv[faces]))
-    a_out = np.bincount(chart, weights=area(pk.txy[faces]))
-    # xatlas stretches each chart to whole texels: at most one texel more per side
-    np.testing.assert_array_less(t * t * a_src * 0.999, a_out)
-    assert np.all(a_out <= t * t * (np.sqrt(a_src) + 1.5) ** 2)
-    coverage = a_out.sum() / (S * S)
-    assert coverage >= 0.45, coverage
+    assert pk.pages == 1 and S & (S - 1) == 0 and t == 1.0
+    assert pack_charts(uv, faces, chart, atlas_size=S // 2, overflow="pages", padding=pad).pages > 1  # S was needed
+    vc = np.repeat(np.arange(n), 4)
+    for c in range(n):
+        d = pk.txy[vc == c] - uv[vc == c]
+        ds = pk.txy[vc == c] - uv[vc == c][:, ::-1]
+        ok = [np.ptp(x, axis=0).max() < 1e-6 and np.abs(x[0] - np.rint(x[0])).max() < 1e-6 for x in (d, ds)]
+        assert any(ok), (c, d, ds)
     assert pk.txy.min() >= -0.5 and pk.txy.max() <= S - 0.5
-    # disjoint: rasterising chart by chart covers each texel once
-    hits = np.zeros(S * S, dtype=np.int64)
+    # disjoint and apart: rasterising chart by chart, each chart's texels dilated by 2 x padding - 1 meet no other
+    own = np.full(S * S, -1)
     for c in range(n):
         idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], S, S)
-        hits[idx] += 1
-    assert hits.max() == 1
+        assert (own[idx] < 0).all()
+        own[idx] = c
+    k = np.ones((4 * pad - 1, 4 * pad - 1), np.uint8)
+    for c in range(n):
+        near = cv2.dilate((own == c).reshape(S, S).astype(np.uint8), k).reshape(-1).astype(bool)
+        assert set(np.unique(own[near])) <= {-1, c}
 
 
 # ------------------------------------------------------------------------------ sampling bake
 
 
-def test_flat_plane_reproduced_also_in_rotated_charts(rng):
-    """A plane photographed by a rolled camera: its chart is tilted in the photo, xatlas turns it to
-    its principal axis, and the bake by sampling still reproduces the photo (PSNR >= 38 dB at random
-    points inside the faces, bilinear lookups on both sides)."""
+@pytest.mark.parametrize("density, min_psnr", [(1.0, 60.0), (1.3, 38.0)])
+def test_flat_plane_reproduced_in_a_tilted_chart(rng, density, min_psnr):
+    """A plane photographed by a rolled camera: its chart is tilted in the photo and stays so in the
+    atlas (turned by a multiple of 90 degrees at most: the texel grid is the pixel grid), and the
+    bake by sampling reproduces the photo at random points inside the faces (bilinear lookups on
+    both sides): exactly at one texel per pixel (PSNR >= 60 dB), closely at 1.3 (Lanczos, >= 38 dB)."""
     import cv2
 
     mesh = grid_mesh(6)
@@ -83,20 +91,23 @@ def test_flat_plane_reproduced_also_in_rotated_charts(rng):
     img = cv2.resize(rng.uniform(0, 255, size=(15, 20, 3)).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
     img = np.clip(img, 0, 255).astype(np.uint8)
     lab = select_views(vis, method="largest-area")
-    tm = bake_texture(mesh, [img], vis, lab, atlas_size=512, texels_per_pixel=1.0, **RAW)
-    # the chart was rotated: the photo's x axis is not the atlas' x axis (nor its y axis)
-    f0 = mesh.faces[0]
-    e_img = vis.uv[0][f0[1]] - vis.uv[0][f0[0]]
+    tm = bake_texture(mesh, [img], vis, lab, atlas_size=512, texels_per_pixel=density, **RAW)
+    # the texturing's corners are the projections rounded to 1/8 px (Visibility.face_uv: the same
+    # bytes far from the origin); the texel grid is that grid scaled
+    fuv = vis.face_uv(lab)  # (F, 3, 2)
+    e_img = fuv[0, 1] - fuv[0, 0]
     e_tex = tm.texel_xy()[tm.faces[0, 1]] - tm.texel_xy()[tm.faces[0, 0]]
+    assert np.linalg.norm(e_tex) == pytest.approx(density * np.linalg.norm(e_img), rel=1e-6)
     ang = np.degrees(np.arctan2(e_tex[1], e_tex[0]) - np.arctan2(e_img[1], e_img[0])) % 90.0
-    assert 5.0 < ang < 85.0, ang
+    assert min(ang, 90.0 - ang) < 1e-4 or abs(abs(np.degrees(np.arctan2(e_tex[1], e_tex[0]))
+                                                 + np.degrees(np.arctan2(e_img[1], e_img[0]))) % 90.0) < 1e-4, ang
     b = rng.dirichlet(np.ones(3), size=(len(mesh.faces), 20))  # (F, 20, 3)
     p_tex = np.einsum("fsk,fkd->fsd", b, tm.texel_xy()[tm.faces]).reshape(-1, 2)
-    p_img = np.einsum("fsk,fkd->fsd", b, vis.uv[0][mesh.faces].astype(np.float64)).reshape(-1, 2)
+    p_img = np.einsum("fsk,fkd->fsd", b, fuv).reshape(-1, 2)
     got = bilinear(tm.texture, p_tex[:, 0], p_tex[:, 1])
     want = bilinear(img, p_img[:, 0], p_img[:, 1])
-    psnr = 10 * np.log10(255.0 ** 2 / np.mean((got - want) ** 2))
-    assert psnr >= 38.0, psnr
+    psnr = 10 * np.log10(255.0 ** 2 / max(np.mean((got - want) ** 2), 1e-12))
+    assert psnr >= min_psnr, psnr
 
 
 # ------------------------------------------------------------------------------ unseen faces
@@ -270,13 +281,18 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     from o3d_seqcc.seams import mip_bleed
 
     tm, _ = fountain_baked
-    assert tm.pages == 1 and tm.atlas_size == 2048 and tm.stats["texels_per_pixel"] >= 1.0
-    assert tm.stats["coverage"] >= 0.5, tm.stats["coverage"]  # the shelf packer had 0.21
+    # sized to the charts at the photos' resolution: one page, and the triangles alone would fill more than
+    # half of the next smaller power of two (so it is the smallest that can hold them with their gutters)
+    assert tm.pages == 1 and tm.atlas_size == 2048 and tm.stats["texels_per_pixel"] == 1.0
+    assert tm.stats["coverage"] * 4 >= 0.5, tm.stats["coverage"]
+    assert tm.stats["face_texels_per_pixel"]["median"] == pytest.approx(1.0, abs=1e-6)
     r = mip_bleed(tm, levels=(1, 2))
     assert r[2]["p99"] <= 1.0 and r[2]["share_gt2"] <= 0.001, r
     assert r[1]["p99"] <= r[2]["p99"] + 1e-9
-    # counted as foreign, the gutters still hardly change level 2: they continue the photo
-    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 3.0
+    # counted as foreign, the gutters still hardly change level 2: they continue the photo (a level-2
+    # texel spans 4 x 4 photo pixels at one texel per pixel: 2.3 at the 1.64 of a 2048 budget; 4.72 with
+    # the faces split into parts (issue 20): more small faces along the chart borders)
+    assert mip_bleed(tm, levels=(2,), reach=0.0)[2]["p99"] <= 5.0
     # gutters removed (every texel outside the faces black, as an atlas without gutter fill): bleeds
     from dataclasses import replace
 

@@ -57,7 +57,7 @@ def test_demo_on_fountain_and_its_offline_message(fountain_root, tmp_path, capsy
     assert "real photos" in text and text.strip().splitlines()[-1].startswith("report: ")
     summ = json.loads((out / "demo_summary.json").read_text())["summary"]
     assert summ["load"]["views"] == 33 and "ground_truth" not in summ
-    assert summ["run"]["unseen_faces"] < 0.1 * summ["run"]["faces"]
+    assert summ["run"]["unseen_area"] < 0.05 and summ["run"]["unseen_input_faces"] < 0.05 * summ["run"]["input_faces"]
     import open3d as o3d
 
     def offline():
@@ -71,4 +71,5 @@ def test_demo_on_fountain_and_its_offline_message(fountain_root, tmp_path, capsy
 def test_demo_scene_is_mostly_seen_and_quiet(demo_run, capsys):
     out, args = demo_run
     summ = json.loads((out / "demo_summary.json").read_text())["summary"]
-    assert summ["run"]["unseen_faces"] < 0.15 * summ["run"]["faces"], summ["run"]
+    r = summ["run"]  # (faces split into parts: the unseen ones are counted in area and in input faces)
+    assert r["unseen_area"] < 0.15 and r["unseen_input_faces"] < 0.15 * r["input_faces"], r

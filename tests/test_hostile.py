@@ -36,7 +36,7 @@ from o3d_seqcc.io.output import MANIFEST, output_folder
 pytestmark = pytest.mark.hostile
 
 REPO = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
 RUN = ["--t-npm", "10", "--atlas-size", "512", "--no-seams", "--selection-view", "none"]
 
 
@@ -450,6 +450,11 @@ def test_far_junk_does_not_veto_or_change_the_scene(S, kind):
         vis = sc.compute_visibility(sc.load_scene(S))
     assert vis.stats["usable"] == clean.stats["usable"] and vis.stats["valid"] == clean.stats["valid"]
     assert len(vis.mesh.faces) == len(clean.mesh.faces) and np.ptp(vis.mesh.vertices, axis=0).max() < 100
+    from o3d_seqcc.refine import coverage  # junk dropped, then the faces split: not counted as unseen input faces
+
+    none = np.full(len(vis.mesh.faces), -1)
+    assert coverage(vis, none)["input_faces"] == coverage(clean, none)["input_faces"] == coverage(clean, none)[
+        "unseen_input_faces"]
 
 
 # ---------------------------------------------------------------------------------------- 5. library arguments
@@ -467,7 +472,8 @@ ARG_CASES = [
     ("run(None)", lambda S: sc.pipeline.run(None), r"scene must be .* got None"),
     ("texture(b'x')", lambda S: sc.pipeline.texture(3.5), r"scene must be .* got 3\.5 \(float\)"),
     ("correct_scene(mesh=5)", lambda S: sc.pipeline.correct_scene(S, mesh=5), r"mesh must be the path of a mesh file"),
-    ("atlas_size='big'", lambda S: sc.pipeline.run(S, atlas_size="big"), r"atlas_size must be an integer, got 'big'"),
+    ("atlas_size='big'", lambda S: sc.pipeline.run(S, atlas_size="big"),
+     r"atlas_size \(--atlas-size\) must be 'auto' or an integer >= 8, got 'big'"),
     ("smoothness='x'", lambda S: sc.pipeline.texture(S, smoothness="x"), r"smoothness must be a number"),
     ("settings=dict", lambda S: sc.pipeline.texture(S, settings={"atlas_size": 512}), r"settings must be a TextureSettings"),
     ("texture(images=[1,2,3])", lambda S: sc.pipeline.texture(S, images=[1, 2, 3]), r"images\[0\] must be a \(48, 64, 3\)"),

@@ -88,7 +88,11 @@ def test_plane_mappings_are_exact(plane_scene, mode):
     assert set(M.pairs) == {(0, 1), (0, 2), (1, 2)}
     mesh = M.visibility.mesh
     for (a, b), pm in M.pairs.items():
-        assert a < b and pm.a == a and pm.b == b and pm.n == M.counts[(a, b)] > 100
+        assert a < b and pm.a == a and pm.b == b and pm.n > 100
+        if mode == "surface":  # counted in pixels of shared surface; the vertices and samples inside faces
+            assert pm.n >= 3 * len(np.unique(pm.face_ids)) and M.counts[(a, b)] > pm.n / 9
+        else:
+            assert pm.n == M.counts[(a, b)]
         assert pm.uv_a.dtype == np.float64 and pm.uv_a.shape == (pm.n, 2) and pm.face_ids.dtype == np.int64
         # inside both images
         for uv in (pm.uv_a, pm.uv_b):
@@ -108,7 +112,7 @@ def test_plane_mappings_are_exact(plane_scene, mode):
 
 
 def test_vertices_mode_is_the_paper_definition(plane_scene):
-    M = compute_mappings(plane_scene)
+    M = compute_mappings(plane_scene, mode="vertices")
     vis = M.visibility
     for (a, b), pm in M.pairs.items():
         shared = np.flatnonzero(vis.usable[a] & vis.usable[b])
@@ -123,7 +127,7 @@ def test_vertices_mode_is_the_paper_definition(plane_scene):
 
 
 def test_dense_has_more_mappings_and_the_same_precision(occluder_scene):
-    mv = compute_mappings(occluder_scene)
+    mv = compute_mappings(occluder_scene, mode="vertices")
     md = compute_mappings(occluder_scene, mode="dense", visibility=mv.visibility)
     assert md.total >= 4 / 3 * mv.total  # at least the centroid of each face
     assert set(md.counts) == set(mv.counts)
@@ -200,16 +204,20 @@ def test_split_by_face(plane_scene, mode):
     np.testing.assert_array_equal(np.union1d(f_fit, f_test), faces_all)
     assert abs(len(f_test) - 0.25 * len(faces_all)) <= 1
     for key in M.pairs:
-        assert fit.count(*key) + test.count(*key) == M.counts[key]
         pf, pt = fit.pair(*key), test.pair(*key)
-        assert pf.n == fit.count(*key) and pt.n == test.count(*key)
+        if mode == "surface":  # areas: each part's count is rounded, and the smaller view may differ by part
+            assert fit.count(*key) + test.count(*key) == pytest.approx(M.counts[key], rel=0.02, abs=2)
+        else:
+            assert fit.count(*key) + test.count(*key) == M.counts[key]
+            assert pf.n == fit.count(*key) and pt.n == test.count(*key)
         assert not np.isin(pf.face_ids, f_test).any()
     # deterministic, and the same on materialised (non-lazy) mappings
     fit2, test2 = M.split(0.25, seed=3)
     np.testing.assert_array_equal(test2.faces(), f_test)
-    fit3, test3 = M.materialize().split(0.25, seed=3)
-    np.testing.assert_array_equal(test3.faces(), f_test)
-    assert fit3.counts == fit.counts
+    if mode != "surface":  # (surface: faces smaller than a sample may hold none, so the materialised face list differs)
+        fit3, test3 = M.materialize().split(0.25, seed=3)
+        np.testing.assert_array_equal(test3.faces(), f_test)
+        assert fit3.counts == fit.counts
     assert not np.array_equal(M.split(0.25, seed=4)[1].faces(), f_test)
     with pytest.raises(ValueError):
         M.split(1.0)
@@ -316,7 +324,7 @@ def test_cli_mappings(occluder_scene, tmp_path, capsys):
 
 
 def test_fountain_counts_and_depth_agreement(fountain_scene):
-    M = compute_mappings(fountain_scene)
+    M = compute_mappings(fountain_scene, mode="vertices")  # the paper's filter acts at the vertices
     c = np.array(list(M.counts.values()))
     n_pairs = 33 * 32 // 2
     assert len(c) > 0.9 * n_pairs

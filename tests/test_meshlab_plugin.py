@@ -7,6 +7,7 @@ O3D_SEQCC_EXECUTABLE): the plugin must find the o3d-seqcc it was built with by i
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -112,7 +113,8 @@ def test_texture_filter_script_matches_o3d_seqcc_run(room, tmp_path):
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     ours, theirs = np.load(out / "selection.npy"), np.load(cli / "selection.npy")
-    assert ours.shape == theirs.shape == (len(load_mlp_faces(room)),)
+    assert ours.shape == theirs.shape  # one view per face of the mesh after faces no photo holds whole are split
+    assert json.loads((cli / "report.json").read_text())["selection"]["input_faces"] == len(load_mlp_faces(room))
     np.testing.assert_array_equal(ours, theirs)
     assert len(np.unique(ours[ours >= 0])) >= 3  # a real selection: several rasters used
 
@@ -166,7 +168,8 @@ def test_failures_show_the_message_not_only_problem_with_filter(room, tmp_path):
     assert (tmp_path / "t" / "keep.txt").read_text() == "not ours"
     (tmp_path / "bad.mlx").write_text(filter_script((TEXTURE_TITLE, {"savedir": str(tmp_path / "u"), "tnpm": -3})))
     code, log = meshlabserver(["-p", str(room), "-s", str(tmp_path / "bad.mlx")], tmp_path)
-    assert code != 0 and "o3d_seqcc: 'Minimum mappings per graph edge' must be a positive integer" in log
+    assert code != 0 and ("o3d_seqcc: argument 'Minimum overlap per graph edge': give 'auto' or a positive integer, "
+                          "not '-3'") in log
 
 
 MESHLAB_2025 = os.environ.get("O3D_SEQCC_MESHLAB_2025_SRC", "")
@@ -204,5 +207,5 @@ except pymeshlab.PyMeshLabException as e:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "layers 2 mesh_textured True" in r.stdout
-    assert "'Minimum mappings per graph edge' must be a positive integer" in r.stdout
+    assert "'Minimum overlap per graph edge': give 'auto' or a positive integer, not '-3'" in r.stdout
     assert (tmp_path / "out" / "mesh_meshlab.ply").is_file()

@@ -71,7 +71,7 @@ def test_meshlab_projection_colours_vertices_like_ours(tmp_path):
     project = save_mlp(scene, tmp_path / "one_raster.mlp")
     ml = _meshlab_colours(project.resolve(), tmp_path / "ml.npy")[:, :3]
 
-    vis = sc.compute_visibility(scene)
+    vis = sc.compute_visibility(scene, split_faces=False)  # MeshLab colours the input mesh's vertices
     v = scene.views[0]
     assert len(ml) == len(vis.mesh.vertices)
     seen = np.zeros(len(ml), bool)
@@ -174,7 +174,7 @@ def test_apply_rejects_bad_calls(tmp_path):
         mf.apply(ms, "seqcc_color_correct_rasters", method="fancy")
     with pytest.raises(InputError, match="enum index 99 out of range"):
         mf.apply(ms, "seqcc_texture_from_rasters", selection=99)
-    with pytest.raises(InputError, match="'tnpm' must be an int, got '50'"):
+    with pytest.raises(InputError, match="'tnpm' must be an int or 'auto', got '50'"):
         mf.apply(ms, "seqcc_color_correct_rasters", tnpm="50")
     with pytest.raises(InputError, match="must be a pymeshlab.MeshSet"):
         mf.apply("project.mlp", "seqcc_color_correct_rasters")
@@ -247,7 +247,7 @@ def test_texture_from_rasters_on_a_meshset(small, tmp_path):
     assert (ms.mesh_number(), ms.raster_number()) == (2, len(scene.views))
     m = ms.current_mesh()
     assert m.id() == out["mesh_id"] and m.label().endswith("_textured") and m.has_wedge_tex_coord()
-    assert m.face_number() == out["faces"] == len(trimesh.load(scene.mesh, process=False).faces)
+    assert m.face_number() == out["faces"] >= len(trimesh.load(scene.mesh, process=False).faces)  # parts of faces
     assert len(m.textures()) == 1 and out["reference"] is None
     assert {"glb", "meshlab_mesh", "meshlab_project"} <= set(out["files"]) and "obj" not in out["files"]
     fresh = pymeshlab.MeshSet()

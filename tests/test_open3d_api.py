@@ -73,8 +73,8 @@ def test_texture_mesh_is_an_open3d_textured_mesh(small, tmp_path):
     assert o3d.t.io.write_triangle_mesh(str(tmp_path / "m.obj"), tm)
     back = o3d.io.read_triangle_mesh(str(tmp_path / "m.obj"), enable_post_processing=False)
     assert len(back.triangles) == F and back.has_triangle_uvs()
-    plain = sc.texture_mesh(mesh, images, params, correct=False, atlas_size=1024)
-    assert plain.triangle.indices.shape == (F, 3)
+    plain = sc.texture_mesh(mesh, images, params, depths=depths, correct=False, atlas_size=1024)
+    assert plain.triangle.indices.shape == (F, 3)  # the same faces split as with the correction
 
 
 @pytest.mark.parametrize("call, match", [

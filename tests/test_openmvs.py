@@ -215,7 +215,7 @@ def test_run_on_scene_mvs_with_mesh(room, tmp_path):
     assert main(["-q", "run", str(path), "--mesh", str(room.scene.mesh), "--out", str(out), "--t-npm", "20",
                  "--atlas-size", "512", "--no-seams", "--format", "glb", "--depth-dir", str(room.root / "depth")]) == 0
     rep = json.loads((out / "report.json").read_text())
-    assert (out / "mesh.glb").is_file() and rep["selection"]["faces"] == len(room.scene.load_mesh().faces)
+    assert (out / "mesh.glb").is_file() and rep["selection"]["input_faces"] == len(room.scene.load_mesh().faces)
     ref = tmp_path / "ref"
     assert main(["-q", "run", str(room.root), "--out", str(ref), "--t-npm", "20", "--atlas-size", "512", "--no-seams",
                  "--format", "glb"]) == 0

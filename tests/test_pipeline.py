@@ -11,7 +11,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc.cli import build_parser, main
-from o3d_seqcc.cli.common import texture_settings_from_args
+from o3d_seqcc.cli.common import library_default, texture_settings_from_args
 from o3d_seqcc.texturing import TextureSettings, bake_texture
 
 SMALL = ["--t-npm", "50", "--atlas-size", "1024"]
@@ -62,7 +62,10 @@ def test_library_defaults_are_the_command_line_defaults(small_scene):
     for f in fields(TextureSettings):  # every CLI texture option reads its default from TextureSettings
         if hasattr(args, f.name):
             assert getattr(args, f.name) == getattr(d, f.name), f.name
-    assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc-global", 400, "vertices")
+    assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc-global", "auto", "surface")
+    lib = library_default(sc.pipeline.run)
+    assert (lib["t_npm"], lib["mappings"], lib["split_faces"]) == (args.t_npm, args.mappings, args.split_faces) \
+        == ("auto", "surface", True)
 
 
 def test_texture_only_and_textured_mesh_conversions(small_scene, tmp_path):

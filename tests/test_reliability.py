@@ -346,7 +346,7 @@ def test_symlinked_out_is_followed_and_images_symlink_not_written_through(S, tmp
 
 def test_argument_checks_before_work(S, tmp_path, capsys):
     assert main(["-q", "correct", str(S), "--out", str(tmp_path / "o"), "--t-npm", "-5"]) == 2
-    assert "t_npm must be a positive integer" in capsys.readouterr().err
+    assert "--t-npm: give 'auto' or a positive integer" in capsys.readouterr().err
     assert main(["-q", "run", str(S), "--out", str(tmp_path / "o"), "--reference", "nope"]) == 2
     assert "unknown view 'nope'" in capsys.readouterr().err
     assert main(["run", str(S), "--out", str(tmp_path / "o"), "--method", "best", "-q"]) == 2  # -q after the command

@@ -275,3 +275,24 @@ def test_texture_writes_the_viewer_without_the_correction_sections(scene, tmp_pa
     assert list(sec)[:1] == ["model"] and "correction" not in sec and "table2" not in sec
     data = json.loads(_scripts(page)[1][0][1])
     assert [m["key"] for m in data["modes"]] == ["result", "photos"]
+
+
+def test_t_npm_is_shown_as_its_setting_and_count_in_every_mapping_mode():
+    from o3d_seqcc.errors import InputError
+    from o3d_seqcc.report.page import t_npm_text
+    from o3d_seqcc.report.validate import validate_report
+
+    name = "t<sub>npm</sub>"
+    assert t_npm_text({"t_npm": "auto", "t_npm_effective": 3072, "mappings": "surface"}) == \
+        f"{name} = auto (1 % of a photo) = 3072 px of shared surface"
+    assert t_npm_text({"t_npm": 500, "t_npm_effective": 500, "mappings": "surface"}) == f"{name} = 500 px of shared surface"
+    assert t_npm_text({"t_npm": "auto", "t_npm_effective": 400, "mappings": "vertices"}) == \
+        f"{name} = auto (the paper's) = 400 mappings"
+    assert t_npm_text({"t_npm": 20, "t_npm_effective": 69, "mappings": "dense"}).startswith(
+        f"{name} = 20 (the setting, in vertex mappings) = 69 dense mappings")
+    # report.json holds the setting as given ("auto" or a number) and the count it meant
+    rep = {"command": "correct", "reference": "v00", "t_npm": "auto", "t_npm_effective": 3072}
+    assert validate_report(rep) is rep
+    for bad in ("many", 2.5, True):
+        with pytest.raises(InputError, match="'t_npm' must be an integer or \"auto\""):
+            validate_report({**rep, "t_npm": bad})

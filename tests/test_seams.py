@@ -55,10 +55,11 @@ def two_chart_plane(n: int = 4, left=RED, right=GREEN, tex_size: int = 64, smoot
 def _on_chart_seam(mesh, rep) -> np.ndarray:
     """(n_edges,) bool: measured edges lying on x = 1 (between the charts)."""
     tm = load_textured_mesh(mesh)
-    # merged ids are the rows of np.unique over positions rounded to merge_tol (as in seam_metric)
+    # merged ids number the groups of positions equal to merge_tol in the order of their first vertex (as
+    # seam_metric's weld_vertices does)
     q = np.round(tm.vertices / 1e-6).astype(np.int64)
     _, first = np.unique(q, axis=0, return_index=True)
-    pos = tm.vertices[first]
+    pos = tm.vertices[np.sort(first)]
     return np.all(np.isclose(pos[rep.edges][:, :, 0], 1.0), axis=1)
 
 

@@ -84,7 +84,7 @@ def test_validity_at_image_borders_and_behind_camera(tmp_path):
     faces.append(np.arange(3) + 3 * len(tris))
     v, f = np.concatenate(verts), np.stack(faces)
     scene = make_scene(tmp_path, (v, f), [E], depth=None)
-    vis = compute_visibility(scene, filters=())
+    vis = compute_visibility(scene, filters=(), split_faces=False)  # the paper's rule, per input face
     assert vis.valid[0].tolist() == [True, True, False, True, False, False, True, False]
     assert np.isnan(vis.uv[0, -3:]).all()
     check_invariants(vis)
@@ -105,11 +105,11 @@ def test_degenerate_faces_excluded_and_counted(tmp_path):
 def test_mesh_without_normals(tmp_path):
     v, f = plane(8)
     scene = make_scene(tmp_path, (v, f), down_cameras(), depth=None, mesh_normals=False)
-    vis = compute_visibility(scene)  # load_mesh computes normals
+    vis = compute_visibility(scene, split_faces=False)  # load_mesh computes normals
     assert vis.usable.any()
     # a Mesh given without usable vertex normals: computed from the winding
     m = Mesh(vertices=v, faces=f, vertex_normals=None)
-    vis2 = compute_visibility(scene, mesh=m)
+    vis2 = compute_visibility(scene, mesh=m, split_faces=False)
     assert np.array_equal(vis.usable, vis2.usable)
     assert vis2.mesh.vertex_normals.shape == v.shape
 
@@ -165,10 +165,10 @@ def test_big_face_partly_hidden_is_occluded(tmp_path):
     v, f = merge((pv, pf), pole)
     E = look_at((0.0, 0.05, 2.4), (0.0, 0.05, 0.0), up=(0.0, 1.0, 0.0))
     scene = make_scene(tmp_path, (v, f), [E], depth=None)
-    vis = compute_visibility(scene, occlusion_spacing=4.0)
+    vis = compute_visibility(scene, occlusion_spacing=4.0, split_faces=False)  # the filter on the input's faces
     assert vis.valid[0, :2].all()
     assert vis.occluded[0, :2].any()
-    vis0 = compute_visibility(scene, occlusion_spacing=0)  # vertices only
+    vis0 = compute_visibility(scene, occlusion_spacing=0, split_faces=False)  # vertices only
     assert not vis0.occluded[0, :2].any()
 
 

@@ -13,10 +13,10 @@ from ..errors import InputError
 from ..export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
-from ..mappings import MODES
+from ..mappings import DEFAULT_MODE, MODES
 from ..orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
-from ..texturing.settings import FALLBACKS, OVERFLOWS
+from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
 __all__ = [
     "add_atlas_arguments",
@@ -24,6 +24,8 @@ __all__ = [
     "add_export_arguments",
     "add_progress_argument",
     "add_scene_arguments",
+    "add_split_argument",
+    "add_t_npm_argument",
     "add_texture_arguments",
     "library_default",
     "prepare_out_dir",
@@ -86,10 +88,42 @@ def add_correction_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default=DEFAULT_METHOD, choices=available_methods(), metavar="METHOD",
                    help=f"colour-correction method: {', '.join(available_methods())} (default {DEFAULT_METHOD}; "
                    "seqcc is the paper's)")
-    p.add_argument("--t-npm", type=int, default=400, help="minimum pairwise mappings (vertex units) for a graph edge "
-                   "(default 400)")
-    p.add_argument("--mappings", choices=MODES, default="vertices", help="pairwise mappings mode (default vertices, "
-                   "the paper's)")
+    from ..pipeline import run
+
+    add_t_npm_argument(p, library_default(run)["t_npm"])
+    p.add_argument("--mappings", choices=MODES, default=DEFAULT_MODE,
+                   help=f"pairwise mappings (default {DEFAULT_MODE}: the shared faces' vertices and points inside "
+                   "the large ones at the photos' resolution, pairs counted in pixels of shared surface; vertices: "
+                   "the paper's face vertices, counted; dense: vertices and interior points, counted)")
+
+
+def add_split_argument(p: argparse.ArgumentParser) -> None:
+    """``--no-split-faces`` (:func:`o3d_seqcc.pipeline.run`'s ``split_faces``)."""
+    p.add_argument("--no-split-faces", dest="split_faces", action="store_false",
+                   help="keep the mesh's faces as they are: by default a face no photo holds whole (clipped by the "
+                   "image border, partly hidden, larger than a photo, or seen so deep its texture would slide) is "
+                   "split into parts the photos that see them can texture")
+
+
+def t_npm_value(text: str) -> int | str:
+    """``--t-npm``'s value: ``"auto"`` or a positive integer (argparse type)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"give 'auto' or a positive integer, not {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"give 'auto' or a positive integer, not {text!r}")
+    return value
+
+
+def add_t_npm_argument(p: argparse.ArgumentParser, default: int | str, *, extra: str = "") -> None:
+    """``--t-npm auto|N``, with the library function's default (:func:`o3d_seqcc.graph.resolve_t_npm`)."""
+    p.add_argument("--t-npm", type=t_npm_value, default=default, metavar="auto|N",
+                   help=f"minimum pair count for a colour-correction graph edge (default {default}): pixels of "
+                   "shared surface with --mappings surface (auto: 1%% of the median photo's pixels), vertex "
+                   f"mappings with vertices / dense (auto: the paper's 400){extra}")
 
 
 def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -> None:
@@ -107,6 +141,13 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
     p.add_argument("--smoothness", type=float, default=d.smoothness,
                    help=f"mrf: Potts weight per interior edge (default {d.smoothness:g})")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of random selection / mrf order (default 0)")
+    p.add_argument("--data-term", default=d.data_term, choices=DATA_TERMS,
+                   help=f"mrf: what makes a photo good for a face (default {d.data_term}: its gradient magnitude "
+                   "integrated over the face's projection, large and sharp; area: the projected area alone)")
+    p.add_argument("--outlier-removal", default=d.outlier_removal, choices=OUTLIER_REMOVALS,
+                   help=f"per face, drop the photos whose colour of it is far from the others' (passers-by, cars the "
+                   f"mesh lacks; default {d.outlier_removal}: far from the median of its photos; gauss-clamping / "
+                   "gauss-damping: texrecon's Gaussian test)")
     add_atlas_arguments(p)
     p.add_argument("--no-leveling", dest="leveling", action="store_false",
                    help="skip global seam leveling (per-chart low-frequency colour offsets that cancel the colour "
@@ -132,14 +173,15 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
 def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
     """The atlas budget and layout options of :class:`~o3d_seqcc.texturing.TextureSettings` (``texture``, ``run``, ``demo``)."""
     d = _DEFAULTS
-    p.add_argument("--atlas-size", type=int, default=d.atlas_size,
-                   help=f"largest atlas side in texels, a budget (default {d.atlas_size}): the atlas is the smallest "
-                   "power of two up to it that holds the charts at --texels-per-pixel")
+    p.add_argument("--atlas-size", default=d.atlas_size, metavar="auto|N",
+                   help=f"atlas side (default {d.atlas_size}: sized to the charts at the photos' resolution, pages of "
+                   "up to 8192^2); N: the largest side in texels, a budget: the atlas is the smallest power of two up "
+                   "to it that holds the charts at --texels-per-pixel")
     p.add_argument("--texels-per-pixel", default=d.texels_per_pixel, metavar="auto|T",
-                   help="texel density, atlas texels per photo pixel (default auto: at least the photos' resolution, "
-                   "raised to fill the atlas, at most 2)")
+                   help="texel density, atlas texels per photo pixel (default auto: the photos' resolution, 1, each "
+                   "texel a copy of a photo pixel; lowered only by an --atlas-size budget)")
     p.add_argument("--atlas-overflow", dest="overflow", choices=OVERFLOWS, default=d.overflow,
-                   help="when the charts do not fit --atlas-size at that density: scale the density down (default, "
+                   help="when the charts do not fit an --atlas-size budget at that density: scale the density down (default, "
                    "a warning gives the factor) or write several atlas pages (one material each)")
     p.add_argument("--no-power-of-two", dest="power_of_two", action="store_false",
                    help="atlas sides need not be powers of two (multiples of 4, as small as the charts allow)")
@@ -251,7 +293,14 @@ def print_run_summary(res, out: Path) -> None:
         print(f"corrected {len(names)} views with {c.method} toward {names[c.reference]} ({len(c.unreachable)} unreachable)")
     st = tm.stats
     pages = f"{tm.pages} pages of " if tm.pages > 1 else ""
-    print(f"textured {s['faces']} faces ({s['unseen_faces']} unseen, {s['transitions']} image transitions, "
+    if s.get("split_input_faces"):
+        split = (f"textured {s['input_faces']} faces ({s['split_input_faces']} split into parts: {s['faces']} out; "
+                 f"{s['unseen_input_faces']} unseen, {s['partly_seen_input_faces']} partly: "
+                 f"{100 * s['unseen_area']:.1f}% of the surface, ")
+    else:
+        split = (f"textured {s['faces']} faces ({s['unseen_faces']} unseen: {100 * s.get('unseen_area', 0.0):.1f}% of "
+                 "the surface, ")
+    print(split + f"{s['transitions']} image transitions, "
           f"{st['charts']} charts, atlas {pages}{tm.atlas_size}^2 at {st.get('texels_per_pixel', 1.0):.2f} texels/pixel, "
           f"{100 * st.get('coverage', 0.0):.0f}% covered) in {res.timings['total']:.2f} s -> {out}")
     if res.seams is not None:

@@ -18,14 +18,16 @@ import argparse
 from ..graph import WEIGHTS
 from ..pipeline import correct_scene
 from .common import add_progress_argument
-from .common import add_correction_arguments, add_scene_arguments, prepare_out_dir, print_report_path, scene_from_args
+from .common import add_correction_arguments, add_scene_arguments, add_split_argument, prepare_out_dir, \
+    print_report_path, scene_from_args
 
 
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     out = prepare_out_dir(args, scene)
     job = correct_scene(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
-                        graph_weight=args.graph_weight, seed=args.seed, metrics=not args.no_metrics)
+                        graph_weight=args.graph_weight, seed=args.seed, metrics=not args.no_metrics,
+                        split_faces=args.split_faces)
     job.save(out, overwrite=args.overwrite)
     r, names = job.result, job.scene.names
     print(f"corrected {len(names)} views with {r.method} toward {names[r.reference]} "
@@ -43,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     add_correction_arguments(p)
+    add_split_argument(p)
     p.add_argument("--graph-weight", choices=WEIGHTS, default="paper",
                    help="edge weight: paper = 1 - n/total (default), log = log(total/n) (prefers strong edges)")
     p.add_argument("--no-metrics", action="store_true", help="skip the before/after metrics in report.json (faster)")

@@ -13,7 +13,8 @@ import argparse
 from ..datasets import DatasetUnavailable
 from ..demo import DATASETS, DEMO_SCENE, run_demo
 from ..errors import InputError
-from .common import add_atlas_arguments, add_export_arguments, save_options_from_args, texture_settings_from_args
+from .common import add_atlas_arguments, add_export_arguments, add_t_npm_argument, library_default, save_options_from_args, \
+    texture_settings_from_args
 from .synthetic import add_synthetic_arguments, scene_options
 
 
@@ -43,6 +44,10 @@ def _print_summary(res) -> None:
         print("mean CIEDE2000 to the ground-truth renders (covered pixels), per view before -> after:")
         print("  " + ", ".join(f"{r['name']} {r['before']:.1f}->{r['after']:.1f}" for r in gt["views"]))
         print(f"  mean over views: {gt['mean_before']:.2f} -> {gt['mean_after']:.2f}")
+        if "texture" in gt:
+            t = gt["texture"]
+            print(f"textured mesh rendered from every view vs the ground truth: CIEDE2000 {t['mean']:.2f}, "
+                  f"{100 * t['holes']:.2f}% of the covered pixels untextured")
     print("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
     print(f"summary written to {res.out / 'demo_summary.json'}")
     report = res.out / "run" / "report.html"
@@ -75,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--t-npm", type=int, default=400,
-                   help="minimum pairwise mappings (vertex units) for a graph edge (default 400; lower it for tiny scenes)")
+    add_t_npm_argument(p, library_default(run_demo)["t_npm"])
     p.add_argument("--dataset", choices=DATASETS, default="synthetic",
                    help="the synthetic room (default, scored against its ground truth) or the real Fountain set")
     p.add_argument("--data-root", help="fountain: a local copy of the set (default: the folder named by "

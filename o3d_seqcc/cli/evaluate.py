@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..evaluation import evaluate_scene
 from ..io.output import write_output_json
 from ..mappings import MODES
-from .common import add_scene_arguments, refuse_input_overwrite, scene_from_args
+from .common import add_scene_arguments, add_t_npm_argument, library_default, refuse_input_overwrite, scene_from_args
 
 
 def _row(label: str, ev) -> str:
@@ -52,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--mappings", choices=MODES, default="vertices", help="mapping mode (default vertices)")
+    d = library_default(evaluate_scene)
+    p.add_argument("--mappings", choices=MODES, default=d["mappings"],
+                   help=f"mapping mode (default {d['mappings']}: the paper's Table 2 scores at the face vertices)")
     p.add_argument("--holdout", type=float, default=0.0, metavar="F",
                    help="score only the mappings of a random fraction F of the faces (with --method: fit on the rest)")
     p.add_argument("--seed", type=int, default=0, help="seed of the --holdout face split (default 0)")
@@ -60,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"fit this correction method here and score it (in-sample and held-out): "
                    f"{', '.join(available_methods())}")
     p.add_argument("--reference", default="auto", help="reference view for --method: name, index or auto (default)")
-    p.add_argument("--t-npm", type=int, default=400, help="minimum mappings per graph edge for --method (default 400)")
+    add_t_npm_argument(p, d["t_npm"], extra="; for --method")
     p.add_argument("--blur", type=float, default=0.0,
                    help="Gaussian sigma (px) applied to the images for scoring only (default 0)")
     p.add_argument("--min-n", type=int, default=1, help="skip pairs with fewer mappings (default 1: all pairs)")

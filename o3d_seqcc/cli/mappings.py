@@ -73,8 +73,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     p.add_argument("--out", required=True, help="output .npz (read it with o3d_seqcc.io.mappings_npz.load_mappings)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
-    p.add_argument("--mode", choices=MODES, default="vertices",
-                   help="vertices: the 3 vertices of each shared face (paper); dense: the vertices plus interior "
+    p.add_argument("--mode", choices=MODES, default=library_default(compute_mappings)["mode"],
+                   help="surface (default): the shared faces' vertices and points inside the large ones at the photos' "
+                   "resolution, pairs counted in "
+                   "pixels; vertices: the 3 vertices of each shared face (paper); dense: the vertices plus interior "
                    "points of each face, adaptive to its size")
     p.add_argument("--plot", metavar="PAIR_OR_DIR",
                    help="'A,B' (view names or indices): write OUT_A_B.png next to --out; a folder: figure of the "

@@ -16,14 +16,15 @@ from dataclasses import replace
 
 from .. import pipeline
 from .common import add_progress_argument
-from .common import add_correction_arguments, add_scene_arguments, add_texture_arguments, print_run_summary, \
-    texture_job_from_args
+from .common import add_correction_arguments, add_scene_arguments, add_split_argument, add_texture_arguments, \
+    print_run_summary, texture_job_from_args
 
 
 def run(args: argparse.Namespace) -> int:
     settings, save_options, scene, out = texture_job_from_args(args)
     res = pipeline.run(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
-                       settings=settings, seams=args.seams, compare_original=args.compare_original)
+                       settings=settings, seams=args.seams, compare_original=args.compare_original,
+                       split_faces=args.split_faces)
     res = replace(res, source=args.scene)
     res.save(out, overwrite=args.overwrite, formats=args.format, save_images=args.save_images,
              selection_view=args.selection_view, **save_options)
@@ -36,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     add_correction_arguments(p)
+    add_split_argument(p)
     add_texture_arguments(p)
     p.add_argument("--save-images", action="store_true", help="also write the corrected images to OUT/images/")
     p.add_argument("--compare-original", action="store_true",

@@ -38,8 +38,18 @@ def scene_options(args: argparse.Namespace) -> dict:
             "seen_only": args.seen_only}
 
 
+def _origin(text: str) -> tuple[float, float, float]:
+    try:
+        xyz = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        xyz = ()
+    if len(xyz) != 3:
+        raise argparse.ArgumentTypeError(f"give three numbers X,Y,Z (metres), not {text!r}")
+    return xyz  # type: ignore[return-value]
+
+
 def run(args: argparse.Namespace) -> int:
-    syn = make_synthetic_scene(args.out, overwrite=args.overwrite, **scene_options(args))
+    syn = make_synthetic_scene(args.out, overwrite=args.overwrite, origin=args.origin, **scene_options(args))
     m = syn.metadata
     print(
         f"synthetic scene: {m['n_views']} views {m['width']}x{m['height']}, {m['n_faces']} faces, "
@@ -53,3 +63,5 @@ def run(args: argparse.Namespace) -> int:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", help="output folder (must be empty or absent unless --overwrite)")
     add_synthetic_arguments(p)
+    p.add_argument("--origin", type=_origin, default=library_default(make_synthetic_scene)["origin"], metavar="X,Y,Z",
+                   help="world coordinates of the room's corner, e.g. 500000,4000000,100 (UTM-like; default the origin)")

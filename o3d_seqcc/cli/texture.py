@@ -14,13 +14,14 @@ from dataclasses import replace
 from .. import pipeline
 from ..io.files import read_view_images
 from .common import add_progress_argument
-from .common import add_scene_arguments, add_texture_arguments, print_run_summary, texture_job_from_args
+from .common import add_scene_arguments, add_split_argument, add_texture_arguments, print_run_summary, \
+    texture_job_from_args
 
 
 def run(args: argparse.Namespace) -> int:
     settings, save_options, scene, out = texture_job_from_args(args)
     images = read_view_images(scene, args.images) if args.images else None
-    res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams)
+    res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams, split_faces=args.split_faces)
     res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
     res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view,
              **save_options)
@@ -32,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
+    add_split_argument(p)
     add_texture_arguments(p)
     p.add_argument("--images", help="folder of (corrected) images named after the views, used instead of the scene's")
     add_progress_argument(p)

@@ -29,7 +29,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import InputError, warn
-from ..graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
+from ..graph import build_graph, check_t_npm, choose_reference, correction_paths, graph_edges, resolve_t_npm, t_npm_units
 from ..images import FloatImages, ImageSequence, image_dtypes
 from ..scene import resolve_view
 from . import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
@@ -56,12 +56,12 @@ __all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", 
 logger = logging.getLogger(__name__)
 
 
-def check_method(method: str, *, t_npm: int = 400) -> None:
-    """Raise ``InputError`` for an unknown ``method`` (listing the valid names) or a ``t_npm`` below 1."""
+def check_method(method: str, *, t_npm: int | str = "auto") -> None:
+    """Raise ``InputError`` for an unknown ``method`` (listing the valid names) or a ``t_npm`` that is neither
+    ``"auto"`` nor a positive integer."""
     if method not in METHODS:
         raise InputError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
-    if isinstance(t_npm, bool) or not isinstance(t_npm, (int, np.integer)) or t_npm < 1:
-        raise InputError(f"t_npm must be a positive integer (minimum pairwise mappings for a graph edge), got {t_npm!r}")
+    check_t_npm(t_npm)
 
 
 def _check_images(images: Sequence[np.ndarray], names: list[str], sizes: list[tuple[int, int]] | None) -> list[np.ndarray]:
@@ -89,9 +89,9 @@ def correct(
     *,
     reference: str | int = "auto",
     method: str = DEFAULT_METHOD,
-    t_npm: int = 400,
+    t_npm: int | str = "auto",
     mappings=None,
-    mappings_mode: str = "vertices",
+    mappings_mode: str = "surface",
     images: Sequence[np.ndarray] | None = None,
     seed: int = 0,
     interpolation: str = "bilinear",
@@ -109,12 +109,14 @@ def correct(
         View name, index, or ``"auto"`` (:func:`o3d_seqcc.graph.choose_reference`).
     method : str, default :data:`DEFAULT_METHOD` ("seqcc-global")
         A name of :data:`METHODS` (see the module docstring); ``"seqcc"`` is the paper's.
-    t_npm : int, default 400
-        Minimum number of pairwise mappings for a graph edge, in vertex-mapping units (scaled
-        for dense mappings by :func:`o3d_seqcc.graph.scale_t_npm`).
+    t_npm : "auto" or int, default "auto"
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): with
+        surface mappings (the default) pixels of shared surface, ``"auto"`` = 1 % of the median
+        photo's pixels; with vertex and dense mappings vertex mappings (scaled for dense by
+        :func:`o3d_seqcc.graph.scale_t_npm`), ``"auto"`` = the paper's 400.
     mappings : o3d_seqcc.mappings.Mappings, optional
         Precomputed filtered mappings (default: ``compute_mappings(scene, mode=mappings_mode)``).
-    mappings_mode : {"vertices", "dense"}, default "vertices"
+    mappings_mode : {"surface", "vertices", "dense"}, default "surface"
     images : list of (H, W, 3) arrays or ImageSequence, optional
         Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]). A lazy
         :class:`~o3d_seqcc.images.ImageSequence` (e.g. ``SceneImages(scene.views)``) is read
@@ -187,7 +189,10 @@ def correct(
 
     t0 = time.perf_counter()
     counts = {k: int(v) for k, v in dict(mappings.counts).items()}
-    t_eff = scale_t_npm(t_npm, mappings)
+    if sizes is None and not lazy:
+        sizes = [(int(np.shape(im)[1]), int(np.shape(im)[0])) for im in raw]
+    t_eff, t_how = resolve_t_npm(t_npm, mappings, image_sizes=sizes)
+    unit = t_npm_units(getattr(mappings, "mode", "vertices"))
     graph = build_graph(counts, n, t_npm=t_eff, weight=graph_weight)
     needs_graph = getattr(fn, "needs_graph", True)
     if needs_graph and graph.number_of_edges() == 0:
@@ -195,8 +200,9 @@ def correct(
         if best is None or best[1] == 0:
             raise InputError("no view pair shares any pairwise mapping: the views do not overlap on the mesh")
         (a, b), nmax = best
+        what = "px of shared surface" if unit == "px" else "mappings"
         raise InputError(
-            f"no view pair has t_npm={t_eff} or more mappings (the largest count is {nmax}, between "
+            f"no view pair has t_npm={t_eff} or more {what} ({t_how}; the largest count is {nmax}, between "
             f"{names[a]!r} and {names[b]!r}); lower t_npm to at most {nmax}"
         )
     if reference == "auto":
@@ -209,7 +215,7 @@ def correct(
         hint = ""
         if own:
             other, c = max(own.items(), key=lambda kv: kv[1])
-            hint = f" (its largest pair count is {c}, with {names[other]!r}, below t_npm={t_eff})"
+            hint = f" (its largest pair count is {c} {unit}, with {names[other]!r}, below t_npm={t_eff})"
         raise InputError(
             f"reference view {names[ref]!r} has no edge in the colour-correction graph{hint}; "
             f"choose another reference (e.g. 'auto' -> {names[choose_reference(graph)]!r}) or lower t_npm"
@@ -238,7 +244,7 @@ def correct(
     out = CorrectedImages(raw, transforms) if lazy else [apply_transform(tr, img) for img, tr in zip(raw, transforms)]
     timings["apply"] = time.perf_counter() - t0
     timings["total"] = float(sum(timings.values()))
-    settings = {"t_npm": int(t_npm), "seed": int(seed), "interpolation": interpolation, "graph_weight": graph_weight,
+    settings = {"t_npm": t_npm if t_npm == "auto" else int(t_npm), "seed": int(seed), "interpolation": interpolation, "graph_weight": graph_weight,
                 "options": dict(options)}
     return CorrectionResult(
         images=out, transforms=transforms, reference=ref, paths=paths, unreachable=unreachable,

@@ -307,14 +307,15 @@ class CorrectionResult:
         Seconds per stage.
     method : str
     t_npm : int
-        Edge threshold used, in the units of the mappings (see :func:`o3d_seqcc.graph.scale_t_npm`).
+        Edge threshold used, in the units of the mappings (pixels of shared surface for surface
+        mappings; see :func:`o3d_seqcc.graph.resolve_t_npm`).
     edge_luts : dict[(int, int), (3, L) float64]
         Per directed path edge ``(target, source)``: the colour mapping function fitted on it
         (R, G, B lookup tables over L evenly spaced inputs), for the methods that compose lookup
         tables along the paths (``seqcc``, ``seqcc-joint``, ``vandermonde``); empty otherwise.
     settings : dict
         The arguments of :func:`~o3d_seqcc.correction.correct` that, with the same images and
-        mappings, give this result again: ``t_npm`` (as given, vertex units), ``seed``,
+        mappings, give this result again: ``t_npm`` (as given: ``"auto"`` or a number), ``seed``,
         ``interpolation``, ``graph_weight`` and ``options`` (the method's).
     """
 

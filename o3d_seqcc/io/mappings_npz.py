@@ -61,6 +61,8 @@ def save_mappings(mappings: Mappings, path: str | os.PathLike, *, format: str = 
         "counts": np.array([mappings.counts[k] for k in keys], dtype=np.int64),
         "filter_stats": np.array(json.dumps(to_jsonable(mappings.filter_stats))),
     }
+    if mappings.image_sizes is not None:  # what t_npm="auto" is derived from
+        data["image_sizes"] = np.array(mappings.image_sizes, dtype=np.int64).reshape(-1, 2)
     if lazy and format != "arrays":
         src = mappings.pairs.source
         vis = src.vis
@@ -75,6 +77,7 @@ def save_mappings(mappings: Mappings, path: str | os.PathLike, *, format: str = 
         )
         if src.level is not None:
             data["level"] = src.level.astype(np.int16)
+        data["sample_spacing"] = np.array(float(getattr(src, "spacing", 3.0)))
         if src.face_mask is not None:
             data["face_mask"] = np.packbits(src.face_mask)
     else:
@@ -146,15 +149,18 @@ def load_mappings(path: str | os.PathLike) -> Mappings:
         stats = json.loads(str(z["filter_stats"])) if "filter_stats" in files else {}
         names = tuple(str(n) for n in z["view_names"])
         mode = str(z["mode"])
+        sizes = tuple(map(tuple, z["image_sizes"].tolist())) if "image_sizes" in files else None
         if layout == "compact":
             F = int(z["n_faces"])
             usable = np.unpackbits(z["usable"], axis=1, count=F).astype(bool)
             vis = _StoredVisibility(z["uv"], z["depth"], usable, z["vertices"], z["faces"])
             level = z["level"].astype(np.int64) if "level" in files else None
             face_mask = np.unpackbits(z["face_mask"], count=F).astype(bool) if "face_mask" in files else None
-            src = PairSource(vis, mode, level, face_mask)
+            spacing = float(z["sample_spacing"]) if "sample_spacing" in files else 3.0
+            src = PairSource(vis, mode, level, face_mask, spacing=spacing)
             return Mappings(
-                pairs=LazyPairs(src, keys), view_names=names, mode=mode, filter_stats=stats, counts=counts
+                pairs=LazyPairs(src, keys), view_names=names, mode=mode, filter_stats=stats, counts=counts,
+                image_sizes=sizes,
             )
         off = z["offsets"]
         uv_a, uv_b, fid = z["uv_a"].astype(np.float64), z["uv_b"].astype(np.float64), z["face_ids"]
@@ -163,4 +169,4 @@ def load_mappings(path: str | os.PathLike) -> Mappings:
         for i, (a, b) in enumerate(keys):
             s = slice(int(off[i]), int(off[i + 1]))
             pairs[(a, b)] = PairMapping(a, b, uv_a[s], uv_b[s], fid[s], None if w is None else w[s])
-    return Mappings(pairs=pairs, view_names=names, mode=mode, filter_stats=stats, counts=counts)
+    return Mappings(pairs=pairs, view_names=names, mode=mode, filter_stats=stats, counts=counts, image_sizes=sizes)

@@ -16,7 +16,7 @@ from ..errors import InputError, warn
 from ..parallel import current as current_executor
 from ..scene import Scene
 from .files import atomic_path, atomic_write_bytes, encode_image
-from .meshlab import save_mlp
+from .meshlab import MeshLayer, save_mlp
 
 __all__ = ["meshlab_project", "scene_paths", "with_mesh_file", "write_images"]
 
@@ -64,14 +64,20 @@ def scene_paths(scene: Scene) -> dict[str, Any]:
     return out
 
 
-def meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: list | None) -> Path | None:
+def meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: list | None,
+                    offset: np.ndarray | None = None) -> Path | None:
     """``folder/project.mlp``: the mesh layer and the rasters, so MeshLab opens the result as it opened the input.
 
     ``images`` default to the scene's own; a camera MeshLab cannot represent (skew), or a path a
     project cannot hold (file names that are not UTF-8: the project is UTF-8 XML), leaves the
-    project out, with a warning.
+    project out, with a warning. ``offset`` (3,): the layer's file holds the mesh minus it, and
+    the layer's placement matrix adds it back.
     """
     try:
+        if offset is not None and np.any(offset) and mesh is not None:
+            T = np.eye(4)
+            T[:3, 3] = offset
+            return save_mlp(scene, folder / "project.mlp", layers=[MeshLayer(Path(mesh), matrix=T)], images=images)
         return save_mlp(scene, folder / "project.mlp", mesh=mesh, images=images)
     except InputError as e:
         warn(f"no MeshLab project written: {e}")

@@ -217,15 +217,18 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
                          "(and --mesh) to say where it is now") from None
     if output is not None:  # before any work: the page may not replace a file the report reads
         check_output_file(output, option="--output", inputs=[*sc.input_paths(), *_run_files(run_dir)])
-    vis = compute_visibility(sc)
+    split = ((rep.get("visibility_stats") or {}).get("split") or {}).get("enabled", False)  # older runs: not split
+    vis = compute_visibility(sc, split_faces=bool(split))
     photos = [v.load_image() for v in sc.views]
     correction = maps = corrected = None
     if f["method"]:
         s = f["settings"]
         ref = rep.get("reference") or rep["correction"]["reference"]
-        maps = compute_mappings(sc, visibility=vis, mode=f["mappings"] or "vertices")
+        maps = compute_mappings(sc, visibility=vis, mode=f["mappings"] or "vertices")  # older reports: the paper's
         seed = s.get("seed", (rep.get("selection") or {}).get("seed", 0))
-        correction = correct(sc, reference=ref, method=f["method"], t_npm=int(s.get("t_npm", f["t_npm"])), mappings=maps,
+        t_npm = s.get("t_npm", f["t_npm"])
+        correction = correct(sc, reference=ref, method=f["method"], t_npm=t_npm if t_npm == "auto" else int(t_npm),
+                             mappings=maps,
                              images=photos, seed=int(seed), interpolation=s.get("interpolation", "bilinear"),
                              graph_weight=s.get("graph_weight", "paper"), **s.get("options", {}))
         corrected = correction.images

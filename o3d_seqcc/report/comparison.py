@@ -18,6 +18,7 @@ colours on either side of them, are what it changes.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -98,7 +99,9 @@ def closeup_view(view: View, mesh: tuple, seams: SelectionSeams | None, *, zoom:
     K[1, 1] *= s
     K[0, 2] = s * (view.intrinsic[0, 2] - left) - 0.5
     K[1, 2] = s * (view.intrinsic[1, 2] - top) - 0.5
-    return replace(view, intrinsic=K, width=width, height=height)
+    # a camera only: in-memory pixels or depth of the original size do not belong to it (never read)
+    return replace(view, intrinsic=K, width=width, height=height, image=view.image or Path(f"{view.name}.png"),
+                   pixels=None, depth_map=None, points=None)
 
 
 def _photo_renders(tm: Any, hits: RayHits, views, base: np.ndarray, *image_sets) -> list[np.ndarray]:

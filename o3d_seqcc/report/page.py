@@ -96,10 +96,14 @@ def facts(rep: dict) -> dict[str, Any]:
 def t_npm_text(f: dict) -> str:
     """The graph threshold one way everywhere (HTML): the setting, and the count it means in this run's mappings."""
     name = "t<sub>npm</sub>"
-    setting, eff = f.get("t_npm"), f.get("t_npm_effective")
+    setting, eff, mode = f.get("t_npm"), f.get("t_npm_effective"), f.get("mappings") or ""
+    unit = "px of shared surface" if mode == "surface" else "mappings"
     if eff is None or str(eff) == str(setting):
-        return f"{name} = {_esc(setting)} mappings"
-    return (f"{name} = {_esc(setting)} (the setting, in vertex mappings) = {_esc(eff)} {_esc(f.get('mappings') or '')} "
+        return f"{name} = {_esc(setting)} {unit}"
+    if mode in ("surface", "vertices"):  # only "auto" differs from its count
+        how = "1 % of a photo" if mode == "surface" else "the paper's"
+        return f"{name} = {_esc(setting)} ({how}) = {_esc(eff)} {unit}"
+    return (f"{name} = {_esc(setting)} (the setting, in vertex mappings) = {_esc(eff)} {_esc(mode)} "
             f"mappings (the threshold this run's counts were held to)")
 
 
@@ -118,13 +122,14 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     weight = c.settings.get("graph_weight", "paper")
     total = inp.mappings.total if inp.mappings is not None else None
     formula = "w = 1 − n / N" if weight == "paper" else "w = log(N / n)"
-    n_txt = f", N = {total} mappings over all pairs" if total is not None else ""
+    unit = "px of shared surface" if getattr(inp.mappings, "mode", None) == "surface" else "mappings"
+    n_txt = f", N = {total} {unit} over all pairs" if total is not None else ""
     unreach = ", ".join(_esc(_name(inp, v)) for v in c.unreachable) or "none"
     cap = (f"Colour-correction graph (paper Figures 4-5). One node per view, numbered by index and placed by its "
            f"camera position (seen from above: the two main axes of the camera centres); the reference "
            f"<b>{_esc(names[ref])}</b> (#{ref}) in red. An edge joins two views sharing at least "
-           f"{t_npm_text({**f, 't_npm_effective': c.t_npm})}: its width grows with the number of mappings n, its "
-           f"colour is its weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
+           f"{t_npm_text({**f, 't_npm_effective': c.t_npm})}: its width grows with that count n, its colour is its "
+           f"weight {formula}{n_txt}. Black arrows: the Dijkstra path of every view toward the reference. "
            f"Unreachable views (grey): {unreach}.")
     by_pair = {(e["a"], e["b"]): e for e in c.graph_edges}
     rows = "".join(

@@ -42,6 +42,7 @@ def _check(kind: str) -> Callable[[Any], bool]:
         "str?": lambda x: x is None or isinstance(x, str),
         "int": _is_int,
         "int?": lambda x: x is None or _is_int(x),
+        "npm": lambda x: x == "auto" or _is_int(x),
         "num": _is_num,
         "num?": lambda x: x is None or _is_num(x),
         "list": lambda x: isinstance(x, list),
@@ -53,7 +54,7 @@ def _check(kind: str) -> Callable[[Any], bool]:
 
 _KINDS = {
     "dict": "an object", "dict?": "an object or null", "str": "a string", "str?": "a string or null",
-    "int": "an integer", "int?": "an integer or null", "num": "a finite number", "num?": "a finite number or null",
+    "int": "an integer", "int?": "an integer or null", "npm": "an integer or \"auto\"", "num": "a finite number", "num?": "a finite number or null",
     "list": "a list", "3x3": "a 3x3 list of numbers", "3x3?": "a 3x3 list of numbers or null",
 }
 
@@ -61,11 +62,11 @@ _STATS = ("mean", "weighted_mean", "std")
 #: (dotted path with * for any key, kind): every field the page or the reader uses
 RULES: tuple[tuple[str, str], ...] = (
     ("command", "str"), ("scene", "str"), ("scene_path", "str"), ("mesh", "str"), ("images", "str"),
-    ("reference", "str"), ("method", "str?"), ("mappings", "str?"), ("graph_weight", "str"), ("t_npm", "int"),
+    ("reference", "str"), ("method", "str?"), ("mappings", "str?"), ("graph_weight", "str"), ("t_npm", "npm"),
     ("seed", "int"),
     ("correction", "dict?"), ("correction.method", "str"), ("correction.reference", "str"),
     ("correction.t_npm", "int"), ("correction.mappings", "str?"), ("correction.settings", "dict"),
-    ("correction.settings.t_npm", "int"), ("correction.settings.seed", "int"),
+    ("correction.settings.t_npm", "npm"), ("correction.settings.seed", "int"),
     ("correction.settings.interpolation", "str"), ("correction.settings.graph_weight", "str"),
     ("correction.settings.options", "dict"), ("correction.timings_s", "dict"), ("correction.timings_s.*", "num"),
     ("correction.n_graph_edges", "int"), ("correction.unreachable", "list"), ("correction.unreachable.*", "str"),

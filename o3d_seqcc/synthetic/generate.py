@@ -30,7 +30,7 @@ import json
 import logging
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -135,6 +135,13 @@ def _write_depth(path: Path, depth_m: np.ndarray, depth_scale: float) -> Path:
     return atomic_write_bytes(path, buf.tobytes())
 
 
+def _moved(extrinsic: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """The world-to-camera matrix of a camera moved with the world by ``shift``: ``E' (x + shift) = E x``."""
+    E = np.array(extrinsic, dtype=np.float64)
+    E[:3, 3] = E[:3, 3] - E[:3, :3] @ shift
+    return E
+
+
 def _write_mesh(path: Path, geom: RoomGeometry) -> Path:
     import open3d as o3d
 
@@ -162,6 +169,7 @@ def make_synthetic_scene(
     cell_size: float = DEFAULT_CELL_SIZE,
     layout: str = "ring",
     seen_only: bool = False,
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> SyntheticScene:
     """Generate a synthetic room scene with known photometric changes (see the module docstring).
 
@@ -203,6 +211,11 @@ def make_synthetic_scene(
     seen_only : bool, default False
         Keep only the faces some camera sees (hit by at least one pixel ray), as a reconstructed
         mesh only holds what was captured; the backs of furniture and hidden corners go.
+    origin : (3,) float, default (0, 0, 0)
+        Where the room's corner is in world coordinates, e.g. ``(5e5, 4e6, 100)`` for UTM-like
+        coordinates: the room is rendered at the world origin (the same images for every
+        ``origin``), then the mesh (double-precision PLY), the cameras and ``points/`` (float64
+        then) are moved there.
 
     Returns
     -------
@@ -221,6 +234,12 @@ def make_synthetic_scene(
             raise InputError(f"{nm} must be an integer >= {lo}, got {val!r}")
     if not (isinstance(cell_size, (int, float, np.floating)) and 0.01 <= float(cell_size) <= 1.0):
         raise InputError(f"cell_size must be a number of metres in [0.01, 1], got {cell_size!r}")
+    try:
+        shift = np.asarray(origin, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise InputError(f"origin must be three numbers (metres), got {origin!r}") from None
+    if not np.all(np.isfinite(shift)):
+        raise InputError(f"origin must be three finite numbers (metres), got {origin!r}")
     if n_views > 100:
         raise InputError(f"n_views must be <= 100 (names are v00..v99), got {n_views}")
     if int(width) * int(height) > iofiles.MAX_IMAGE_PIXELS:
@@ -254,6 +273,11 @@ def make_synthetic_scene(
         geom, face_map = keep_faces(geom, seen)
         renders = [(np.where(face >= 0, face_map[np.maximum(face, 0)], -1).astype(np.int32), *rest)
                    for face, *rest in renders]
+    if shift.any():  # rendered at the origin, then moved: the images do not depend on origin
+        geom = replace(geom, vertices=geom.vertices + shift)
+        extrinsics = [_moved(E, shift) for E in extrinsics]
+        cams = [(c + shift, yaw, pitch, roll) for c, yaw, pitch, roll in cams]
+        renders = [(face, pts.astype(np.float64) + shift, *rest) for face, pts, *rest in renders]
     with output_folder(out_dir, overwrite=overwrite, command="synthetic") as stage:  # written as a whole
         mesh_path = _write_mesh(stage / "mesh.ply", geom)
         views, gt_paths, fid_paths, pt_paths, transforms, per_view = [], {}, {}, {}, {}, []
@@ -296,6 +320,7 @@ def make_synthetic_scene(
             "cell_size": float(cell_size),
             "layout": layout,
             "seen_only": bool(seen_only),
+            "origin": shift.tolist(),
             "room": list(ROOM),
             "n_faces": int(len(geom.faces)),
             "n_vertices": int(len(geom.vertices)),

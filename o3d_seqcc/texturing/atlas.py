@@ -1,4 +1,4 @@
-"""Texture-atlas baking: charts, xatlas packing, sampling bake, seam leveling (paper 3.8, issue 13).
+"""Texture-atlas baking: charts, xatlas packing, sampling bake, seam leveling (paper 3.8, issues 13, 19).
 
 :func:`bake_texture` turns a per-face view selection into a textured mesh, in stages:
 
@@ -7,12 +7,16 @@
    footprint, as the paper crops each face's projection from its selected photo); unseen faces
    welded into a neighbouring chart or into one shared fallback region; tiny charts merged
    into a neighbour's parametrisation;
-2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas packs the charts (rotated, at
-   ``padding`` texels from each other) into the smallest power-of-two atlas within the
-   ``atlas_size`` budget at the photos' resolution or above; when even the budget cannot hold
-   them, the density is scaled down (logged with the factor) or several pages are written;
+2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas places the charts (turned by 90
+   degrees at most, at ``padding`` texels from each other) in the smallest power-of-two page that
+   holds them at the photos' resolution (``atlas_size="auto"``: up to 8192 x 8192, then more
+   pages; an integer is a budget: when it cannot hold them, the density is scaled down, logged
+   with the factor, or several pages are written); every chart's texel grid is its photo's
+   pixel grid, moved by whole texels;
 3. **bake by sampling** (:mod:`~o3d_seqcc.texturing.bake`): every texel inside a face samples
-   the face's own view at the same barycentric point of its projection; gutter texels continue
+   the face's own view at the same barycentric point of its projection (at one texel per pixel
+   a pixel centre, so the texel is a copy of the photo's pixel; Lanczos, clamped, in tiny charts
+   merged into a neighbour's parametrisation and at other densities); gutter texels continue
    the nearest face's map (real photo content around every chart, so bilinear filtering and
    mip levels 1-2 read no foreign colour); faces seen by no view get their fallback colours
    (:mod:`~o3d_seqcc.texturing.fallback`);
@@ -126,8 +130,8 @@ def bake_texture(
         From :func:`~o3d_seqcc.texturing.select_views`; -1 = unseen face (fallback colour).
     settings : TextureSettings, optional
         Atlas, leveling and fallback options; default :class:`TextureSettings` (the command
-        line's defaults: at most 2048 x 2048, the photos' resolution or above, 4 texels of
-        padding, global and local seam leveling on).
+        line's defaults: sized to the charts at the photos' resolution, 4 texels of padding,
+        global and local seam leveling on).
     adjacency : (E, 2) int array, optional
         Face adjacency (:func:`o3d_seqcc.meshops.face_adjacency`), computed when omitted.
     **options
@@ -139,8 +143,11 @@ def bake_texture(
     TexturedMesh
         UVs in the OBJ convention (origin bottom-left); with several pages, ``texture`` holds
         them stacked vertically (``pages``). ``stats``: ``atlas_size`` (page side),
-        ``requested_atlas_size``, ``pages``, ``texels_per_pixel``, ``density_scale`` (< 1 when
-        the budget lowered the density), ``coverage`` (triangle texels / atlas texels),
+        ``requested_atlas_size``, ``pages``, ``texels_per_pixel`` (atlas texels per photo pixel),
+        ``face_texels_per_pixel`` (per seen face, the square root of its texel area over its
+        area in its photo: ``min``, ``p1``, ``median`` and the share ``below_1`` below
+        ``texels_per_pixel``; tiny charts merged into a neighbour's parametrisation may be
+        smaller), ``density_scale`` (< 1 when the budget lowered the density), ``coverage`` (triangle texels / atlas texels),
         ``utilization`` (texels written: faces and their gutters / atlas texels), ``charts``
         (image charts), ``fallback_charts``, ``absorbed_faces``, ``merged_tiny_charts``,
         ``unseen_faces``, ``vertices_in``, ``vertices_out``, ``packer``, ``pack_log``,
@@ -203,7 +210,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
                       merge_faces=int(s.merge_charts))
     t_charts = time.perf_counter()
     step("pack")
-    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=int(s.atlas_size), texels_per_pixel=s.texels_per_pixel,
+    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=s.atlas_size, texels_per_pixel=s.texels_per_pixel,
                      overflow=s.overflow, padding=int(s.padding), power_of_two=bool(s.power_of_two))
     S, P = pk.size, pk.pages
     H = P * S
@@ -281,9 +288,16 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])
                        - (p2[:, 2, 0] - p2[:, 0, 0]) * (p2[:, 1, 1] - p2[:, 0, 1]))
+    own = 0.5 * np.abs((fuv[:, 1, 0] - fuv[:, 0, 0]) * (fuv[:, 2, 1] - fuv[:, 0, 1])
+                       - (fuv[:, 2, 0] - fuv[:, 0, 0]) * (fuv[:, 1, 1] - fuv[:, 0, 1]))
+    sized = seen & (own > 1e-6)
+    face_tpp = np.sqrt(tri[sized] / own[sized]) if sized.any() else np.ones(1)
     stats = {
-        "atlas_size": S, "requested_atlas_size": int(s.atlas_size), "pages": P,
+        "atlas_size": S, "requested_atlas_size": s.atlas_size, "pages": P,
         "texels_per_pixel": pk.texels_per_pixel, "density_scale": pk.scale, "padding": int(s.padding),
+        "face_texels_per_pixel": {"min": float(face_tpp.min()), "p1": float(np.percentile(face_tpp, 1)),
+                                  "median": float(np.median(face_tpp)),
+                                  "below_1": float(np.mean(face_tpp < 0.999 * pk.texels_per_pixel))},
         "coverage": float(tri.sum() / (P * S * S)), "utilization": float(len(idx) / (P * S * S)),
         "charts": int(cs.n_image), "fallback_charts": int(cs.stats["fallback_charts"]),
         "absorbed_faces": int(cs.stats["absorbed_faces"]), "merged_tiny_charts": int(cs.stats["merged_tiny_charts"]),

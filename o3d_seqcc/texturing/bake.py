@@ -1,10 +1,14 @@
-"""Baking an atlas by sampling (issue 13): texel -> face -> barycentric -> source pixel.
+"""Baking an atlas by sampling (issues 13, 19): texel -> face -> barycentric -> source pixel.
 
-The packed charts may be rotated and scaled, so the atlas is not assembled from copied pixel
-rectangles but *sampled*: every texel whose centre lies in a face's UV triangle
+The atlas is *sampled*: every texel whose centre lies in a face's UV triangle
 (:func:`rasterize_faces`) takes the colour of the face's own view at the point with the same
-barycentric coordinates in the face's projection (:func:`sample_image`; the projection is
-affine over a face, as the texture mapping of a renderer). Texels of a chart's gutter
+barycentric coordinates in the face's projection (:func:`sample_image`: Lanczos, clamped to
+the neighbouring pixels' range; the projection is affine over a face, as the texture mapping
+of a renderer). The packing puts every chart's texels on its photo's pixel grid
+(:mod:`~o3d_seqcc.texturing.packing`), so at one texel per pixel that point is a pixel centre
+and the texel a copy of the pixel: nothing is resampled, and a render from the photo's camera
+gives the photo back. Faces of tiny charts merged into a neighbour's parametrisation, atlases
+at another density and the fallback region are resampled. Texels of a chart's gutter
 (:func:`gutter_texels`: within ``reach`` texels of a face) continue the nearest face's affine
 map outside the triangle, so that they hold the photo's real content around the chart and
 bilinear filtering and the first mip levels read nothing foreign; texels further away are
@@ -18,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "sample_image"]
+__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "row_spans",
+           "sample_image"]
 
 
 def _area2(p: np.ndarray) -> np.ndarray:
@@ -58,13 +63,66 @@ def _edge_functions(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return A, B, C, d
 
 
+def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000):
+    """Per triangle and canvas row, the span of texel (pixel) centres inside the triangle.
+
+    The span of every row is solved from the three edge functions (no per-texel inside test),
+    vectorised over all rows of a chunk of triangles.
+
+    Parameters
+    ----------
+    p : (F, 3, 2) float64
+        Triangles in canvas coordinates (x right, y down, centres at integers).
+    height, width : int
+        Canvas size (spans are clipped to it).
+    chunk : int
+        Texels (estimated from bounding boxes) handled per step.
+
+    Yields
+    ------
+    k : (rows,) int64
+        Triangle of every row (index into ``p``), ascending.
+    y : (rows,) float64
+        The row.
+    xs, n : (rows,) int64
+        First texel of the span and its length (0: no texel centre inside).
+    A, r : (rows, 3) float64
+        The barycentric coordinates on the row: ``l_i = A_i x + r_i``.
+    """
+    A, B, C, d = _edge_functions(p)
+    y0 = np.maximum(np.ceil(p[:, :, 1].min(axis=1) - 1e-9), 0).astype(np.int64)
+    y1 = np.minimum(np.floor(p[:, :, 1].max(axis=1) + 1e-9), height - 1).astype(np.int64)
+    xlo = np.maximum(p[:, :, 0].min(axis=1) - 1e-9, 0.0)
+    xhi = np.minimum(p[:, :, 0].max(axis=1) + 1e-9, width - 1.0)
+    ny = np.where(np.abs(d) > 1e-12, np.maximum(y1 - y0 + 1, 0), 0)
+    est = np.cumsum(ny * np.maximum(np.ceil(xhi - xlo) + 1, 1))
+    eps = 1e-7
+    start = 0
+    while start < len(p):
+        base = est[start - 1] if start else 0
+        end = max(int(np.searchsorted(est, base + chunk, side="right")), start + 1)
+        k = np.repeat(np.arange(start, end), ny[start:end])  # one entry per (face, row)
+        if len(k):
+            y = (y0[k] + np.arange(len(k)) - np.repeat(np.cumsum(ny[start:end]) - ny[start:end], ny[start:end])).astype(np.float64)
+            r = B[k] * y[:, None] + C[k]  # (rows, 3): l_i = A_i x + r_i on this row
+            a = A[k]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                bound = (-eps - r) / a
+            lo = np.max(np.where(a > 1e-15, bound, -np.inf), axis=1)
+            hi = np.min(np.where(a < -1e-15, bound, np.inf), axis=1)
+            flat_bad = ((np.abs(a) <= 1e-15) & (r < -eps)).any(axis=1)
+            xs = np.ceil(np.maximum(lo, xlo[k])).astype(np.int64)
+            xe = np.floor(np.minimum(hi, xhi[k])).astype(np.int64)
+            n = np.where(flat_bad, 0, np.maximum(xe - xs + 1, 0))
+            yield k, y, xs, n, a, r
+        start = end
+
+
 def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int, *,
                     order: np.ndarray | None = None, chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texels whose centre lies in a UV triangle, with their face and barycentric coordinates.
 
-    Scanline: for every row of every triangle the span of texel centres inside it is solved
-    from the three edge functions (no per-texel inside test), vectorised over all rows of a
-    chunk of triangles.
+    Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles.
 
     Parameters
     ----------
@@ -92,40 +150,15 @@ def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
     if len(fo) == 0:
         return empty
     p = np.asarray(txy, dtype=np.float64)[np.asarray(faces)[fo]]
-    A, B, C, d = _edge_functions(p)
-    y0 = np.maximum(np.ceil(p[:, :, 1].min(axis=1) - 1e-9), 0).astype(np.int64)
-    y1 = np.minimum(np.floor(p[:, :, 1].max(axis=1) + 1e-9), height - 1).astype(np.int64)
-    xlo = np.maximum(p[:, :, 0].min(axis=1) - 1e-9, 0.0)
-    xhi = np.minimum(p[:, :, 0].max(axis=1) + 1e-9, width - 1.0)
-    ny = np.where(np.abs(d) > 1e-12, np.maximum(y1 - y0 + 1, 0), 0)
-    est = np.cumsum(ny * np.maximum(np.ceil(xhi - xlo) + 1, 1))
-    eps = 1e-7
     parts = []
-    start = 0
-    while start < len(fo):
-        base = est[start - 1] if start else 0
-        end = max(int(np.searchsorted(est, base + chunk, side="right")), start + 1)
-        k = np.repeat(np.arange(start, end), ny[start:end])  # one entry per (face, row)
-        if len(k):
-            y = (y0[k] + np.arange(len(k)) - np.repeat(np.cumsum(ny[start:end]) - ny[start:end], ny[start:end])).astype(np.float64)
-            r = B[k] * y[:, None] + C[k]  # (rows, 3): l_i = A_i x + r_i on this row
-            a = A[k]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                bound = (-eps - r) / a
-            lo = np.max(np.where(a > 1e-15, bound, -np.inf), axis=1)
-            hi = np.min(np.where(a < -1e-15, bound, np.inf), axis=1)
-            flat_bad = ((np.abs(a) <= 1e-15) & (r < -eps)).any(axis=1)
-            xs = np.ceil(np.maximum(lo, xlo[k])).astype(np.int64)
-            xe = np.floor(np.minimum(hi, xhi[k])).astype(np.int64)
-            n = np.where(flat_bad, 0, np.maximum(xe - xs + 1, 0))
-            t = np.repeat(np.arange(len(k)), n)  # one entry per texel
-            x = xs[t] + (np.arange(len(t)) - np.repeat(np.cumsum(n) - n, n))
-            xf = x.astype(np.float64)
-            l0 = A[k[t], 0] * xf + r[t, 0]
-            l1 = A[k[t], 1] * xf + r[t, 1]
-            bary = np.stack([l0, l1, 1.0 - l0 - l1], axis=1).astype(np.float32)
-            parts.append((y[t].astype(np.int64) * width + x, fo[k[t]], bary))
-        start = end
+    for k, y, xs, n, a, r in row_spans(p, height, width, chunk=chunk):
+        t = np.repeat(np.arange(len(k)), n)  # one entry per texel
+        x = xs[t] + (np.arange(len(t)) - np.repeat(np.cumsum(n) - n, n))
+        xf = x.astype(np.float64)
+        l0 = a[t, 0] * xf + r[t, 0]
+        l1 = a[t, 1] * xf + r[t, 1]
+        bary = np.stack([l0, l1, 1.0 - l0 - l1], axis=1).astype(np.float32)
+        parts.append((y[t].astype(np.int64) * width + x, fo[k[t]], bary))
     if not parts:
         return empty
     idx = np.concatenate([q[0] for q in parts])
@@ -210,14 +243,23 @@ def gutter_texels(idx: np.ndarray, face: np.ndarray, height: int, width: int,
     return gidx, np.asarray(face, dtype=np.int64)[lab.reshape(-1)[gidx] - 1]
 
 
+def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:
+    import cv2
+
+    return cv2.remap(img, mx, my, interpolation, borderMode=cv2.BORDER_REPLICATE)
+
+
 def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, *, density: float) -> np.ndarray:
     """(n, 3) float32 colours (0-255 units) of ``image`` at pixel coordinates (x, y), pixel centres at integers.
 
-    The interpolation follows the texel density (texels per source pixel): bicubic at up to
-    1.25, half bilinear + half bicubic above (bicubic alone over-sharpens an upsampled photo,
-    bilinear blurs it); below 1 the image is first area-averaged to the atlas resolution (a
-    texel then integrates its footprint instead of aliasing). Outside the image the border
-    pixels are repeated.
+    Lanczos interpolation (OpenCV's 8 x 8 ``INTER_LANCZOS4``), clamped to the range of the 2 x 2
+    pixels around the point (no ringing: a value never leaves what bilinear interpolation could
+    give, yet keeps the photo's contrast where bilinear would average it away). At a pixel centre
+    the result is that pixel, exactly: on an atlas aligned with the photo at one texel per pixel
+    (:mod:`~o3d_seqcc.texturing.packing`) the bake copies the photo. Below one texel per pixel
+    (``density`` < 1, an atlas budget too small for the photos) the image is first area-averaged
+    to the atlas resolution, so that a texel integrates its footprint instead of aliasing.
+    Outside the image the border pixels are repeated.
     """
     import cv2
 
@@ -235,11 +277,14 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, *, density: fl
     my = np.zeros(rows * cols, np.float32)
     mx[:n], my[:n] = x, y
     mx, my = mx.reshape(rows, cols), my.reshape(rows, cols)
-    cubic = cv2.remap(img, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)[:n]
-    if density <= 1.25:
-        return cubic.astype(np.float32)
-    lin = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)[:n]
-    return 0.5 * (cubic.astype(np.float32) + lin.astype(np.float32))
+    out = _remap(img, mx, my, cv2.INTER_LANCZOS4).reshape(-1, 3)[:n].astype(np.float32)
+    # the 2 x 2 neighbourhood's range: min / max filters (anchored at the top-left pixel) read at the floor
+    k = np.ones((2, 2), np.uint8)
+    fx, fy = np.floor(mx), np.floor(my)
+    lo = _remap(cv2.erode(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE), fx, fy, cv2.INTER_NEAREST)
+    hi = _remap(cv2.dilate(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE), fx, fy, cv2.INTER_NEAREST)
+    np.clip(out, lo.reshape(-1, 3)[:n].astype(np.float32), hi.reshape(-1, 3)[:n].astype(np.float32), out=out)
+    return out
 
 
 def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -331,11 +331,15 @@ def _planar_param(verts: np.ndarray, faces: np.ndarray, wid: np.ndarray, comp: n
             C[:, i, j] = np.bincount(vcomp, weights=Q[:, i] * Q[:, j], minlength=nc)
     fn = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
     nsum = np.stack([np.bincount(comp, weights=fn[:, k], minlength=nc) for k in range(3)], axis=1)
-    _, V = np.linalg.eigh(C)
+    # rounded to 1e-6 of each component's spread: float64 noise (a scene 1e7 m from the origin) must not turn the
+    # axes of a nearly round component (the packing reacts to any change)
+    q = 1e-6 * np.maximum(np.trace(C, axis1=1, axis2=2), 1e-300)[:, None, None]
+    _, V = np.linalg.eigh(np.round(C / q) * q)
     e0, e1 = V[:, :, 2], V[:, :, 1].copy()  # the two largest principal axes
     flip = (np.cross(e0, e1) * nsum).sum(axis=1) < 0  # keep the faces' winding (counter-clockwise)
     e1[flip] *= -1.0
     uv = np.stack([(Q * e0[vcomp]).sum(axis=1), (Q * e1[vcomp]).sum(axis=1)], axis=1) * float(scale)
+    uv = np.round(uv * 8.0) / 8.0  # source pixels to 1/8, as Visibility.face_uv
     bad = np.bincount(comp, weights=_tri_area2(uv[vid]) <= 1e-9, minlength=nc) > 0
     return uv[vid], vid, ~bad
 
@@ -350,7 +354,10 @@ def _xatlas_param(verts: np.ndarray, faces: np.ndarray, wid: np.ndarray, scale: 
     first = np.zeros(len(uw), dtype=np.int64)
     first[inv.reshape(-1)] = faces.reshape(-1)
     a = xatlas.Atlas()
-    a.add_mesh(np.ascontiguousarray(verts[first], dtype=np.float32), np.ascontiguousarray(lf, dtype=np.uint32))
+    local = verts[first] - verts[first].mean(axis=0)  # xatlas is float32: a local frame for far-away scenes,
+    q = 1e-6 * max(float(np.ptp(local, axis=0).max()), 1e-300)  # rounded so float64 noise there changes nothing
+    local = np.round(local / q) * q
+    a.add_mesh(np.ascontiguousarray(local, dtype=np.float32), np.ascontiguousarray(lf, dtype=np.uint32))
     po = xatlas.PackOptions()
     po.texels_per_unit = float(scale)
     po.resolution = 0

@@ -1,20 +1,32 @@
-"""Chart packing with xatlas, under an atlas-size budget (issue 13).
+"""Chart packing with xatlas, the atlas sized to the charts or under a budget (issues 13, 19).
 
 The charts (:mod:`~o3d_seqcc.texturing.charts`) are given to xatlas as a *UV mesh*
 (``xatlas.Atlas.add_uv_mesh`` with one material per chart, so that charts are kept as they are
-and never merged), whose parametric area is its UV area: every chart is scaled by exactly the
-texel density ``t`` (texels per source pixel), rotated (by 90 degrees and to its principal
-axis) and packed by xatlas (``PackOptions``: ``padding`` texels around every chart, the
-texels bilinear filtering reads included, ``resolution`` = the page size).
+and never merged), whose parametric area is its UV area: xatlas places every chart (turned by
+90 degrees where that packs better, never by another angle: ``rotate_charts_to_axis`` off) at
+``padding`` texels from the others (the texels bilinear filtering reads included,
+``resolution`` = the page size).
 
-Budget (:func:`pack_charts`): ``atlas_size`` N is a maximum. With ``texels_per_pixel="auto"``
-the page is the smallest power of two S <= N (or the smallest multiple of 4 with
-``power_of_two=False``) that holds the charts at one texel per source pixel, and the density
-is then raised to fill S (at most :data:`MAX_AUTO_DENSITY`); a number asks for that density.
-When even N cannot hold the charts at the asked density, ``overflow="scale"`` lowers the density
-(a warning gives the factor) and ``overflow="pages"`` keeps it and writes several N x N pages.
-Charts are never resized silently: a chart xatlas would have to shrink to fit a page lowers
-the density of the whole atlas instead (with a warning).
+**The texel grid is the photo's pixel grid.** xatlas moves a chart by a fractional offset and
+stretches it to whole texels, so its texture coordinates would put every texel between four
+photo pixels. Only its placement is kept: every chart's texel coordinates are recomputed as
+``t * uv + o`` (``uv`` with x and y swapped where xatlas turned the chart) with an integer
+offset ``o`` per chart, as close to xatlas's placement as rounding allows (within a texel: xatlas
+is given ``padding + 1`` so that the gap between charts stays ``2 * padding``). At one texel per
+pixel (``t = 1``) a texel centre is then a pixel centre and the bake copies the photo
+(:mod:`~o3d_seqcc.texturing.bake`).
+
+Size (:func:`pack_charts`): with ``atlas_size="auto"`` (the default) the atlas is sized to the
+charts at their photos' resolution (``texels_per_pixel="auto"``: exactly 1, or the number
+asked): one page, the smallest power of two (or multiple of 4 with ``power_of_two=False``) that
+holds them, up to :data:`MAX_AUTO_ATLAS_SIZE`; beyond that, as many pages of that size as
+needed. An integer ``atlas_size`` N is a budget, a maximum: the page is the smallest side <= N
+that holds the charts at the asked density (never raised to fill the page: a texel between photo
+pixels blurs the photo once more in every render); when even N cannot hold the charts at that
+density, ``overflow="scale"`` lowers the density (a warning gives the factor) and
+``overflow="pages"`` keeps it and writes several N x N pages. Charts are never resized silently:
+a chart xatlas would have to shrink to fit a page lowers the density of the whole atlas instead
+(with a warning).
 """
 
 from __future__ import annotations
@@ -27,12 +39,12 @@ import numpy as np
 
 from ..errors import InputError, warn
 
-__all__ = ["MAX_AUTO_DENSITY", "Packing", "pack_charts"]
+__all__ = ["MAX_AUTO_ATLAS_SIZE", "Packing", "pack_charts"]
 
 logger = logging.getLogger(__name__)
 
-#: ``texels_per_pixel="auto"`` raises the density up to this to fill the chosen page
-MAX_AUTO_DENSITY = 2.0
+#: ``atlas_size="auto"``: the largest page; more pages of this side beyond it
+MAX_AUTO_ATLAS_SIZE = 8192
 #: xatlas's marker of an unassigned vertex / chart
 _NONE = np.iinfo(np.uint32).max
 
@@ -77,17 +89,20 @@ class _Packer:
     """xatlas calls on one UV mesh (kept across attempts)."""
 
     def __init__(self, uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, padding: int) -> None:
+        self.uv64 = np.asarray(uv, dtype=np.float64)
         self.uv = np.ascontiguousarray(uv, dtype=np.float32)
         self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
         self.chart = np.ascontiguousarray(chart, dtype=np.uint32).reshape(-1, 1)
         self.padding = int(padding)
-        p = np.asarray(uv, dtype=np.float64)[np.asarray(faces)]
+        p = self.uv64[np.asarray(faces)]
         a2 = np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
         self.n_charts = int(np.asarray(chart).max()) + 1
         self.chart_area = np.bincount(np.asarray(chart), weights=0.5 * a2, minlength=self.n_charts)
+        self.vertex_chart = np.full(len(uv), -1, dtype=np.int64)
+        self.vertex_chart[np.asarray(faces, dtype=np.int64)] = np.asarray(chart, dtype=np.int64)[:, None]
         self.log: list[str] = []
 
-    def pack(self, t: float, resolution: int, padding: int | None = None):
+    def pack(self, t: float, resolution: int):
         import xatlas
 
         a = xatlas.Atlas()
@@ -95,11 +110,11 @@ class _Packer:
         po = xatlas.PackOptions()
         po.texels_per_unit = float(t)
         po.resolution = int(resolution)
-        po.padding = self.padding if padding is None else int(padding)
+        po.padding = self.padding + 1 if self.padding > 0 else 0  # + the texel the grid alignment may move a chart
         po.bilinear = True
         po.blockAlign = False
-        po.rotate_charts = True
-        po.rotate_charts_to_axis = True
+        po.rotate_charts = True  # by 90 degrees (xatlas swaps x and y): the texel grid stays the pixel grid
+        po.rotate_charts_to_axis = False  # any other angle would resample every texel
         a.generate(xatlas.ChartOptions(), po)
         return a
 
@@ -132,13 +147,72 @@ def _sizes(atlas_size: int, power_of_two: bool, side: float) -> list[int]:
     return sorted(set(x for x in out if x < atlas_size)) + [int(atlas_size)]
 
 
+def _chart_ranges(values: np.ndarray, order: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-chart minimum and maximum of (M, k) ``values`` (vertices sorted by chart: ``order``, ``starts``)."""
+    v = values[order]
+    return np.minimum.reduceat(v, starts, axis=0), np.maximum.reduceat(v, starts, axis=0)
+
+
+def _aligned(pk: _Packer, txy: np.ndarray, placed: np.ndarray, t: float, size: int) -> np.ndarray:
+    """Texel coordinates ``t * uv + o`` per chart (x and y swapped where xatlas turned it), ``o`` integer.
+
+    ``txy`` (M, 2): xatlas's coordinates (texel centres at integers) where ``placed``; charts with
+    no placed vertex keep them.
+    """
+    vc = pk.vertex_chart
+    sel = np.flatnonzero(placed & (vc >= 0))
+    out = txy.copy()
+    if len(sel) == 0:
+        return out
+    order = np.argsort(vc[sel], kind="stable")
+    cs = vc[sel][order]
+    starts = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
+    charts = cs[starts]
+    uv = pk.uv64 * t
+    q = txy[sel]
+    spread = []
+    for src in (uv[sel], uv[sel][:, ::-1]):
+        lo, hi = _chart_ranges(q - src, order, starts)
+        spread.append((hi - lo).sum(axis=1))
+    swap_c = np.zeros(pk.n_charts, dtype=bool)
+    swap_c[charts] = spread[1] < spread[0] - 1e-6
+    has = np.zeros(pk.n_charts, dtype=bool)
+    has[charts] = True
+    allv = np.flatnonzero((vc >= 0) & has[np.maximum(vc, 0)])
+    src_all = np.where(swap_c[vc[allv]][:, None], uv[allv][:, ::-1], uv[allv])
+    src = np.where(swap_c[vc[sel]][:, None], uv[sel][:, ::-1], uv[sel])
+    dlo, dhi = _chart_ranges(q - src, order, starts)
+    o = np.rint(0.5 * (dlo + dhi))
+    # keep the chart inside its page (xatlas's placement may touch the page border)
+    o2 = np.argsort(vc[allv], kind="stable")
+    ca = vc[allv][o2]
+    st2 = np.flatnonzero(np.r_[True, ca[1:] != ca[:-1]])
+    slo, shi = _chart_ranges(src_all, o2, st2)
+    pos = np.searchsorted(charts, ca[st2])  # the same charts, in the same (ascending) order
+    o = o[pos]
+    o = np.minimum(np.maximum(o, np.ceil(-0.5 - slo - 1e-9)), np.floor(size - 0.5 - shi + 1e-9))
+    off = np.zeros((pk.n_charts, 2))
+    off[ca[st2]] = o
+    out[allv] = src_all + off[vc[allv]]
+    return out
+
+
 def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
     _, ind, uv = a[0]
     page, _ = a.get_mesh_vertex_assignment(0)
     page = page.astype(np.int64)
     txy = uv.astype(np.float64) * [a.width, a.height] - 0.5
     bad = page >= _NONE
-    if bad.any():  # vertices of faces xatlas ignored (zero UV area): put them on a placed vertex of their face
+    txy = _aligned(pk, txy, ~bad & np.isfinite(txy).all(axis=1), t, size)
+    if bad.any():  # vertices of faces xatlas ignored (zero UV area): their chart's page, else a placed vertex's
+        vc = pk.vertex_chart
+        cpage = np.full(pk.n_charts, -1, dtype=np.int64)
+        ok = ~bad & (vc >= 0)
+        cpage[vc[ok]] = page[ok]
+        fix = bad & (vc >= 0)
+        fix[fix] = cpage[vc[fix]] >= 0
+        page[fix] = cpage[vc[fix]]
+        bad &= ~fix
         faces = pk.faces.astype(np.int64)
         for j in range(3):  # 3 corner slots, vectorised over faces
             fv = faces[:, j]
@@ -156,32 +230,38 @@ def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
 
 
 def pack_charts(
-    uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int, texels_per_pixel: float | str = "auto",
-    overflow: str = "scale", padding: int = 4, power_of_two: bool = True,
+    uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int | str = "auto",
+    texels_per_pixel: float | str = "auto", overflow: str = "scale", padding: int = 4, power_of_two: bool = True,
 ) -> Packing:
-    """Pack charts into square pages of at most ``atlas_size`` (see the module docstring).
+    """Pack charts into square pages, sized to them or of at most ``atlas_size`` (see the module docstring).
 
     Parameters
     ----------
     uv : (M, 2) float
-        Chart coordinates in source pixels.
+        Chart coordinates in source pixels (pixel centres at integers).
     faces : (F, 3) int
         Faces over ``uv``.
     chart : (F,) int
         Chart of every face (``0 .. C-1``); a chart is packed as one piece.
-    atlas_size : int
-        Largest page side N.
+    atlas_size : int or "auto", default "auto"
+        ``"auto"``: pages sized to the charts (up to :data:`MAX_AUTO_ATLAS_SIZE`, then more pages);
+        an integer: the largest page side N (a budget).
     texels_per_pixel : float or "auto", default "auto"
+        Density; ``"auto"``: 1, the photos' resolution (lowered only by a budget with
+        ``overflow="scale"``).
     overflow : {"scale", "pages"}, default "scale"
+        Under a budget, when the charts do not fit one N x N page at the density (always
+        ``"pages"`` with ``atlas_size="auto"``).
     padding : int, default 4
-        Texels between a chart and its neighbours' padding (xatlas ``padding``; the gap
-        between two charts is twice this).
+        Texels between a chart and its neighbours' padding (the gap between two charts is
+        twice this).
     power_of_two : bool, default True
         Page sides are powers of two.
 
     Returns
     -------
     Packing
+        ``txy``: ``t * uv + o`` per chart (x and y swapped in charts xatlas turned), ``o`` integer.
 
     Raises
     ------
@@ -193,7 +273,10 @@ def pack_charts(
     req = 1.0 if auto else float(texels_per_pixel)
     if not req > 0:
         raise InputError(f"texels_per_pixel must be > 0 or 'auto', got {texels_per_pixel!r}")
-    N = int(atlas_size)
+    sized = isinstance(atlas_size, str)  # "auto": sized to the charts, pages beyond the largest
+    if sized:
+        overflow = "pages"
+    N = MAX_AUTO_ATLAS_SIZE if sized else int(atlas_size)
     pk = _Packer(uv, faces, chart, padding)
     tight = pk.pack(req, 0)  # the charts at the asked density, without a size limit
     area_1 = tight.width * tight.height / (req * req)  # atlas texels they take per unit density^2
@@ -205,9 +288,7 @@ def pack_charts(
         return math.sqrt(size * size / area_1) * 0.98
 
     k = next((i for i, s_ in enumerate(sizes) if fill(s_) >= req), len(sizes) - 1)
-    t = min(fill(sizes[k]), MAX_AUTO_DENSITY) if auto else min(req, fill(sizes[k]))
-    if not power_of_two:
-        t = min(t, max(req, fill(sizes[k]) if k == 0 else req))
+    t = min(req, fill(sizes[k]))
     for _ in range(60):
         if t < req * 0.999 and k == len(sizes) - 1 and overflow == "pages":
             break
@@ -225,15 +306,9 @@ def pack_charts(
         # the next try: several pages -> shrink by their total use, else a few percent
         used = sum(a.get_utilization(i) for i in range(a.atlas_count))
         shrink = float(np.clip(math.sqrt(0.95 / used), 0.5, 0.95)) if a.atlas_count > 1 and used > 0 else 0.95
-        if auto and t * shrink >= req:
-            t *= shrink
-        elif auto and t > req * 1.001:
-            t = req
-        elif k < len(sizes) - 1:
+        if k < len(sizes) - 1:
             k += 1
-            t = min(fill(sizes[k]), MAX_AUTO_DENSITY) if auto else req
-            if not power_of_two:
-                t = min(t, req)
+            t = req
         elif overflow == "pages":
             break
         else:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -98,6 +98,7 @@ class _Entries:
     cos_angle: np.ndarray | None  # (nnz,) float64
     n_views: int
     n_faces: int
+    quality: np.ndarray | None = None  # (nnz,) float64: the data term's quality (ScoredVisibility)
 
     def view(self, v: int) -> slice:
         return slice(int(self.indptr[v]), int(self.indptr[v + 1]))
@@ -109,7 +110,8 @@ def _entries(visibility: VisibilityLike, *, cos: bool = False) -> _Entries:
     if hasattr(visibility, "usable_entries"):
         indptr, faces, area, cos_angle = visibility.usable_entries()
         return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
-                        cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces))
+                        cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces),
+                        getattr(visibility, "entry_quality", None))
     usable = np.asarray(visibility.usable, dtype=bool)
     if usable.ndim != 2:
         raise InputError(f"visibility.usable must be (V, F) bool, got shape {usable.shape}")
@@ -142,9 +144,9 @@ def _select_largest_area(visibility: VisibilityLike, *, seed: int = 0) -> np.nda
     return _largest(_entries(visibility))
 
 
-def _largest(e: _Entries) -> np.ndarray:
-    """Per face the usable view of largest area; ties go to the lowest view index."""
-    score = np.nan_to_num(e.area, nan=-1.0)
+def _largest(e: _Entries, score: np.ndarray | None = None) -> np.ndarray:
+    """Per face the usable view of largest area (or ``score``); ties go to the lowest view index."""
+    score = np.nan_to_num(e.area if score is None else score, nan=-1.0)
     best = np.full(e.n_faces, -np.inf)
     lab = np.full(e.n_faces, -1, dtype=np.int64)
     for v in range(e.n_views):
@@ -156,16 +158,41 @@ def _largest(e: _Entries) -> np.ndarray:
     return lab
 
 
-def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
-    """(nnz,) float64 data cost of every usable incidence (unusable ones are never considered)."""
+#: data terms of the "mrf" method (the "log-" names are the older spellings of the first two)
+_MRF_DATA_TERMS = ("area", "area-cos", "gmi", "log-area", "log-area-cos")
+
+
+def _quality(e: _Entries, data_term: str) -> np.ndarray:
+    """(nnz,) quality of every usable incidence under ``data_term``."""
+    if e.quality is not None:
+        return np.nan_to_num(e.quality, nan=0.0)
+    if data_term == "gmi":
+        raise InputError("data_term='gmi' reads the photos: call select_views(..., images=...)")
     area = np.nan_to_num(e.area, nan=0.0)
-    if data_term == "log-area":
-        q = area
-    elif data_term == "log-area-cos":
-        q = area * np.clip(np.nan_to_num(e.cos_angle), 0.0, 1.0)
-    else:
-        raise ValueError(f"unknown data_term {data_term!r}; valid: 'log-area', 'log-area-cos'")
-    q = np.maximum(q, 0.0)
+    if data_term in ("area-cos", "log-area-cos"):
+        return area * np.clip(np.nan_to_num(e.cos_angle), 0.0, 1.0)
+    return area
+
+
+#: "gmi" data cost of a view without detail: texrecon's 1 - q / q_99.5 scaled so that the Potts weight
+#: MRF_SMOOTHNESS (4) is texrecon's weight 1. Measured on Fountain (issue 19): 4x weaker smoothness
+#: (16) renders with a higher variance of the Laplacian than texrecon's, but splits the "HAROLD HATCH"
+#: lettering at misregistered seams (doubled edges count as detail); this balance keeps it whole.
+GMI_COST = 4.0
+
+
+def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
+    """(nnz,) float64 data cost of every usable incidence (unusable ones are never considered).
+
+    Area terms: ``-log(q / q_max of the face)`` (relative to the face's best view, clipped to
+    ``max_cost``). GMI: ``GMI_COST * (1 - min(1, q / q_99.5))`` with the 99.5th percentile of
+    all incidences (Waechter et al.), so detailed faces get strong data terms and pick their
+    sharpest photo while plain ones follow the smoothness.
+    """
+    q = np.maximum(_quality(e, data_term), 0.0)
+    if data_term == "gmi":
+        ref = float(np.percentile(q, 99.5)) if len(q) else 1.0
+        return GMI_COST * (1.0 - np.minimum(1.0, q / max(ref, 1e-12)))
     qmax = np.zeros(e.n_faces)
     np.maximum.at(qmax, e.faces, q)
     qm = qmax[e.faces]
@@ -200,7 +227,7 @@ def _select_mrf(
     *,
     seed: int = 0,
     smoothness: float = MRF_SMOOTHNESS,
-    data_term: str = "log-area",
+    data_term: str = "area",
     max_data_cost: float = 10.0,
     n_sweeps: int = 4,
     adjacency: np.ndarray | None = None,
@@ -210,9 +237,10 @@ def _select_mrf(
 
     Energy ``E(l) = sum_f D_f(l_f) + smoothness * #{(p, q) adjacent: l_p != l_q}`` with
     ``D_f(l) = -log(q_f(l) / max_l' q_f(l'))`` clipped to ``[0, max_data_cost]`` for usable
-    views (``q`` = projected area, or area x cos for ``"log-area-cos"``) and a prohibitive cost
-    for unusable ones. Starts from ``"largest-area"`` (energy only decreases, so the result
-    never has more transitions *plus* data cost than it); each sweep runs one expansion move
+    views (``q`` = projected area, area x cos for ``"area-cos"``, or the quality of a
+    :class:`~o3d_seqcc.texturing.data_costs.ScoredVisibility`, e.g. GMI) and a prohibitive cost
+    for unusable ones. Starts from the best ``q`` of every face (energy only decreases, so the
+    result never has more transitions *plus* data cost than it); each sweep runs one expansion move
     per view in a seeded random order, restricted to the faces where that view is usable;
     stops after ``n_sweeps`` or when a sweep changes nothing. Works on the usable incidences
     only (memory and time proportional to them, not to views x faces).
@@ -224,7 +252,9 @@ def _select_mrf(
         On fountain, 1 / 4 / 8 give 962 / 680 / 602 image transitions, with seam metric (mean,
         after leveling) 0.26 / 0.20 / 0.19 and the sharpness of the render of view 16 unchanged
         (1.02x / 1.12x / 1.12x of the photo).
-    data_term : {"log-area", "log-area-cos"}, default "log-area"
+    data_term : {"area", "area-cos", "gmi"}, default "area"
+        ``"gmi"`` needs a scored visibility (:func:`select_views` with ``images``); with one,
+        its quality is used whatever the name.
     max_data_cost : float, default 10.0
     n_sweeps : int, default 4
     adjacency : (E, 2) int array, optional
@@ -236,9 +266,9 @@ def _select_mrf(
 
     if smoothness < 0:
         raise ValueError(f"smoothness must be >= 0, got {smoothness}")
-    if data_term not in ("log-area", "log-area-cos"):
-        raise ValueError(f"unknown data_term {data_term!r}; valid: 'log-area', 'log-area-cos'")
-    e = _entries(visibility, cos=data_term == "log-area-cos")
+    if data_term not in _MRF_DATA_TERMS:
+        raise ValueError(f"unknown data_term {data_term!r}; valid: {', '.join(map(repr, _MRF_DATA_TERMS[:3]))}")
+    e = _entries(visibility, cos=data_term in ("area-cos", "log-area-cos"))
     n_views, n_faces = e.n_views, e.n_faces
     if adjacency is None:
         m = mesh if mesh is not None else getattr(visibility, "mesh", None)
@@ -246,12 +276,12 @@ def _select_mrf(
             raise InputError("mrf selection needs the mesh adjacency: pass adjacency= or mesh=")
         adjacency = face_adjacency(m.faces, m.vertices)
     adjacency = np.asarray(adjacency, dtype=np.int64).reshape(-1, 2)
-    labels = _largest(e)
+    data = _mrf_data_cost(e, data_term, max_data_cost)
+    labels = _largest(e, -data)
     seen = labels >= 0
     pairs = adjacency[seen[adjacency[:, 0]] & seen[adjacency[:, 1]]]
     if smoothness == 0 or len(pairs) == 0:
         return labels
-    data = _mrf_data_cost(e, data_term, max_data_cost)
     w = float(smoothness)
     rng = np.random.default_rng(seed)
     cur = np.zeros(n_faces)  # data cost of every face's current label
@@ -343,6 +373,9 @@ def select_views(
     *,
     method: str = TextureSettings.selection,
     seed: int = 0,
+    images: Sequence[np.ndarray] | None = None,
+    data_term: str | None = None,
+    outlier_removal: str | None = None,
     **options: Any,
 ) -> np.ndarray:
     """Choose one view per face for texturing.
@@ -358,9 +391,22 @@ def select_views(
         See the module docstring and :data:`SELECTION_METHODS`.
     seed : int, default 0
         Seed of ``"random"`` and of the expansion order of ``"mrf"``.
+    images : sequence of (H, W, 3) arrays, optional
+        The (colour-corrected) photos, one per view, read once each: needed by the ``"gmi"``
+        data term and by outlier removal (:mod:`~o3d_seqcc.texturing.data_costs`).
+    data_term : {"area", "area-cos", "gmi"}, optional
+        ``"mrf"``'s quality of a view for a face: projected area, area x cosine, or GMI (the
+        photo's gradient magnitude integrated over the face's projection: detail, not only
+        size). Default :attr:`TextureSettings.data_term` (``"gmi"``) when ``images`` are given,
+        else ``"area"``.
+    outlier_removal : {"median", "none", "gauss-clamping", "gauss-damping"}, optional
+        Drop (damping: down-weight, ``"mrf"`` only) the views whose colour of a face is far from
+        the consensus of its other views (every method; :func:`~o3d_seqcc.texturing.data_costs.photometric_outliers`).
+        Default :attr:`TextureSettings.outlier_removal` (``"median"``) when ``images`` are
+        given, else ``"none"``.
     **options
-        Method options (``"mrf"``: ``smoothness``, ``data_term``, ``max_data_cost``,
-        ``n_sweeps``, ``adjacency``, ``mesh``); unknown ones raise ``TypeError``.
+        Method options (``"mrf"``: ``smoothness``, ``max_data_cost``, ``n_sweeps``,
+        ``adjacency``, ``mesh``); unknown ones raise ``TypeError``.
 
     Returns
     -------
@@ -371,12 +417,19 @@ def select_views(
     Raises
     ------
     ValueError
-        Unknown method (the message lists the valid ones).
+        Unknown method, data term or outlier removal (the message lists the valid ones).
     InputError
-        No face is usable in any view (wrong cameras or mesh, or filters too strict).
+        No face is usable in any view (wrong cameras or mesh, or filters too strict); ``"gmi"``
+        or outlier removal without ``images``.
     """
+    from .data_costs import score_visibility
+
     if method not in SELECTION_METHODS:
         raise ValueError(f"unknown selection method {method!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
+    term = (TextureSettings.data_term if images is not None else "area") if data_term is None else data_term
+    term = {"log-area": "area", "log-area-cos": "area-cos"}.get(term, term)
+    if outlier_removal is None:
+        outlier_removal = TextureSettings.outlier_removal if images is not None else "none"
     n_usable = (int(visibility.usable_counts().sum()) if hasattr(visibility, "usable_counts")
                 else len(_entries(visibility).faces))
     if visibility.n_faces == 0 or not n_usable:
@@ -385,6 +438,13 @@ def select_views(
             "depth-inconsistent or too oblique): check that the mesh and the cameras are in the same coordinates "
             "(extrinsic = world-to-camera), or relax the visibility filters"
         )
+    if method == "mrf":
+        options["data_term"] = term
+    if (method == "mrf" and term == "gmi") or outlier_removal != "none":
+        visibility = score_visibility(visibility, images, data_term=term if method == "mrf" else "area",
+                                      outlier_removal=outlier_removal)
+    elif term not in ("area", "area-cos", "gmi"):
+        raise ValueError(f"unknown data_term {data_term!r}; valid: 'area', 'area-cos', 'gmi'")
     labels = np.asarray(SELECTION_METHODS[method](visibility, seed=seed, **options), dtype=np.int64)
     n_unseen = int(np.count_nonzero(labels < 0))
     if n_unseen:

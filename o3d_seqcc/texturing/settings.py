@@ -14,8 +14,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["FALLBACKS", "LEVELING_SMOOTHNESS", "MAX_ATLAS_SIZE", "MRF_SMOOTHNESS", "OVERFLOWS", "TextureSettings", "VisibilityLike",
-           "parse_texels_per_pixel"]
+__all__ = ["DATA_TERMS", "FALLBACKS", "LEVELING_SMOOTHNESS", "MAX_ATLAS_SIZE", "MRF_SMOOTHNESS", "OUTLIER_REMOVALS",
+           "OVERFLOWS", "TextureSettings", "VisibilityLike", "parse_atlas_size", "parse_texels_per_pixel"]
 
 #: default Potts weight of the ``"mrf"`` selection
 MRF_SMOOTHNESS = 4.0
@@ -23,6 +23,10 @@ MRF_SMOOTHNESS = 4.0
 LEVELING_SMOOTHNESS = 0.03
 #: colours of faces seen by no view
 FALLBACKS = ("smooth", "flat")
+#: data terms of the "mrf" selection (:mod:`~o3d_seqcc.texturing.data_costs`)
+DATA_TERMS = ("area", "area-cos", "gmi")
+#: photometric outlier removal of the selection (texrecon's --outlier_removal)
+OUTLIER_REMOVALS = ("none", "median", "gauss-clamping", "gauss-damping")
 #: what to do when the charts do not fit the atlas at the asked density
 OVERFLOWS = ("scale", "pages")
 
@@ -54,16 +58,35 @@ class TextureSettings:
         ``"mrf"``: Potts weight per interior edge.
     seed : int, default 0
         Seed of ``"random"`` and of the ``"mrf"`` expansion order.
-    atlas_size : int, default 2048
-        Largest side of the (square) atlas in texels: a budget, never exceeded. The atlas is
-        the smallest power of two up to it that holds the charts (see ``texels_per_pixel``).
+    data_term : {"gmi", "area", "area-cos"}, default "gmi"
+        ``"mrf"``: what makes a photo good for a face: ``"gmi"``, the photo's gradient magnitude
+        integrated over the face's projection (Waechter et al. 2014: large *and* sharp, so a
+        blurred photo loses to a sharp one of the same size), on the corrected photos;
+        ``"area"``, the projected area alone; ``"area-cos"``, area x cosine of the viewing angle.
+    outlier_removal : {"median", "none", "gauss-clamping", "gauss-damping"}, default "median"
+        Per face, drop the photos whose colour of it is far from the consensus of the others
+        (on the corrected photos), so that a passer-by or a car the mesh does not hold is not
+        textured in: ``"median"``, more than 20 CIE Lab units and 3 x the face's median distance
+        from the per-channel median of its photos (faces seen by at least 3; robust to 2
+        outliers in 5); texrecon's ``--outlier_removal`` ``"gauss-clamping"`` (drop) and
+        ``"gauss-damping"`` (down-weight) test an iterated Gaussian of the colours (faces seen
+        by at least 4; a minority of 2 in 5 is not found).
+    atlas_size : int or "auto", default "auto"
+        ``"auto"``: the atlas is sized to the charts at the photos' own resolution: one square
+        page, the smallest power of two that holds them, up to 8192 x 8192, and more pages of
+        8192 x 8192 beyond (:data:`~o3d_seqcc.texturing.packing.MAX_AUTO_ATLAS_SIZE`). An
+        integer: the largest side of the (square) atlas in texels, a budget (e.g. a game
+        engine's), never exceeded: the atlas is the smallest power of two up to it that holds
+        the charts (see ``texels_per_pixel`` and ``overflow``).
     texels_per_pixel : float or "auto", default "auto"
-        Texel density, atlas texels per photo pixel. ``"auto"``: at least the photos' own
-        resolution (1), raised to fill the chosen atlas (at most 2: charts are packed densely).
+        Texel density, atlas texels per photo pixel. ``"auto"``: the photos' own resolution, 1
+        (every texel a copy of a photo pixel; lowered only by an ``atlas_size`` budget with
+        ``overflow="scale"``). Another density resamples the photos (Lanczos, clamped): 2 still
+        renders the photo exactly from its own camera, a fraction blurs it.
     overflow : {"scale", "pages"}, default "scale"
-        When the charts do not fit ``atlas_size`` at the asked density (1 for ``"auto"``):
-        lower the density (a warning gives the factor), or write several atlas pages of
-        ``atlas_size`` (one material each).
+        With an ``atlas_size`` budget, when the charts do not fit it at the asked density (1 for
+        ``"auto"``): lower the density (a warning gives the factor), or write several atlas pages
+        of ``atlas_size`` (one material each). ``atlas_size="auto"`` always adds pages.
     power_of_two : bool, default True
         Atlas sides are powers of two (``False``: multiples of 4, as small as the charts allow).
     padding : int, default 4
@@ -91,7 +114,9 @@ class TextureSettings:
     selection: str = "mrf"
     smoothness: float = MRF_SMOOTHNESS
     seed: int = 0
-    atlas_size: int = 2048
+    data_term: str = "gmi"
+    outlier_removal: str = "median"
+    atlas_size: int | str = "auto"
     texels_per_pixel: float | str = "auto"
     overflow: str = "scale"
     power_of_two: bool = True
@@ -108,10 +133,14 @@ class TextureSettings:
         _check_types(self)
         if self.fallback not in FALLBACKS:
             raise ValueError(f"unknown fallback {self.fallback!r}; valid: {', '.join(map(repr, FALLBACKS))}")
+        if self.data_term not in DATA_TERMS:
+            raise ValueError(f"unknown data_term {self.data_term!r}; valid: {', '.join(map(repr, DATA_TERMS))}")
+        if self.outlier_removal not in OUTLIER_REMOVALS:
+            raise ValueError(f"unknown outlier_removal {self.outlier_removal!r}; valid: "
+                             f"{', '.join(map(repr, OUTLIER_REMOVALS))}")
         if self.overflow not in OVERFLOWS:
             raise ValueError(f"unknown overflow {self.overflow!r}; valid: {', '.join(map(repr, OVERFLOWS))}")
-        if isinstance(self.atlas_size, bool) or int(self.atlas_size) != self.atlas_size or int(self.atlas_size) < 8:
-            raise InputError(f"atlas_size must be an integer >= 8, got {self.atlas_size}")
+        object.__setattr__(self, "atlas_size", parse_atlas_size(self.atlas_size))
         object.__setattr__(self, "texels_per_pixel", parse_texels_per_pixel(self.texels_per_pixel))
         if isinstance(self.padding, bool) or int(self.padding) != self.padding or not 0 <= self.padding <= 64:
             raise InputError(f"padding must be an integer in 0..64, got {self.padding}")
@@ -123,9 +152,6 @@ class TextureSettings:
             raise InputError(f"smoothness (--smoothness) must be >= 0, got {self.smoothness}")
         if not self.leveling_smoothness >= 0:
             raise InputError(f"leveling_smoothness (--leveling-smoothness) must be >= 0, got {self.leveling_smoothness}")
-        if int(self.atlas_size) > MAX_ATLAS_SIZE:
-            raise InputError(f"atlas_size (--atlas-size) must be at most {MAX_ATLAS_SIZE} (the largest texture GPUs "
-                             f"load), got {self.atlas_size}; use overflow='pages' (--atlas-overflow pages) for more")
 
     def updated(self, **changes: Any) -> "TextureSettings":
         """A copy with some fields changed; unknown names raise ``TypeError`` listing the valid ones."""
@@ -133,6 +159,31 @@ class TextureSettings:
         if bad:
             raise TypeError(f"unknown texture setting(s) {bad}; valid: {sorted(f.name for f in fields(self))}")
         return replace(self, **changes)
+
+
+def parse_atlas_size(value: Any) -> int | str:
+    """``"auto"`` or an integer side in 8..:data:`MAX_ATLAS_SIZE` (also given as a string, as on the command line).
+
+    Raises
+    ------
+    InputError
+        Anything else.
+    """
+    if isinstance(value, str):
+        v = value.strip().lower()
+        if v == "auto":
+            return "auto"
+        try:
+            value = int(v)
+        except ValueError:
+            raise InputError(f"atlas_size (--atlas-size) must be 'auto' or an integer >= 8, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not np.isfinite(value) \
+            or int(value) != value or int(value) < 8:
+        raise InputError(f"atlas_size (--atlas-size) must be 'auto' or an integer >= 8, got {value!r}")
+    if int(value) > MAX_ATLAS_SIZE:
+        raise InputError(f"atlas_size (--atlas-size) must be at most {MAX_ATLAS_SIZE} (the largest texture GPUs "
+                         f"load), got {value}; use overflow='pages' (--atlas-overflow pages) for more")
+    return int(value)
 
 
 def _is_int(v: Any) -> bool:
@@ -146,7 +197,7 @@ _TYPES = {"int": (_is_int, "an integer"),
 
 
 def _check_types(settings: Any) -> None:
-    """Every field of the type it is declared with (``atlas_size="big"`` names the field, not ``int()``)."""
+    """Every field of the type it is declared with (``padding="big"`` names the field, not ``int()``)."""
     for f in fields(settings):
         kind = _TYPES.get(str(f.type))
         v = getattr(settings, f.name)

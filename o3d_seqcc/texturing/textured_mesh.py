@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..imageops import dtype_scale, sample_bilinear
+from ..meshops import float32_offset
 
 __all__ = ["TexturedMesh", "load_textured_mesh", "sample_texture"]
 
@@ -127,11 +128,14 @@ class TexturedMesh:
         float32 in the OBJ convention Open3D uses, and the texture as the ``albedo`` map of a
         ``defaultLit`` material, so ``o3d.visualization.draw`` shows it textured and
         ``o3d.t.io.write_triangle_mesh`` writes it. A vertex-coloured mesh gets ``vertex.colors``.
+        Positions are float64 where float32 would not hold them (far from the origin,
+        :func:`~o3d_seqcc.meshops.float32_offset`).
         """
         import open3d as o3d
 
         m = o3d.t.geometry.TriangleMesh()
-        m.vertex.positions = o3d.core.Tensor(np.asarray(self.vertices, dtype=np.float32))
+        far = float32_offset(self.vertices).any()
+        m.vertex.positions = o3d.core.Tensor(np.asarray(self.vertices, dtype=np.float64 if far else np.float32))
         m.triangle.indices = o3d.core.Tensor(np.asarray(self.faces, dtype=np.int32))
         if self.normals is not None:
             m.vertex.normals = o3d.core.Tensor(np.asarray(self.normals, dtype=np.float32))
