@@ -35,14 +35,6 @@ __all__ = ["write_run_folder"]
 logger = logging.getLogger(__name__)
 
 
-def _timed(name: str, fn, *args, **kw):
-    t = time.perf_counter()
-    try:
-        return fn(*args, **kw)
-    finally:
-        logger.debug("save: %s %.3f s", name, time.perf_counter() - t)
-
-
 def _mesh_files(res: Any, stage: Path, *, fmts: list[str], tfmt: str, quality: int, unlit: bool, rotation: Any,
                 save_images: bool) -> tuple[dict[str, Path], dict[str, Path], float]:
     """The textured mesh's files, selection.npy, the images, the MeshLab project: (files before the selection
@@ -102,11 +94,11 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
               "orientation": {**orientation, "applies_to": [f for f in fmts]}}
     pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="o3d_seqcc-save")
     try:
-        files = pool.submit(carried(_timed), "mesh files", _mesh_files, res, stage, fmts=fmts, tfmt=tfmt,
+        files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, fmts=fmts, tfmt=tfmt,
                             quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
-        pic = pool.submit(carried(_timed), "selection picture", write_selection_picture, res.scene, res.visibility,
+        pic = pool.submit(carried(write_selection_picture, "save: selection picture"), res.scene, res.visibility,
                           res.selection, stage / "selection.png", view) if picture else None
-        prelude = pool.submit(carried(_timed), "table 2 and seam steps", res._report_prelude, table2,
+        prelude = pool.submit(carried(res._report_prelude, "save: table 2 and seam steps"), table2,
                               images) if report else None
         rep = page = None
         t = time.perf_counter()

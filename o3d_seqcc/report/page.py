@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import inspect
 import logging
-import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -485,13 +484,6 @@ justify-content:space-between;width:242px}
 """
 
 
-def _timed(sid: str, build, *args, **kw):
-    t = time.perf_counter()
-    body = build(*args, **kw)
-    logger.debug("report section %s: %.3f s", sid, time.perf_counter() - t)
-    return body
-
-
 def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str, str]]:
     """(id, title, body) of every section the data allow; each timed at DEBUG.
 
@@ -504,7 +496,7 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
     out: list = []
 
     def add(sid: str, title: str, build, *args, **kw) -> None:
-        out.append((sid, title, pool.submit(carried(_timed), sid, build, *args, **kw)))
+        out.append((sid, title, pool.submit(carried(build, f"report section {sid}"), *args, **kw)))
 
     textured = inp.textured is not None and inp.selection is not None and inp.mesh is not None
     if textured:
@@ -533,7 +525,7 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp, f)
         if inp.mappings is not None and c.paths:
             edges = _path_edges(c.paths)
-            jihs, thumbs = pool.submit(carried(_timed), "JIH", _jihs_and_thumbs, inp, edges).result()
+            jihs, thumbs = pool.submit(carried(_jihs_and_thumbs, "report JIH"), inp, edges).result()
             add("jih", "Joint image histograms and colour mapping functions (Figures 6-7)", _jih_section, inp, path,
                 jihs, thumbs)
             if path:
@@ -549,9 +541,8 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
 
 
 def _jihs_and_thumbs(inp: PageInputs, edges: list) -> tuple[dict, dict]:
-    c = inp.correction
     jihs = _edge_jihs(inp, edges)
-    return jihs, {e: png(jih_thumbnail(jihs[e][0], c.edge_luts.get(e), jihs[e][1])) for e in edges}
+    return jihs, {e: png(jih_thumbnail(jihs[e][0], inp.correction.edge_luts.get(e), jihs[e][1])) for e in edges}
 
 
 def timings_block(rep: dict) -> str:
@@ -594,10 +585,9 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
 def render_page(inp: PageInputs, *, width: int = 160) -> str:
     """The report page of ``inp`` (sections only for the data present), thumbnails ``width`` pixels wide."""
     from .. import __version__
-
-    f = facts(inp.rep)
     from . import cached_images
 
+    f = facts(inp.rep)
     photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
     inp = replace(inp, photos=photos, corrected=corrected)
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
