@@ -158,3 +158,36 @@ def test_same_bytes_for_any_jobs(tmp_path):
         digests.append(_digest(out))
     assert {"mesh.glb", "mesh.obj", "mesh.png", "report.html", "report.json", "selection.png"} <= set(digests[0])
     assert digests[0] == digests[1]
+
+
+def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
+    """A pair's picked mappings built alone (the correction's 8000, Table 2's 200 of a pair) are bit for bit
+    the full build's at those indices, in every mapping mode; the count comes without building."""
+    from o3d_seqcc.mappings import compute_mappings
+    from o3d_seqcc.pairs import thinned
+    from o3d_seqcc.visibility import compute_visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    vis = compute_visibility(scene)
+    rng = np.random.default_rng(3)
+    for mode in ("surface", "vertices", "dense"):
+        m = compute_mappings(scene, visibility=vis, mode=mode)
+        src = m.pairs.source
+        levels = 0
+        for key in m.pairs:
+            full = src.build(*key)
+            levels += len(np.unique(src._plan(*key)[1]))
+            assert src.size(*key) == full.n > 0
+            picks = [np.sort(rng.choice(full.n, min(full.n, 97), replace=False)), np.arange(full.n),
+                     np.zeros(0, np.int64), np.array([0, full.n - 1])]
+            for idx in picks:
+                n, part = thinned(m.pairs, key, lambda n, idx=idx: idx)
+                want = full.take(idx)
+                assert n == full.n and part.n == len(idx)
+                for name in ("uv_a", "uv_b", "face_ids", "weights"):
+                    x, y = getattr(part, name), getattr(want, name)
+                    assert (x is None) == (y is None), (mode, name)
+                    assert x is None or (x.dtype == y.dtype and np.array_equal(x, y)), (mode, key, name)
+            assert thinned(m.pairs, key, lambda n: None)[1].n == full.n
+        assert mode == "vertices" or levels > len(m.pairs)  # faces of several levels in a pair: groups crossed

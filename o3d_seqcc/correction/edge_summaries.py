@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..pairs import thinned
 from ..parallel import LocalExecutor, current as current_executor
 
 __all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
@@ -239,22 +240,29 @@ def edge_observations(
     qb = np.zeros((E, 3, P))
     ns = np.zeros(E, dtype=np.int64)
     q = np.linspace(TRIM, 1.0 - TRIM, P)
-    # the positions each edge samples in its two views (pairs built lazily, once; strided to max_mappings)
-    uvs: list[tuple[np.ndarray, np.ndarray]] = []
-    for a, b in edges:
-        pm = ctx.mappings.pairs[(min(int(a), int(b)), max(int(a), int(b)))]
-        uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
-        if max_mappings is not None and len(uva) > int(max_mappings):
-            idx = (np.arange(int(max_mappings)) * (len(uva) / float(max_mappings))).astype(np.int64)
-            uva, uvb = uva[idx], uvb[idx]
-        uvs.append((np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)))
+
+    def pick(n: int) -> np.ndarray | None:
+        if max_mappings is None or n <= int(max_mappings):
+            return None
+        return (np.arange(int(max_mappings)) * (n / float(max_mappings))).astype(np.int64)
+
+    def positions(edge: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        a, b = int(edge[0]), int(edge[1])
+        _, pm = thinned(ctx.mappings.pairs, (min(a, b), max(a, b)), pick)
+        uva, uvb = (pm.uv_a, pm.uv_b) if a <= b else (pm.uv_b, pm.uv_a)
+        return np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)
+
+    # the positions each edge samples in its two views: only the strided max_mappings of a pair built, on
+    # local threads (the lazy pairs live in this process)
+    ex = current_executor(n_jobs)
+    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
+    uvs = local.map(positions, list(edges), desc="edge mappings", unit="edge")
     # one task per view: its image read once, sampled at all its edges' positions, released
     parts: dict[int, list[np.ndarray]] = {}
     for (a, b), (uva, uvb) in zip(edges, uvs):
         parts.setdefault(int(a), []).append(uva)
         parts.setdefault(int(b), []).append(uvb)
     views = sorted(parts)
-    ex = current_executor(n_jobs)
     sampled = ex.map(_sample_view_task, [(v, np.concatenate(parts[v])) for v in views],
                      ex.share(ctx.images), ctx.interpolation, desc="sample views", unit="view")
     offset = {v: 0 for v in views}
@@ -269,7 +277,6 @@ def edge_observations(
         pairs.append((ca, cb))
     # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
     live = [i for i in range(E) if len(pairs[i][0])]
-    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
     for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [pairs[i] for i in live], q, outlier_k,
                                                    desc="edge summaries", unit="edge")):
         qa[i], qb[i], ns[i] = qa_i, qb_i, n_i
