@@ -277,7 +277,9 @@ def _registry() -> dict[str, MeshLabFilter]:
                             description="Colour-correct the rasters toward the reference first (o3d-seqcc run), "
                                         "or texture with the rasters as they are (o3d-seqcc texture)."),
             *_correction_parameters(run_defaults, run_docs),
-            *(_param(k, labels[k], ts_defaults, ts_docs, values=enums.get(k, ())) for k in ts_defaults),
+            # atlas_size: an int budget or "auto" (sized to the charts), as t_npm
+            *(_param(k, labels[k], ts_defaults, ts_docs, values=enums.get(k, ()), kind=int if k == "atlas_size" else None)
+              for k in ts_defaults),
             _param("seams", "Seam metric", run_defaults, run_docs),
             FilterParameter(name="formats", type=str, default=",".join(pipeline.DEFAULT_FORMATS),
                             label="Export formats", description=save_docs["formats"], keyword="formats"),

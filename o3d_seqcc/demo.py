@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .io.output import write_output_json
+from .io.output import write_output_file, write_output_json
 from .metrics import image_delta_e
 from .pipeline import RunResult, run
 from .datasets import DatasetUnavailable, fountain
@@ -96,7 +96,8 @@ def run_demo(
     Parameters
     ----------
     out : path-like, default "out/demo"
-        Demo folder: ``scene/`` (the synthetic scene), ``run/`` (the job's outputs),
+        Demo folder: ``scene/`` (the synthetic scene), ``run/`` (the job's outputs), ``report.html``
+        (a copy of ``run/report.html``: one offline file, the result to open),
         ``demo_summary.json``.
     dataset : {"synthetic", "fountain"}, default "synthetic"
         The synthetic room (generated, or reused when identical; scored against its ground-truth
@@ -181,6 +182,9 @@ def run_demo(
         t = time.perf_counter()
         summary.update(_ground_truth(syn, res))
         timings["ground_truth"] = time.perf_counter() - t
+    page = run_dir / "report.html"
+    if page.is_file():  # one offline file (figures and model inline): the result to open, at the top of OUT
+        write_output_file(out / "report.html", page.read_bytes(), option="--out", inputs=scene.input_paths())
     timings["total"] = time.perf_counter() - t0
     write_output_json(out / "demo_summary.json", {"summary": summary, "timings": timings}, option="--out",
                       inputs=scene.input_paths())

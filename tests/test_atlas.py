@@ -92,7 +92,7 @@ def test_flat_plane_reproduced_in_a_tilted_chart(rng, density, min_psnr):
     img = np.clip(img, 0, 255).astype(np.uint8)
     lab = select_views(vis, method="largest-area")
     tm = bake_texture(mesh, [img], vis, lab, atlas_size=512, texels_per_pixel=density, **RAW)
-    # the texturing's corners are the projections rounded to 1/8 px (Visibility.face_uv: the same
+    # the texturing's corners are the projections rounded to 1/256 px (Visibility.face_uv: the same
     # bytes far from the origin); the texel grid is that grid scaled
     fuv = vis.face_uv(lab)  # (F, 3, 2)
     e_img = fuv[0, 1] - fuv[0, 0]

@@ -26,6 +26,8 @@ def test_demo_writes_the_textured_mesh_and_a_summary(demo_run):
         assert (out / "run" / name).is_file(), name
     assert summ["run"]["reference"] == "v00" and summ["run"]["unreachable"] == []
     assert summ["run"]["seams"]["n_edges"] > 0
+    # the result to open sits at the top of --out, the same offline page as run/report.html
+    assert (out / "report.html").read_bytes() == (out / "run" / "report.html").read_bytes()
 
 
 def test_demo_correction_moves_views_toward_ground_truth(demo_run):

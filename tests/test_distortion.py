@@ -223,7 +223,9 @@ def distorted_runs(tmp_path_factory):
 def test_distorted_scene_textured_like_the_undistorted_one(distorted_runs):
     """The issue's criterion: texture within 1 CIEDE2000 of the undistorted run (mean over the pixels of
     renders from every camera). At this test's 160x120 the undistortion alone (no correction) changes
-    the texture by 0.83 and the photos by 0.9 (bicubic resampling of detailed photos), and the default
+    the texture by 1.02 (0.83 before the bake copied the photos' pixels: the bilinear bake's low-pass
+    hid part of the resampling's difference) and the photos by 0.9 (bicubic resampling of detailed
+    photos), and the default
     run's texture is 1.17 (OPENCV) / 1.25 (RADIAL) from the undistorted run's (face mean colours
     0.66 / 0.72), as far from the ground truth (within 0.3); benchmarks/distortion.py measures
     160x120 to 640x480, where it is within 1. Ignoring the distortion: 9.5."""
@@ -235,7 +237,7 @@ def test_distorted_scene_textured_like_the_undistorted_one(distorted_runs):
     ref = runs["PINHOLE", "seqcc-global"]
     assert runs["OPENCV", "seqcc-global"].selection_stats["unseen_faces"] == ref.selection_stats["unseen_faces"]
     alone = texture_delta_e(syn, runs["PINHOLE", "none"].textured, runs["OPENCV", "none"].textured)
-    assert alone < 1.0, alone
+    assert alone < 1.1, alone
     default = {m: texture_delta_e(syn, ref.textured, runs[m, "seqcc-global"].textured) for m in ("OPENCV", "RADIAL")}
     ignored = texture_delta_e(syn, ref.textured, runs["ignored", "seqcc-global"].textured)
     assert max(default.values()) < 1.5 and ignored > 3 * max(default.values()), (default, ignored)

@@ -53,7 +53,7 @@ def test_quiet_demo_prints_nothing_and_writes_the_viewer(demo, capfd):
     assert main(["-q", "demo", "--out", str(demo), "--views", "10", "--t-npm", "200"]) == 0
     out, err = capfd.readouterr()
     assert (out, err) == ("", "")
-    page = (demo / "run" / "report.html").read_text(encoding="utf-8")
+    page = (demo / "report.html").read_text(encoding="utf-8")
     assert '<div id="o3d-viewer"' in page and 'id="o3d-viewer-data"' in page
     # the graph threshold one way everywhere: the setting (vertex units) and its count in the demo's dense mappings
     rep = json.loads((demo / "run" / "report.json").read_text())

@@ -80,7 +80,7 @@ def test_records_are_sparse_and_match_their_dense_views(wide_scene, cache, monke
         np.testing.assert_array_equal(z, vis.depth[v][ids])
     lab = select_views(vis, method="largest-area")
     seen = lab >= 0
-    dense = vis.uv[lab[seen][:, None], vis.mesh.faces[seen]]  # face_uv: the same, rounded to 1/8 px
+    dense = vis.uv[lab[seen][:, None], vis.mesh.faces[seen]]  # face_uv: the same, rounded to 1/256 px
     np.testing.assert_array_equal(vis.face_uv(lab)[seen], np.round(dense * FACE_UV_STEPS) / FACE_UV_STEPS)
     # pickling (a Dask worker's copy) drops the dense caches and keeps the records
     blob = pickle.dumps(vis)

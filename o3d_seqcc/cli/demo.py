@@ -50,7 +50,7 @@ def _print_summary(res) -> None:
                   f"{100 * t['holes']:.2f}% of the covered pixels untextured")
     print("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
     print(f"summary written to {res.out / 'demo_summary.json'}")
-    report = res.out / "run" / "report.html"
+    report = res.out / "report.html"
     print(f"report: {report if report.is_file() else res.out / 'run' / 'report.json'}")
 
 
