@@ -191,3 +191,24 @@ def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
                     assert x is None or (x.dtype == y.dtype and np.array_equal(x, y)), (mode, key, name)
             assert thinned(m.pairs, key, lambda n: None)[1].n == full.n
         assert mode == "vertices" or levels > len(m.pairs)  # faces of several levels in a pair: groups crossed
+
+
+def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
+    """The gutter fill of an even-sided page pulls and pushes its full-resolution level in row bands (no
+    float copy of the page): the same bytes as the whole-page pyramid, for bands that do or do not divide it."""
+    import cv2
+
+    from o3d_seqcc.texturing import bake
+
+    rng = np.random.default_rng(5)
+    for H, W, band in ((512, 384, 64), (640, 256, 96), (514, 258, 128)):
+        img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+        blobs = cv2.resize(rng.random((H // 16 + 1, W // 16 + 1)).astype(np.float32), (W, H),
+                           interpolation=cv2.INTER_NEAREST)
+        mask = (blobs > 0.55) & (rng.random((H, W)) > 0.05)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", 1 << 20)  # one band: the whole-page path
+        whole = bake.push_pull_fill(img, mask)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", band)
+        banded = bake.push_pull_fill(img, mask)
+        assert np.array_equal(whole[mask], img[mask]) and not np.array_equal(whole, img)
+        assert np.array_equal(banded, whole), (H, W, band)
