@@ -111,10 +111,12 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
         t_report = time.perf_counter() - t
         written, after, t_export = files.result()
         picture_path = None if pic is None else pic.result()
+        pool.shutdown(wait=True)
     except BaseException:
+        # a SIGTERM / Ctrl-C here (pool.shutdown's join included) must not leave the tasks writing into the
+        # stage while the output guard removes it: they finish first (the ones not started are dropped)
         pool.shutdown(wait=True, cancel_futures=True)
         raise
-    pool.shutdown(wait=True)
     if picture_path is not None:
         written["selection_png"] = picture_path[0]
     written.update(after)
