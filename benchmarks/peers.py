@@ -1004,6 +1004,8 @@ def _child(argv: Sequence[str]) -> int:
 DATA = REPO.parent / "shared" / "datasets" / "fountain_small"
 #: Fountain meshes: key -> path relative to the data folder.
 MESHES = {"16k": "scene/mesh_decimated_uv_blender.ply", "300k": "scene/tsdf_mesh.ply"}
+#: synthetic scenes (key -> ``o3d-seqcc synthetic`` options), made once under ``--out``; timed, not rendered
+SYNTHETIC = {"6mp": ("--views", "10", "--width", "3000", "--height", "2000", "--seen-only")}
 #: "ours-texture": ``o3d-seqcc texture`` (ours without the colour correction, the photos as taken)
 TOOLS = ("texrecon", "ours", "ours-texture", "meshlab", "open3d")
 DEFAULT_VIEWS = (0, 5, 10, 15, 17, 20, 25, 30)
@@ -1017,12 +1019,21 @@ CROPS = (
 )
 
 
+def synthetic_scene(key: str, out: Path) -> Path:
+    """The synthetic scene ``key`` of :data:`SYNTHETIC` (made once as ``out/<key>_scene``)."""
+    folder = out / f"{key}_scene"
+    if not (folder / "scene.json").is_file():
+        subprocess.run([sys.executable, "-m", "o3d_seqcc", "-q", "synthetic", str(folder), *SYNTHETIC[key], "--overwrite"],
+                       check=True)
+    return folder
+
+
 def _run_tool(tool: str, key: str, scene: Scene, data: Path, mesh: Path, out: Path, args) -> PeerResult:
     d = out / key / tool
     if tool == "texrecon":
         return run_texrecon(scene, d, overwrite=True, align_texels=not args.texrecon_exact_cameras)
     if tool in ("ours", "ours-texture"):
-        return run_ours(data, d, mesh=mesh, command="run" if tool == "ours" else "texture")
+        return run_ours(data, d, mesh=None if key in SYNTHETIC else mesh, command="run" if tool == "ours" else "texture")
     return run_peer_measured(tool, data, d, mesh=mesh)
 
 
@@ -1038,6 +1049,29 @@ def _error_line(text: str) -> str:
 
 def _fmt(x: float | None, spec: str = ".2f") -> str:
     return "-" if x is None or (isinstance(x, float) and not np.isfinite(x)) else format(x, spec)
+
+
+def _timing_row(p: list) -> dict:
+    import statistics
+
+    return {"wall": statistics.median(x.total_seconds for x in p), "wall_runs": [x.total_seconds for x in p],
+            "peak_rss": statistics.median(x.peak_rss for x in p), "peak_rss_runs": [x.peak_rss for x in p],
+            "cpu_seconds": statistics.median(x.info.get("cpu_seconds", float("nan")) for x in p),
+            "mesh_file": str(p[-1].mesh)}
+
+
+def _print_timing(key: str, res: dict) -> None:
+    print(f"\n== {key}: {res['faces']} faces ({res['vertices']} vertices): wall time and peak RSS")
+    print(f"  {'tool':<10}{'wall s':>8}{'runs':>26}{'RSS MB':>8}{'CPU s':>7}")
+    for t, r in res["tools"].items():
+        if "error" in r:
+            print(f"  {t:<10} failed: {r['error']}")
+            continue
+        runs = ",".join(f"{x:.1f}" for x in r["wall_runs"])
+        print(f"  {t:<10}{r['wall']:8.2f}{runs:>26}{r['peak_rss'] / 1e6:8.0f}{r['cpu_seconds']:7.1f}")
+    o, x = res["tools"].get("ours", {}), res["tools"].get("texrecon", {})
+    if "wall" in o and "wall" in x:
+        print(f"  ours / texrecon: wall {o['wall'] / x['wall']:.2f}x, peak RSS {o['peak_rss'] / x['peak_rss']:.2f}x")
 
 
 def _print_mesh(key: str, res: dict, views: list[int]) -> None:
@@ -1122,7 +1156,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "each with its defaults, measured the same way in one run.",
     )
     ap.add_argument("--data", default=str(DATA), help="fountain_small folder (default ../shared/datasets/fountain_small)")
-    ap.add_argument("--meshes", default="16k,300k", help=f"comma-separated among {', '.join(MESHES)} (default both)")
+    ap.add_argument("--meshes", default="16k,300k",
+                    help=f"comma-separated among {', '.join([*MESHES, *SYNTHETIC])} (default 16k,300k; {', '.join(SYNTHETIC)}: "
+                    "a synthetic room of 10 photos of 3000 x 2000, wall time and peak RSS only)")
+    ap.add_argument("--timing-only", action="store_true",
+                    help="wall time and peak RSS only: no renders, no quality measures, no crops")
     ap.add_argument("--tools", default=",".join(TOOLS), help=f"comma-separated among {', '.join(TOOLS)}")
     ap.add_argument("--views", default=",".join(map(str, DEFAULT_VIEWS)), help="view indices rendered and scored")
     ap.add_argument("--repeat", type=int, default=1,
@@ -1148,7 +1186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     tools = [t.strip() for t in args.tools.split(",") if t.strip()]
     keys = [k.strip() for k in args.meshes.split(",") if k.strip()]
-    bad = [t for t in tools if t not in TOOLS] + [k for k in keys if k not in MESHES]
+    bad = [t for t in tools if t not in TOOLS] + [k for k in keys if k not in MESHES and k not in SYNTHETIC]
     if bad or args.repeat < 1:
         print(f"unknown {bad}; tools: {', '.join(TOOLS)}; meshes: {', '.join(MESHES)}; --repeat >= 1", file=sys.stderr)
         return 2
@@ -1193,10 +1231,15 @@ def main(argv: Sequence[str] | None = None) -> int:
               "texrecon_cameras": "exact" if args.texrecon_exact_cameras else "aligned texels (texrecon_cam)"}
     crops_rows = []
     for key in keys:
-        mesh = data / MESHES[key]
-        scene = load_scene(data, mesh=mesh)
+        timing_only = args.timing_only or key in SYNTHETIC
+        if key in SYNTHETIC:
+            data_k = synthetic_scene(key, out)
+            mesh, scene = data_k / "mesh.ply", load_scene(data_k)
+        else:
+            data_k, mesh = data, data / MESHES[key]
+            scene = load_scene(data, mesh=mesh)
         mesh_in = scene.load_mesh()
-        views = {k: scene.views[k] for k in views_idx}
+        views = {k: scene.views[k] for k in views_idx if k < len(scene.views)}
         res = {"mesh": str(mesh), "faces": int(len(mesh_in.faces)), "vertices": int(len(mesh_in.vertices)), "tools": {}}
         runs: dict[str, list[PeerResult]] = {t: [] for t in tools}
         errors: dict[str, str] = {}
@@ -1217,7 +1260,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     continue
                 print(f"[{key}] run {r + 1}/{args.repeat}: {tool} ...", flush=True)
                 try:
-                    runs[tool].append(_run_tool(tool, key, scene, data, mesh, out, args))
+                    runs[tool].append(_run_tool(tool, key, scene, data_k, mesh, out, args))
                 except (RuntimeError, InputError) as e:
                     errors[tool] = _error_line(str(e))
                     print(f"[{key}] {tool} failed: {errors[tool]}", flush=True)
@@ -1229,6 +1272,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 {"name": p.name, "mesh": str(p.mesh), "texture": str(p.texture), "seconds": p.seconds,
                  "total_seconds": p.total_seconds, "peak_rss": p.peak_rss, "info": p.info} for p in ps]
                 for t, ps in runs.items()}})
+        if timing_only:
+            res["tools"] = {t: _timing_row(runs[t]) if runs[t] and t not in errors else {"error": errors.get(t, "no run")}
+                            for t in tools}
+            report["meshes"][key] = res
+            _print_timing(key, res)
+            continue
         photos = {k: v.load_image() for k, v in views.items()}
         scene_hits = {k: raycast(mesh_in, v).mask for k, v in views.items()}
         loaded, renders, hits = {}, {}, {}

@@ -37,6 +37,8 @@ import numpy as np
 
 from .errors import InputError
 from .imageops import INTERPOLATIONS, delta_e_2000, dtype_scale, img_as_float, sample_colors
+from .pairs import thinned
+from .parallel import LocalExecutor
 
 __all__ = [
     "PSNR_CAP_DB",
@@ -327,14 +329,18 @@ def _pair_items(mappings, keys, *, min_n: int, max_per_pair: int | None, skipped
     """
     if max_per_pair is not None and int(max_per_pair) < 1:
         raise ValueError(f"max_per_pair must be >= 1 or None, got {max_per_pair!r}")
-    for a, b in keys:
-        pm = mappings.pairs[(a, b)]
-        n = int(len(pm.uv_a))
-        if n < max(int(min_n), 1):
+    lo = max(int(min_n), 1)
+
+    def one(key):  # only the mappings scored are built
+        return key, *thinned(mappings.pairs, key, lambda n: thin_indices(n, max_per_pair) if n >= lo
+                             else np.zeros(0, np.int64))
+
+    # pairs built on local threads (numpy releases the GIL), yielded in order, a few ahead of the scoring
+    for (a, b), n, pm in LocalExecutor().imap(one, list(keys), desc="pairs", unit="pair"):
+        if n < lo:
             skipped.append((a, b))
             continue
-        idx = thin_indices(n, max_per_pair)
-        yield (a, b, n, pm.uv_a, pm.uv_b) if idx is None else (a, b, n, pm.uv_a[idx], pm.uv_b[idx])
+        yield a, b, n, pm.uv_a, pm.uv_b
 
 
 def _sample_batch(images: list[np.ndarray], scales: list[float], batch, interpolation: str):

@@ -25,7 +25,7 @@ from typing import Any, Iterable, Iterator
 import numpy as np
 
 __all__ = ["SURFACE_MAX_LEVEL", "LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key", "shared_area",
-           "shared_counts"]
+           "shared_counts", "thinned"]
 
 Pair = tuple[int, int]
 
@@ -101,6 +101,16 @@ class PairMapping:
         return f"PairMapping(a={self.a}, b={self.b}, n={self.n})"
 
 
+def thinned(pairs: Any, key: Any, pick) -> tuple[int, PairMapping]:
+    """``(n, pairs[key].take(pick(n)))`` for any ``{pair: PairMapping}`` (:meth:`LazyPairs.thinned`: only the
+    picked mappings built); ``pick(n)`` gives ascending indices, or None for all ``n``."""
+    if isinstance(pairs, LazyPairs):
+        return pairs.thinned(key, pick)
+    pm = pairs[key]
+    idx = pick(pm.n)
+    return pm.n, (pm if idx is None else pm.take(idx))
+
+
 def norm_key(key: Any) -> Pair:
     """``(a, b)`` as a pair of ints; anything else raises ``KeyError``."""
     try:
@@ -137,6 +147,21 @@ class LazyPairs(_MappingABC):
                 while len(self._cache) > self._cache_size:
                     self._cache.popitem(last=False)
         return pm
+
+    def thinned(self, key: Any, pick) -> tuple[int, PairMapping]:
+        """``(n, the mappings at pick(n))`` of a pair of ``n`` mappings (``pick(n)``: ascending indices, or None
+        for all): the same values as ``self[key].take(pick(n))``, but an uncached pair is sized and only the
+        picked mappings built (the correction's 8000 and Table 2's 200 of a pair's 10^4-10^5)."""
+        k = norm_key(key)
+        if k not in self._keyset:
+            raise KeyError(key)
+        with self._lock:
+            pm = self._cache.get(k)
+        if pm is None and hasattr(self.source, "thinned"):
+            return self.source.thinned(*k, pick)
+        pm = self[k] if pm is None else pm
+        idx = pick(pm.n)
+        return pm.n, (pm if idx is None else pm.take(idx))
 
     def __contains__(self, key: object) -> bool:
         try:
@@ -371,8 +396,9 @@ class PairSource:
         mark[ua] = True
         return ub[mark[ub]]
 
-    def _surface_levels(self, a: int, b: int, k: np.ndarray, tri: np.ndarray) -> np.ndarray:
-        """Surface mode: the subdivision level of the faces ``k`` in the pair ``(a, b)``.
+    def _surface_levels(self, uv: list[np.ndarray]) -> np.ndarray:
+        """Surface mode: the subdivision level of a pair's faces, from their corners' (m, 3, 2) float64
+        pixel coordinates in the two views.
 
         Every face gives its 3 vertices (as the paper's mappings); a face whose smaller projection
         of the two views holds ``m = area / spacing^2 >= 1`` sample cells gives, besides, the
@@ -382,55 +408,98 @@ class PairSource:
         detailed surface scores better against the semi-real truth than area samples alone:
         2.78 vs 2.86 CIEDE2000, benchmarks/table2.py).
         """
-        uv = [self.vis.vertex_projection(v, tri.reshape(-1))[0].reshape(-1, 3, 2).astype(np.float64) for v in (a, b)]
         m = np.minimum(_tri_area(uv[0]), _tri_area(uv[1])) / self.spacing**2
         return np.where(m >= 1.0, np.clip(np.rint(np.sqrt(np.maximum(m, 1.0))), 1, SURFACE_MAX_LEVEL), 0).astype(np.int64)
 
-    def build(self, a: int, b: int) -> PairMapping:
-        vis = self.vis
+    def _plan(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+        """The pair's faces grouped by level: (faces (m,), level (m,) ascending, first mapping of every
+        face (m + 1,), {view: (corners' uv (m, 3, 2) float32, depth (m, 3) float32)}); the mappings are
+        face after face, each its level's pattern (the vertices alone in vertex mode)."""
         k = self.faces(a, b)
-        tri = np.asarray(vis.mesh.faces)[k]  # (m, 3)
+        tri = np.asarray(self.vis.mesh.faces)[k].reshape(-1)  # (3 m,)
+        proj = {}
+        for v in (a, b):
+            uv_v, z_v = self.vis.vertex_projection(v, tri)
+            proj[v] = (uv_v.reshape(-1, 3, 2), z_v.reshape(-1, 3))
         if self.mode == "vertices":
-            uv_a = vis.vertex_projection(a, tri.reshape(-1))[0]
-            uv_b = vis.vertex_projection(b, tri.reshape(-1))[0]
-            return PairMapping(a, b, uv_a, uv_b, np.repeat(k, 3))
+            return k, np.ones(len(k), np.int64), 3 * np.arange(len(k) + 1), proj
         if self.mode == "surface":
-            lev = self._surface_levels(a, b, k, tri)
+            lev = self._surface_levels([proj[v][0].astype(np.float64) for v in (a, b)])
         else:
             lev = self.level[k]
-        # faces grouped by level; per level the samples are a fixed barycentric pattern
         order = np.argsort(lev, kind="stable")
-        k, tri, lev = k[order], tri[order], lev[order]
+        proj = {v: (uv_v[order], z_v[order]) for v, (uv_v, z_v) in proj.items()}
+        return k[order], lev[order], np.concatenate([[0], np.cumsum(self.count[lev[order]])]), proj
+
+    def size(self, a: int, b: int) -> int:
+        """The number of mappings :meth:`build` gives the pair, without building them."""
+        return int(self._plan(a, b)[2][-1])
+
+    def thinned(self, a: int, b: int, pick) -> tuple[int, PairMapping]:
+        """``(n, build(a, b).take(pick(n)))`` with only the picked mappings built (``pick(n)``: ascending
+        indices, or None for all ``n``)."""
+        plan = self._plan(a, b)
+        n = int(plan[2][-1])
+        idx = pick(n)
+        return n, self._build(a, b, plan, None if idx is None else np.asarray(idx, np.int64).reshape(-1))
+
+    def build(self, a: int, b: int, index: np.ndarray | None = None) -> PairMapping:
+        """The pair's mappings; ``index`` (ascending ints): only those of them (the same values as
+        ``build(a, b).take(index)``: each mapping computed by the same arithmetic, the others not at all)."""
+        return self._build(a, b, self._plan(a, b), None if index is None else np.asarray(index, np.int64).reshape(-1))
+
+    def _build(self, a: int, b: int, plan: tuple, index: np.ndarray | None) -> PairMapping:
+        """:meth:`build` from :meth:`_plan`'s groups. Mapping ``i`` is point ``i - first[f]`` of face ``f``'s
+        pattern (a row of the barycentric table), projected perspective-correctly; all at once, whatever
+        their face's level."""
+        k, lev, first, proj = plan
+        if self.mode != "vertices" and index is None:
+            return self._build_all(a, b, plan)
+        sel = np.arange(first[-1]) if index is None else index
+        f = np.searchsorted(first, sel, side="right") - 1  # the face of every mapping
+        if self.mode == "vertices":
+            return PairMapping(a, b, proj[a][0].reshape(-1, 2)[sel], proj[b][0].reshape(-1, 2)[sel], k[f])
+        W = self.table[self.start[lev[f]] + sel - first[f]]  # (n, 3) barycentric weights
+        uv_out = {}
+        for v in (a, b):
+            z = proj[v][1].astype(np.float64)  # (m, 3) per face, then per mapping
+            uvz = (proj[v][0].astype(np.float64) * z[:, :, None])[f]  # (n, 3, 2)
+            z = z[f]
+            num, den = np.zeros((len(sel), 2)), np.zeros(len(sel))
+            for j in range(3):
+                num += W[:, j, None] * uvz[:, j, :]
+                den += W[:, j] * z[:, j]
+            # perspective-correct: projection of sum(w_i X_i) = sum(w_i z_i uv_i) / sum(w_i z_i)
+            uv_out[v] = num / den[:, None]
+        return PairMapping(a, b, uv_out[a], uv_out[b], k[f], W.astype(np.float32))
+
+    def _build_all(self, a: int, b: int, plan: tuple) -> PairMapping:
+        """Every mapping of the pair, level group by level group (each group's faces times its fixed
+        pattern, broadcast: faster than :meth:`_build`'s per-mapping gathers when all are wanted)."""
+        k, lev, first, proj = plan
         bounds = np.flatnonzero(np.diff(lev)) + 1
-        starts = np.concatenate([[0], bounds])
-        ends = np.concatenate([bounds, [len(k)]])
-        uv_out = {a: [], b: []}
+        uv_out: dict[int, list] = {a: [], b: []}
         fids, ws = [], []
-        for s0, s1 in zip(starts, ends):
+        for s0, s1 in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(k)]])):
             if s1 <= s0:
                 continue
             L = int(lev[s0])  # (surface mode: level 0 = the vertices alone)
             Wl = self.table[self.start[L] : self.start[L] + self.count[L]]  # (p, 3)
-            t = tri[s0:s1]
             for v in (a, b):
-                uv_v, z_v = vis.vertex_projection(v, t.reshape(-1))
-                z = z_v.reshape(-1, 3).astype(np.float64)  # (m, 3)
-                uvz = uv_v.reshape(-1, 3, 2).astype(np.float64) * z[:, :, None]  # (m, 3, 2)
-                num = np.zeros((len(t), len(Wl), 2))
-                den = np.zeros((len(t), len(Wl)))
+                z = proj[v][1][s0:s1].astype(np.float64)  # (m, 3)
+                uvz = proj[v][0][s0:s1].astype(np.float64) * z[:, :, None]  # (m, 3, 2)
+                num, den = np.zeros((s1 - s0, len(Wl), 2)), np.zeros((s1 - s0, len(Wl)))
                 for j in range(3):
                     num += Wl[None, :, j, None] * uvz[:, None, j, :]
                     den += Wl[None, :, j] * z[:, None, j]
-                # perspective-correct: projection of sum(w_i X_i) = sum(w_i z_i uv_i) / sum(w_i z_i)
                 uv_out[v].append((num / den[:, :, None]).reshape(-1, 2))
             fids.append(np.repeat(k[s0:s1], len(Wl)))
             ws.append(np.broadcast_to(Wl.astype(np.float32), (s1 - s0,) + Wl.shape).reshape(-1, 3))
         if not fids:
             e2 = np.zeros((0, 2))
             return PairMapping(a, b, e2, e2, np.zeros(0, np.int64), np.zeros((0, 3), np.float32))
-        return PairMapping(
-            a, b, np.concatenate(uv_out[a]), np.concatenate(uv_out[b]), np.concatenate(fids), np.concatenate(ws)
-        )
+        return PairMapping(a, b, np.concatenate(uv_out[a]), np.concatenate(uv_out[b]), np.concatenate(fids),
+                           np.concatenate(ws))
 
     def with_mask(self, face_mask: np.ndarray) -> "PairSource":
         fm = face_mask if self.face_mask is None else (self.face_mask & face_mask)

@@ -37,7 +37,7 @@ from typing import Any, Callable, Iterator, Sequence
 from .errors import InputError, require
 from .progress import track
 
-__all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "connect", "current", "use"]
+__all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "carried", "connect", "current", "use"]
 
 logger = logging.getLogger(__name__)
 
@@ -199,6 +199,33 @@ class DaskExecutor:
 
     def __repr__(self) -> str:
         return f"DaskExecutor({self.client!r})"
+
+
+def carried(fn: Callable, timed: str | None = None) -> Callable:
+    """``fn`` to run on another thread as if here: the active executor (:func:`use`), the progress
+    settings and joblib's ``n_jobs`` (``parallel_config``, which joblib keeps per thread) go with it.
+
+    Wrap at submission, once per task (``pool.submit(carried(fn), ...)``): each call copies this
+    thread's context. ``timed``: a name under which the call's seconds are logged at DEBUG.
+    """
+    import contextvars
+    import time
+
+    from joblib import parallel_config
+    from joblib.parallel import get_active_backend
+
+    ctx, n_jobs = contextvars.copy_context(), get_active_backend()[1]
+
+    def run(*args: Any, **kwargs: Any) -> Any:
+        t = time.perf_counter()
+        try:
+            with parallel_config(n_jobs=n_jobs):
+                return ctx.run(fn, *args, **kwargs)
+        finally:
+            if timed is not None:
+                logger.debug("%s: %.3f s", timed, time.perf_counter() - t)
+
+    return run
 
 
 def current(n_jobs: int | None = None) -> LocalExecutor | DaskExecutor:

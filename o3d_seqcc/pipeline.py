@@ -23,11 +23,9 @@ view selection, the atlas and the export run here. Images are read when a stage 
 
 from __future__ import annotations
 
-import io
 import logging
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -37,10 +35,9 @@ import numpy as np
 from .arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import DEFAULT_FORMATS, check_export_options, export_meshlab_ply, export_textured_mesh, float32_offset, \
-    parse_formats, texture_file_names
-from .images import SceneImages
-from .io.files import atomic_write_bytes, write_json
+from .export import DEFAULT_FORMATS, check_export_options, parse_formats
+from .images import scene_photos
+from .io.files import write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
@@ -51,8 +48,8 @@ from .orientation import up_axis_transform
 from .parallel import use as use_executor
 from .progress import stage as _stage
 from .refine import coverage
-from .render import write_selection_picture
-from .report import REPORT_FILE, cached_images, metrics_sample, write_report
+from .run_folder import write_run_folder
+from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
 from .seams import SeamReport, seam_metric, selection_seams
@@ -255,57 +252,12 @@ class RunResult:
         view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
         if view is not None:
             self.scene.index(view)
-        t = time.perf_counter()
-        table2 = report and self.correction is not None and self.mappings is not None and self.originals is not None
-        with ThreadPoolExecutor(max_workers=1) as pool, \
-                output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage, \
+        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage, \
                 _stage("export"):
-            # the report's imports and Table 2 in a thread, while the files are encoded and written (OpenCV and
-            # the file writes release the GIL): on fountain about 0.8 s of work mostly hidden behind the export
-            images = cached_images(*((self.originals, self.images) if self.originals else (self.images, None)))
-            prelude = pool.submit(self._report_prelude, table2, images) if report else None
-            picture = None
-            if selection_view is None or view is not None:
-                picture = write_selection_picture(self.scene, self.visibility, self.selection,
-                                                  stage / "selection.png", view)
-            written = {k: Path(v) for k, v in export_textured_mesh(
-                self.textured, stage, formats=fmts, unlit=unlit, texture_format=tfmt, quality=int(jpeg_quality),
-                transform=None if up_axis == "none" else rotation).items()}
-            buf = io.BytesIO()
-            np.save(buf, self.selection)
-            atomic_write_bytes(stage / "selection.npy", buf.getvalue())
-            if picture is not None:
-                written["selection_png"] = picture[0]
-            rasters = None
-            if save_images:
-                rasters = write_images(stage / "images", self.scene.views, self.images)
-                written["images"] = stage / "images"
-            # the layer is MeshLab's own textured PLY: MeshLab 2020.09 (Debian 12) aborts on any OBJ
-            layer = stage / "mesh_meshlab.ply"
-            shift = float32_offset(self.textured.vertices)  # MeshLab holds float32: the layer matrix adds it back
-            project = meshlab_project(self.scene, stage, mesh=layer, images=rasters, offset=shift)
-            if project is not None:
-                written["meshlab_project"] = project
-                reuse = "obj" in written and tfmt in ("png", "jpg")  # MeshLab reads the OBJ's PNG / JPEG files
-                written["meshlab_mesh"] = export_meshlab_ply(
-                    self.textured, layer, texture=[stage / n for n in texture_file_names(
-                        "mesh", tfmt, self.textured.pages)] if reuse else None, offset=shift)
-            written_out = {k: str(Path(out) / p.relative_to(stage)) for k, p in written.items()}
-            self.timings["export"] = time.perf_counter() - t
-            export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(jpeg_quality), "unlit": bool(unlit),
-                      "orientation": {**orientation, "applies_to": [f for f in fmts]}}
-            t = time.perf_counter()
-            metrics, steps = (None, None) if prelude is None else prelude.result()
-            if report:
-                written_out["report_html"] = str(Path(out) / REPORT_FILE)
-            rep = self.report(written_out, picture_view=None if picture is None else picture[1], export=export,
-                              metrics=metrics, selection_seams=steps)
-            if report:
-                write_report(self, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images)
-                self.timings["report"] = time.perf_counter() - t
-                rep["timings_s"]["report"] = round(self.timings["report"], 4)
-            write_json(stage / "report.json", rep)
-        return written_out
+            return write_run_folder(self, stage, Path(out), fmts=fmts, tfmt=tfmt, quality=int(jpeg_quality), unlit=unlit,
+                                    rotation=None if up_axis == "none" else rotation, orientation=orientation,
+                                    picture=selection_view is None or view is not None, view=view,
+                                    save_images=save_images, report=report)
 
     def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
         """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
@@ -378,7 +330,7 @@ def texture(
     s = _settings(settings, texture_options)
     sc = _as_scene(scene, mesh)
     if images is None:
-        imgs = SceneImages(sc.views)  # read when the bake needs them
+        imgs = scene_photos(sc.views)  # read when the bake needs them, kept while they fit
     else:
         imgs = check_images_argument(images, sc.views)
     with use_executor(client):
@@ -458,8 +410,9 @@ def run(
     sc = _as_scene(scene, mesh)
     if reference != "auto":
         resolve_view(sc.names, reference)
-    originals = SceneImages(sc.views)  # read when a task needs them, released after
-    _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
+    originals = scene_photos(sc.views)  # read when a task first needs them, kept while they fit
+    if method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
+        _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc, split_faces=split_faces)

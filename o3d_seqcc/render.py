@@ -87,6 +87,10 @@ def _arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
+#: rays cast per chunk by :func:`raycast` (about 150 bytes each while a chunk is in flight)
+RAY_CHUNK = 1 << 19
+
+
 def raycast(mesh: Any, view: View) -> RayHits:
     """Cast one ray through every pixel centre of ``view`` and record the first hit.
 
@@ -111,24 +115,34 @@ def raycast(mesh: Any, view: View) -> RayHits:
         o3d.core.Tensor(np.ascontiguousarray(f, dtype=np.uint32)),
     )
     K, R, C = view.intrinsic, view.rotation, view.center
-    xs, ys = np.meshgrid(np.arange(view.width, dtype=np.float64), np.arange(view.height, dtype=np.float64))
-    pix = np.stack([xs, ys, np.ones_like(xs)], axis=-1)  # pixel centres at integers
-    d_cam = pix @ np.linalg.inv(K).T  # z = 1: t_hit is the camera depth
-    d_world = d_cam @ R  # R^T d for each pixel
-    rays = np.concatenate([np.broadcast_to(C - origin, d_world.shape), d_world], axis=-1).astype(np.float32)
-    ans = scene.cast_rays(o3d.core.Tensor(rays))
-    prim = ans["primitive_ids"].numpy().astype(np.int64)
-    hit = prim != _INVALID
-    face_ids = np.where(hit, prim, -1)
-    uvs = ans["primitive_uvs"].numpy().astype(np.float64)
-    bary = np.stack([1.0 - uvs[..., 0] - uvs[..., 1], uvs[..., 0], uvs[..., 1]], axis=-1)
-    bary[~hit] = 0.0
-    depth = ans["t_hit"].numpy().astype(np.float64)
-    depth[~hit] = np.inf
-    normals = ans["primitive_normals"].numpy().astype(np.float64)
-    dn = d_world / np.linalg.norm(d_world, axis=-1, keepdims=True)
-    cos = -np.sum(normals * dn, axis=-1)
-    cos[~hit] = 0.0
+    H, W = int(view.height), int(view.width)
+    face_ids, depth, cos = np.empty((H, W), np.int64), np.empty((H, W)), np.empty((H, W))
+    bary = np.empty((H, W, 3))
+    kinv = np.linalg.inv(K).T
+    step = max(1, RAY_CHUNK // max(W, 1))
+    for r0 in range(0, H, step):  # rows in chunks: the same per-pixel arithmetic, a fraction of the memory
+        r1 = min(H, r0 + step)
+        xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(r0, r1, dtype=np.float64))
+        pix = np.stack([xs, ys, np.ones_like(xs)], axis=-1)  # pixel centres at integers
+        d_cam = pix @ kinv  # z = 1: t_hit is the camera depth
+        d_world = d_cam @ R  # R^T d for each pixel
+        rays = np.concatenate([np.broadcast_to(C - origin, d_world.shape), d_world], axis=-1).astype(np.float32)
+        ans = scene.cast_rays(o3d.core.Tensor(rays))
+        prim = ans["primitive_ids"].numpy().astype(np.int64)
+        hit = prim != _INVALID
+        face_ids[r0:r1] = np.where(hit, prim, -1)
+        uvs = ans["primitive_uvs"].numpy().astype(np.float64)
+        b = bary[r0:r1]
+        b[..., 0], b[..., 1:] = 1.0 - uvs[..., 0] - uvs[..., 1], uvs
+        b[~hit] = 0.0
+        d = ans["t_hit"].numpy().astype(np.float64)
+        d[~hit] = np.inf
+        depth[r0:r1] = d
+        normals = ans["primitive_normals"].numpy().astype(np.float64)
+        dn = d_world / np.linalg.norm(d_world, axis=-1, keepdims=True)
+        c = -np.sum(normals * dn, axis=-1)
+        c[~hit] = 0.0
+        cos[r0:r1] = c
     return RayHits(face_ids=face_ids, bary=bary, depth=depth, cos_angle=cos)
 
 

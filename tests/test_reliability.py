@@ -129,12 +129,12 @@ def test_max_image_pixels_option(S, capsys):
 
 def test_failure_after_loading_leaves_nothing_and_rerun_works(S, tmp_path, monkeypatch):
     out = tmp_path / "g"
-    import o3d_seqcc.pipeline as pl
+    import o3d_seqcc.run_folder as rf  # RunResult.save's writer
 
     def boom(*a, **k):
         raise RuntimeError("disk exploded")
 
-    monkeypatch.setattr(pl, "export_textured_mesh", boom)
+    monkeypatch.setattr(rf, "export_textured_mesh", boom)
     with pytest.raises(RuntimeError):
         main(["-q", "run", str(S), "--out", str(out), *FAST])
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".g.")]

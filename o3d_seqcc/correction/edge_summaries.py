@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..pairs import thinned
 from ..parallel import LocalExecutor, current as current_executor
 
 __all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
@@ -100,9 +101,53 @@ def _sample_flat(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.ndar
     return top * (1.0 - fy) + bot * fy
 
 
+def _sample_levels(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.ndarray:
+    """:func:`_sample_flat` of ``img_as_float(img)`` for a uint8 / uint16 image, without the float image.
+
+    The pixels the samples touch are gathered as integers and turned into float32 through a
+    table of ``float32(level / scale)`` (float64 division, as :func:`~o3d_seqcc.imageops.img_as_float`
+    then the float32 copy do), so every value, and every bilinear weight and product after it, is
+    bit for bit :func:`_sample_flat`'s: the (H, W, 3) float64 and float32 copies (24 + 12 bytes
+    per pixel, 216 MB for a 6 MP photo) are never made.
+    """
+    from ..imageops import dtype_scale
+
+    H, W = img.shape[:2]
+    levels = np.arange(np.iinfo(img.dtype).max + 1, dtype=np.float64) / dtype_scale(img.dtype)
+    table = levels.astype(np.float32)
+    flat = np.ascontiguousarray(img).reshape(-1, 3)
+    x = np.clip(uv[:, 0], 0.0, W - 1.0)
+    y = np.clip(uv[:, 1], 0.0, H - 1.0)
+    if interpolation == "nearest":
+        xi = np.minimum(np.floor(x + 0.5).astype(np.int64), W - 1)
+        yi = np.minimum(np.floor(y + 0.5).astype(np.int64), H - 1)
+        return table[np.take(flat, yi * W + xi, axis=0)]
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    dx = (x0 < W - 1).astype(np.int64)
+    i00 = y0 * W + x0
+    i10 = i00 + np.where(y0 < H - 1, W, 0)
+    fx = (x - x0).astype(np.float32)[:, None]
+    fy = (y - y0).astype(np.float32)[:, None]
+    top = table[np.take(flat, i00, axis=0)] * (1.0 - fx) + table[np.take(flat, i00 + dx, axis=0)] * fx
+    bot = table[np.take(flat, i10, axis=0)] * (1.0 - fx) + table[np.take(flat, i10 + dx, axis=0)] * fx
+    return top * (1.0 - fy) + bot * fy
+
+
 def _sample_view_task(item: tuple[int, np.ndarray], images, interpolation: str) -> np.ndarray:
-    """One view's task: read its image once and sample it at every position its edges need."""
+    """One view's task: read its image once and sample it at every position its edges need.
+
+    ``images`` is the context's float sequence; over uint8 / uint16 photos
+    (:class:`~o3d_seqcc.images.FloatImages`) the photo itself is sampled (:func:`_sample_levels`:
+    the same values, no float copy of the photo).
+    """
+    from ..images import FloatImages
+
     v, uv = item
+    if isinstance(images, FloatImages):
+        raw = np.asarray(images.images[v])
+        if raw.dtype in (np.uint8, np.uint16) and raw.ndim == 3 and raw.shape[2] == 3:
+            return _sample_levels(raw, uv, interpolation)
     return _sample_flat(images[v], uv, interpolation)
 
 
@@ -195,22 +240,29 @@ def edge_observations(
     qb = np.zeros((E, 3, P))
     ns = np.zeros(E, dtype=np.int64)
     q = np.linspace(TRIM, 1.0 - TRIM, P)
-    # the positions each edge samples in its two views (pairs built lazily, once; strided to max_mappings)
-    uvs: list[tuple[np.ndarray, np.ndarray]] = []
-    for a, b in edges:
-        pm = ctx.mappings.pairs[(min(int(a), int(b)), max(int(a), int(b)))]
-        uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
-        if max_mappings is not None and len(uva) > int(max_mappings):
-            idx = (np.arange(int(max_mappings)) * (len(uva) / float(max_mappings))).astype(np.int64)
-            uva, uvb = uva[idx], uvb[idx]
-        uvs.append((np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)))
+
+    def pick(n: int) -> np.ndarray | None:
+        if max_mappings is None or n <= int(max_mappings):
+            return None
+        return (np.arange(int(max_mappings)) * (n / float(max_mappings))).astype(np.int64)
+
+    def positions(edge: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        a, b = int(edge[0]), int(edge[1])
+        _, pm = thinned(ctx.mappings.pairs, (min(a, b), max(a, b)), pick)
+        uva, uvb = (pm.uv_a, pm.uv_b) if a <= b else (pm.uv_b, pm.uv_a)
+        return np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)
+
+    # the positions each edge samples in its two views: only the strided max_mappings of a pair built, on
+    # local threads (the lazy pairs live in this process)
+    ex = current_executor(n_jobs)
+    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
+    uvs = local.map(positions, list(edges), desc="edge mappings", unit="edge")
     # one task per view: its image read once, sampled at all its edges' positions, released
     parts: dict[int, list[np.ndarray]] = {}
     for (a, b), (uva, uvb) in zip(edges, uvs):
         parts.setdefault(int(a), []).append(uva)
         parts.setdefault(int(b), []).append(uvb)
     views = sorted(parts)
-    ex = current_executor(n_jobs)
     sampled = ex.map(_sample_view_task, [(v, np.concatenate(parts[v])) for v in views],
                      ex.share(ctx.images), ctx.interpolation, desc="sample views", unit="view")
     offset = {v: 0 for v in views}
@@ -225,7 +277,6 @@ def edge_observations(
         pairs.append((ca, cb))
     # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
     live = [i for i in range(E) if len(pairs[i][0])]
-    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
     for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [pairs[i] for i in live], q, outlier_k,
                                                    desc="edge summaries", unit="edge")):
         qa[i], qb[i], ns[i] = qa_i, qb_i, n_i

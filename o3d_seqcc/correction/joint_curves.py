@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..parallel import LocalExecutor
 from .edge_summaries import EdgeObservations
 
 __all__ = ["BLACK_WEIGHT", "SATURATION", "RefineResult", "linear_start", "refine_curves"]
@@ -274,23 +275,25 @@ def refine_curves(
     from threadpoolctl import threadpool_limits
 
     # small dense systems: one BLAS thread (threaded BLAS on a busy 2-core machine was 100x slower)
-    with threadpool_limits(1, user_api="blas"):
-        for c in range(3):
-            support[:, c] = _support(obs, c, keep_e, n_views, support_tail)
-            if F == 0:
-                continue
-            fit = _adjust_channel(
-                obs.a, obs.b, obs.qa[:, c, :], obs.qb[:, c, :], keep_e, base_w, col, free, response[:, c, :].copy(),
-                luts[:, c, :], uk, grid, D, reg_block, smooth=smooth, prior=prior, anchor=anchor,
-                iterations=int(iterations), plain_iterations=int(plain_iterations), edge_robust_c=edge_robust_c,
-                monotone_steps=monotone_steps, channel=c,
-            )
-            if fit is None:
-                continue
-            phi, residual[:, c], ew_all[c] = fit
-            response[:, c, :] = phi
-            for v in free:
-                luts[v, c] = _invert(phi[v], uk, grid)
+    def channel(c: int):
+        return None if F == 0 else _adjust_channel(
+            obs.a, obs.b, obs.qa[:, c, :], obs.qb[:, c, :], keep_e, base_w, col, free, response[:, c, :].copy(),
+            luts[:, c, :], uk, grid, D, reg_block, smooth=smooth, prior=prior, anchor=anchor,
+            iterations=int(iterations), plain_iterations=int(plain_iterations), edge_robust_c=edge_robust_c,
+            monotone_steps=monotone_steps, channel=c,
+        )
+
+    with threadpool_limits(1, user_api="blas"):  # the three channels side by side (independent solves)
+        fits = LocalExecutor(min(3, LocalExecutor().threads())).map(channel, range(3), desc="refine curves",
+                                                                   unit="channel")
+    for c, fit in enumerate(fits):
+        support[:, c] = _support(obs, c, keep_e, n_views, support_tail)
+        if fit is None:
+            continue
+        phi, residual[:, c], ew_all[c] = fit
+        response[:, c, :] = phi
+        for v in free:
+            luts[v, c] = _invert(phi[v], uk, grid)
     ew_out = ew_all.min(axis=0)
     logger.debug(
         "refine_curves: %d edge(s), %d free view(s); median edge rms %.4f; %d edge(s) weighted below 0.5",

@@ -3,19 +3,17 @@
 Reading (:func:`read_image`, :func:`check_image_file`, :func:`read_depth`,
 :func:`~o3d_seqcc.io.mesh_files.read_mesh`, :func:`~o3d_seqcc.io.mesh_files.read_point_cloud`) follows the same steps for every file, before any decoder sees it:
 
-1. **regular files only** (:func:`open_regular`): a FIFO, a device, a socket or a folder is an
-   error naming it, found without blocking (the file is opened non-blocking and checked with
-   ``fstat``, so a named pipe never hangs a run);
-2. **any path bytes**: files are read through their descriptor (OpenCV decodes from memory,
-   ``cv2.imdecode``; Open3D gets an ASCII alias of the open file), so a folder name that is not
-   UTF-8 works as it does in the shell;
+1. **regular files only** (:func:`open_regular`): a FIFO, a device, a socket or a folder is an error naming
+   it, found without blocking (opened non-blocking and checked with ``fstat``: a named pipe never hangs a run);
+2. **any path bytes**: files are read through their descriptor (OpenCV decodes from memory, ``cv2.imdecode``;
+   Open3D gets an ASCII alias of the open file), so a folder name that is not UTF-8 works as in the shell;
 3. **budgets from the header, before decoding**: images and depth maps have at most
    :data:`MAX_IMAGE_PIXELS` pixels (``--max-image-pixels``); a PLY / OFF / STL header may not
    declare more elements than its file can hold (:mod:`o3d_seqcc.io.headers`);
 4. **complete files**: a JPEG's main image must end with its end-of-image marker after its first
    scan (an EXIF thumbnail's marker does not count), a PNG's chunks must reach IEND;
-5. **sane values**: mesh vertices finite and within :data:`MAX_COORDINATE`; point-cloud points
-   that are not are dropped with a warning; depth that is not finite is "missing".
+5. **sane values**: mesh vertices finite and within :data:`MAX_COORDINATE`; point-cloud points that are not
+   are dropped with a warning; depth that is not finite is "missing".
 
 Images are RGB (never BGR) arrays (H, W, 3) uint8 or uint16, the pixels as stored: EXIF orientation
 is not applied (cameras are registered on the stored pixels), a photo whose tag asks for it is warned about.
@@ -243,9 +241,15 @@ def check_complete(path: Path, f: BinaryIO, size: int, *, what: str, full: bool)
                          "copy or download); copy or export it again")
 
 
-def _warn_orientation(path: Path, im: Any) -> None:
-    try:
-        value = int(im.getexif().get(0x0112, 1))
+def _warn_orientation(path: Path, im: Any, f: BinaryIO) -> None:
+    from PIL import Image
+
+    try:  # Pillow's getexif decodes a PNG to find an eXIf chunk after the pixels; the chunk headers tell at once
+        if im.format == "PNG" and not {"exif", "Raw profile type exif"} & set(im.info):
+            (exif := Image.Exif()).load(headers.png_exif(f) or b"")
+        else:
+            exif = im.getexif()
+        value = int(exif.get(0x0112, 1))
     except Exception:  # a broken EXIF block is not our business: the pixels decode without it
         return
     if value not in _ORIENTATIONS:
@@ -280,7 +284,7 @@ def _image_header(path: Path, f: BinaryIO, size: int, *, what: str = "image", fu
             with Image.open(f) as im:
                 (w, h), mode = im.size, im.mode
                 if what == "image":
-                    _warn_orientation(path, im)
+                    _warn_orientation(path, im, f)
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError, struct.error) as e:
         raise InputError(f"cannot read {what} {path}: {e}; re-save it as PNG or JPEG") from None
     over_budget(path, what, w, h)

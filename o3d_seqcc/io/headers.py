@@ -109,6 +109,26 @@ def png_complete(f: BinaryIO, size: int) -> bool:
     return False
 
 
+def png_exif(f: BinaryIO) -> bytes | None:
+    """The payload of a PNG's ``eXIf`` chunk (None without one), from the chunk headers alone.
+
+    Pillow finds an ``eXIf`` chunk that follows the image data only by decoding the image
+    (``PngImageFile.getexif`` loads it): half a second per 6 MP photo, on every read. Walking
+    the chunks' 8-byte headers (seeking over ``IDAT``) finds it without decoding.
+    """
+    f.seek(8)
+    while True:
+        head = f.read(8)
+        if len(head) < 8:
+            return None
+        n, kind = struct.unpack(">I4s", head)
+        if kind == b"eXIf":
+            return f.read(n)
+        if kind == b"IEND":
+            return None
+        f.seek(n + 4, 1)
+
+
 def exr_size(head: bytes) -> tuple[int, int] | None:
     """(width, height) of an OpenEXR file from its header's ``dataWindow`` (box2i), None if not found."""
     if not head.startswith(b"\x76\x2f\x31\x01") or len(head) < 8:

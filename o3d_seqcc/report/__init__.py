@@ -63,8 +63,23 @@ METRICS_MAX_PER_PAIR = 200
 METRICS_ALL_UP_TO = 100_000
 
 
-#: bytes of images a report keeps while it is made (each photo read, and corrected, once while they fit)
+#: bytes of images a report keeps while it is made (each photo read, and corrected, once while they fit):
+#: at least this, up to :data:`IMAGE_CACHE_MAX_BYTES` when the photos and their corrections need more
 IMAGE_CACHE_BYTES = 256 << 20
+#: the most a report's image cache grows to (10 photos of 6 MP and their corrections: 360 MB)
+IMAGE_CACHE_MAX_BYTES = 768 << 20
+
+
+def _bytes(images: Any) -> int:
+    """Bytes of a sequence's images (views' sizes and header dtypes for a lazy one, 0 for None)."""
+    from ..images import image_dtypes
+
+    if images is None:
+        return 0
+    views = getattr(images, "views", None) or getattr(getattr(images, "originals", None), "views", None)
+    if views is not None and len(views) == len(images):
+        return sum(v.width * v.height * 3 * np.dtype(d).itemsize for v, d in zip(views, image_dtypes(images)))
+    return sum(int(np.asarray(im).nbytes) for im in images) if isinstance(images, (list, tuple)) else 0
 
 
 def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
@@ -76,9 +91,11 @@ def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
     from ..correction.base import CorrectedImages
     from ..images import CachedImages, LRUCache
 
-    if isinstance(photos, CachedImages):
-        return photos, corrected
-    cache = LRUCache(IMAGE_CACHE_BYTES)
+    if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos): the corrections join their cache
+        if corrected is None or isinstance(corrected, CachedImages):
+            return photos, corrected
+        return photos, CachedImages(corrected, photos.cache, "corrected")
+    cache = LRUCache(max(IMAGE_CACHE_BYTES, min(IMAGE_CACHE_MAX_BYTES, _bytes(photos) + _bytes(corrected))))
     p = None if photos is None else CachedImages(photos, cache, "photos")
     if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
         corrected = CorrectedImages(p, corrected.transforms)  # the LUTs applied to the cached photos
@@ -142,7 +159,7 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
-                 selection_seams: dict | None = None, images: tuple | None = None) -> Path:
+                 selection_seams: dict | None = None, images: tuple | None = None, write: bool = True) -> Path | str:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
@@ -150,11 +167,13 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
     (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
-    result's (e.g. :func:`cached_images` shared with whoever read them before).
+    result's (e.g. :func:`cached_images` shared with whoever read them before). ``write=False``
+    returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).
     """
     path = Path(path)
     inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
-    return atomic_write_bytes(path, page_bytes(render_page(inp, width=int(thumb_width))))
+    page = render_page(inp, width=int(thumb_width))
+    return atomic_write_bytes(path, page_bytes(page)) if write else page
 
 
 def _scene_frame(tm, rep: dict, fmt: str):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import inspect
 import logging
-import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -18,6 +18,7 @@ import numpy as np
 
 from ..imageops import dtype_scale, img_as_uint8, sample_colors
 from ..metrics import thin_indices
+from ..parallel import carried
 from ..render import render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
 from ..seams import selection_seams
@@ -483,19 +484,19 @@ justify-content:space-between;width:242px}
 """
 
 
-def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]]:
+def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str, str]]:
     """(id, title, body) of every section the data allow; each timed at DEBUG.
 
     What the correction did first (Figure 10, Table 2), then how (Figures 4-8), then the texturing
-    (Figures 9, 12-13, seams), then timings and settings.
+    (Figures 9, 12-13, seams), then timings and settings. The sections are built side by side on
+    ``pool``'s threads (numpy, OpenCV and Open3D release the GIL; matplotlib draws one section
+    only) and joined in this order; only this thread waits for a result another part needs.
     """
     c = inp.correction
-    out: list[tuple[str, str, str]] = []
+    out: list = []
 
     def add(sid: str, title: str, build, *args, **kw) -> None:
-        t = time.perf_counter()
-        out.append((sid, title, build(*args, **kw)))
-        logger.debug("report section %s: %.3f s", sid, time.perf_counter() - t)
+        out.append((sid, title, pool.submit(carried(build, f"report section {sid}"), *args, **kw)))
 
     textured = inp.textured is not None and inp.selection is not None and inp.mesh is not None
     if textured:
@@ -506,9 +507,9 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
             seams = _selection_seams(inp)
             add("correction", "What the correction changes", correction_section, inp.textured, inp.scene.views[a],
                 inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method)
-
-    before = [thumbnail(im, width) for im in inp.photos] if inp.photos is not None else None
-    after = [thumbnail(im, width) for im in inp.corrected] if inp.corrected is not None and before else None
+    thumbs = [pool.submit(carried(lambda ims: [thumbnail(im, width) for im in ims]), ims) if ims is not None else None
+              for ims in (inp.photos, inp.corrected if inp.photos is not None else None)]
+    before, after = (None if t is None else t.result() for t in thumbs)
     if before is not None:
         add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
             [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
@@ -523,11 +524,8 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
         path = c.paths[max(longest, key=lambda v: (change[v], -v))] if longest else None
         add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp, f)
         if inp.mappings is not None and c.paths:
-            t = time.perf_counter()
             edges = _path_edges(c.paths)
-            jihs = _edge_jihs(inp, edges)
-            thumbs = {e: png(jih_thumbnail(jihs[e][0], c.edge_luts.get(e), jihs[e][1])) for e in edges}
-            logger.debug("report JIH of %d edges: %.3f s", len(edges), time.perf_counter() - t)
+            jihs, thumbs = pool.submit(carried(_jihs_and_thumbs, "report JIH"), inp, edges).result()
             add("jih", "Joint image histograms and colour mapping functions (Figures 6-7)", _jih_section, inp, path,
                 jihs, thumbs)
             if path:
@@ -537,10 +535,22 @@ def _sections(inp: PageInputs, f: dict, width: int) -> list[tuple[str, str, str]
         add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
         add("renders", "Textured mesh and photos (Figures 12-13)", _renders_section, inp, (a, b), 2 * width)
         add("seams", "Seam metric", _seams_section, inp.rep, inp.selection_seams)
-    timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
-    out.append(("timings", "Timings (s)", f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"))
+    out.append(("timings", "Timings (s)", timings_block(inp.rep)))
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
-    return out
+    return [(sid, title, body if isinstance(body, str) else body.result()) for sid, title, body in out]
+
+
+def _jihs_and_thumbs(inp: PageInputs, edges: list) -> tuple[dict, dict]:
+    jihs = _edge_jihs(inp, edges)
+    return jihs, {e: png(jih_thumbnail(jihs[e][0], inp.correction.edge_luts.get(e), jihs[e][1])) for e in edges}
+
+
+def timings_block(rep: dict) -> str:
+    """The timings section's body from a report.json dict, between ``<!-- timings -->`` markers (the one part of
+    a page that differs between two identical runs; the run's writer fills it in last)."""
+    f = facts(rep)
+    timings = {"stages": f["timings"], **({"correction": f["correction_timings"]} if f["correction_timings"] else {})}
+    return f"<!-- timings -->{_kv_tables(timings)}<!-- /timings -->"
 
 
 def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
@@ -575,16 +585,19 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
 def render_page(inp: PageInputs, *, width: int = 160) -> str:
     """The report page of ``inp`` (sections only for the data present), thumbnails ``width`` pixels wide."""
     from .. import __version__
-
-    f = facts(inp.rep)
     from . import cached_images
 
+    f = facts(inp.rep)
     photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
     inp = replace(inp, photos=photos, corrected=corrected)
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
             and inp.corrected is not None and inp.selection_seams is None:
         inp = replace(inp, selection_seams=_selection_seams(inp))  # the cards and two sections show them
-    sections = _sections(inp, f, width)
+    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="o3d_seqcc-report")
+    try:
+        sections = _sections(inp, f, width, pool)
+    finally:  # an error: the sections not started are dropped, the running ones finish
+        pool.shutdown(wait=True, cancel_futures=True)
     c = inp.correction
     faces = "" if inp.selection is None else f", {len(inp.selection)} faces"
     where = inp.rep.get("scene") or inp.rep.get("scene_path") or "a scene in memory"

@@ -274,13 +274,17 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         region = np.full(H * S, -1, dtype=np.int32)
         rc = cs.face_chart[face]
         region[idx] = np.where(rc < cs.n_image, rc, -1)  # image charts (with absorbed faces), not the fallback region
+        del rc
         tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
                                                adjacency, wf, band=int(s.local_band))
+        del region
         logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
                     local_stats["seam_edges"], local_stats["mean_abs_diff"], local_stats["texels_changed"],
                     local_stats["time_s"])
     t_local = time.perf_counter()
     step("gutters")
+    n_texels = len(idx)
+    del canvas, idx, face  # the atlas-sized index arrays (16 bytes per written texel) are done
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
         tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
@@ -298,7 +302,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         "face_texels_per_pixel": {"min": float(face_tpp.min()), "p1": float(np.percentile(face_tpp, 1)),
                                   "median": float(np.median(face_tpp)),
                                   "below_1": float(np.mean(face_tpp < 0.999 * pk.texels_per_pixel))},
-        "coverage": float(tri.sum() / (P * S * S)), "utilization": float(len(idx) / (P * S * S)),
+        "coverage": float(tri.sum() / (P * S * S)), "utilization": float(n_texels / (P * S * S)),
         "charts": int(cs.n_image), "fallback_charts": int(cs.stats["fallback_charts"]),
         "absorbed_faces": int(cs.stats["absorbed_faces"]), "merged_tiny_charts": int(cs.stats["merged_tiny_charts"]),
         "fallback": s.fallback, "unseen_faces": n_unseen, "vertices_in": int(len(verts)),

@@ -213,13 +213,33 @@ def _absorb_unseen(chart: np.ndarray, chart_view: np.ndarray, labels: np.ndarray
     return out, int(np.count_nonzero(best >= 0))
 
 
+def _usable_at(visibility: VisibilityLike, views: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pointwise ``usable[views, faces]`` (bool) and ``area[views, faces]`` (float64, 0 where not usable), looked
+    up in the sparse per-view records (ascending face ids) when the visibility has them: no (V, F) array."""
+    views, faces = np.asarray(views, np.int64).reshape(-1), np.asarray(faces, np.int64).reshape(-1)
+    records = getattr(visibility, "records", None)
+    if records is None:
+        return (np.asarray(visibility.usable[views, faces], dtype=bool),
+                np.asarray(visibility.area[views, faces], dtype=np.float64))
+    ok, area = np.zeros(len(faces), bool), np.zeros(len(faces), np.float64)
+    order = np.argsort(views, kind="stable")
+    bounds = np.searchsorted(views[order], np.arange(len(records) + 1))
+    for v in np.flatnonzero(np.diff(bounds)):
+        idx, r = order[bounds[v]:bounds[v + 1]], records[v]
+        keep = r.flags == 0
+        ids = r.faces[keep]
+        if len(ids):
+            pos = np.minimum(np.searchsorted(ids, faces[idx]), len(ids) - 1)
+            ok[idx] = hit = ids[pos] == faces[idx]
+            area[idx] = np.where(hit, r.area[keep][pos], 0.0)
+    return ok, area
+
+
 def _merge_tiny(chart: np.ndarray, chart_view: np.ndarray, labels: np.ndarray, wf: np.ndarray,
                 visibility: VisibilityLike, own_area: np.ndarray, max_faces: int, rounds: int = 3) -> tuple[np.ndarray, int]:
     """Charts of <= ``max_faces`` faces moved into a larger neighbour's parametrisation (module docstring)."""
     ch = chart.copy()
     n_ch = len(chart_view)
-    usable = visibility.usable
-    area = visibility.area
     merged = 0
     for _ in range(rounds):
         m = ch >= 0
@@ -243,8 +263,8 @@ def _merge_tiny(chart: np.ndarray, chart_view: np.ndarray, labels: np.ndarray, w
         ok_f = np.zeros(len(f), dtype=bool)
         if seen_f.any():
             fs, vs = f[seen_f], v[seen_f]
-            ok_f[seen_f] = np.asarray(usable[vs, fs], dtype=bool) & (
-                np.asarray(area[vs, fs], dtype=np.float64) >= MERGE_MIN_AREA_RATIO * own_area[fs])
+            use, area = _usable_at(visibility, vs, fs)
+            ok_f[seen_f] = use & (area >= MERGE_MIN_AREA_RATIO * own_area[fs])
         ok = np.bincount(rep, weights=~ok_f & seen_f, minlength=len(t_)) == 0
         ok &= np.bincount(rep, weights=seen_f, minlength=len(t_)) == n  # tiny charts of seen faces only
         t_, c_ = t_[ok], c_[ok]
@@ -281,8 +301,8 @@ def _migrate_faces(chart: np.ndarray, chart_view: np.ndarray, labels: np.ndarray
         if len(fa) == 0:
             continue
         v = chart_view[cb]
-        ok = np.asarray(visibility.usable[v, fa], dtype=bool) & (
-            np.asarray(visibility.area[v, fa], dtype=np.float64) >= MERGE_MIN_AREA_RATIO * own_area[fa])
+        use, area = _usable_at(visibility, v, fa)
+        ok = use & (area >= MERGE_MIN_AREA_RATIO * own_area[fa])
         ch[fa[ok]] = cb[ok]
         moved += int(ok.sum())
     return ch, moved

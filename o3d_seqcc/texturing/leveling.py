@@ -27,7 +27,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..imageops import sample_bilinear
-from ..meshops import weld_vertices
 from .settings import LEVELING_SMOOTHNESS
 
 __all__ = ["corner_colors", "local_seam_leveling", "seam_leveling_offsets", "solve_corner_offsets"]
@@ -351,27 +350,35 @@ def local_seam_leveling(
     edge[:, :-1] |= reg[:, :-1] != reg[:, 1:]
     edge = cv2.dilate(edge, np.ones((3, 3), np.uint8))
     dom = ((reg >= 0) & (edge == 0)).astype(np.float32)
+    del edge
     is_seed = (wsum > 1e-6) & (dom.reshape(-1)[uniq] > 0)
     seed = np.zeros(R * S, dtype=np.float32)
     seed[uniq[is_seed]] = 1.0
     seed = seed.reshape(R, S)
     # the extension front and the smoothing do not depend on the values: their factors serve every pass
     bc = cv2.BORDER_CONSTANT
+    # (held sparse: each factor is 0, or 1 for ``keep``, off the few texels a step reaches, where it changes nothing)
     K = seed
     grow = []
     for _ in range((int(band) + 1) // 2):  # two texels per step
         c = cv2.boxFilter(K, -1, (5, 5), normalize=False, borderType=bc)
         upd = cv2.multiply(cv2.subtract(dom, K), cv2.threshold(c, 1e-3, 1.0, cv2.THRESH_BINARY)[1])
-        grow.append(cv2.divide(upd, cv2.max(c, 1e-3)))  # upd is 0 where c is
+        ring = np.flatnonzero(upd)
+        grow.append((ring, cv2.divide(upd, cv2.max(c, 1e-3)).reshape(-1)[ring]))  # upd is 0 where c is
         K = cv2.add(K, upd)
-    free = cv2.subtract(K, seed)  # extended, non-seed texels
-    keep = cv2.subtract(np.float32(1.0) + np.zeros_like(free), free)
-    smooth = cv2.divide(free, cv2.max(cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc), 1e-3))
+    del dom, c, upd
+    free = cv2.subtract(K, seed)  # extended, non-seed texels (0 or 1): keep = 1 - free, smooth = free / box(K)
+    ext = np.flatnonzero(free)
+    keep = (np.float32(1.0) - free.reshape(-1)[ext]).astype(np.float32)
+    smooth = cv2.divide(free, cv2.max(cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc), 1e-3)).reshape(-1)[ext]
     dist = cv2.distanceTransform((seed == 0).astype(np.uint8), cv2.DIST_L2, 3)
     tt = np.clip(1.0 - (dist - 1.0) / float(band), 0.0, 1.0)
+    del free, seed
     fall = (tt * tt * (3.0 - 2.0 * tt) * K).astype(np.float32)  # P holds value x known, K in {0, 1}
+    del dist, tt, K  # of the atlas-sized float planes only the factors of the passes stay
     touched = fall > 0
     fall_t = fall[touched][:, None]
+    del fall
     out = tex.copy()
     sub = out[:R]
     total = np.zeros((int(np.count_nonzero(touched)), 3), dtype=np.float32)
@@ -386,11 +393,12 @@ def local_seam_leveling(
             p = np.zeros(R * S, dtype=np.float32)
             p[uniq[is_seed]] = vals[is_seed, c] / wsum[is_seed]
             p = p.reshape(R, S)
-            for g in grow:
-                p = cv2.add(p, cv2.multiply(cv2.boxFilter(p, -1, (5, 5), normalize=False, borderType=bc), g))
+            flat = p.reshape(-1)
+            for ring, g in grow:  # p += box5(p) * g
+                flat[ring] += cv2.boxFilter(p, -1, (5, 5), normalize=False, borderType=bc).reshape(-1)[ring] * g
             for _ in range(int(smooth_iters)):  # masked smoothing of the extended values (seeds fixed)
-                p = cv2.add(cv2.multiply(p, keep),
-                            cv2.multiply(cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=bc), smooth))
+                box = cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=bc).reshape(-1)[ext]
+                flat[ext] = flat[ext] * keep + box * smooth  # p * keep + box3(p) * smooth
             off[:, c] = p[touched]
         off *= fall_t
         sub[touched] = np.clip(np.rint(sub[touched].astype(np.float32) + off), 0, 255).astype(np.uint8)

@@ -1,0 +1,214 @@
+"""Speed and memory work of issue 21 that must not change a result: same values, same bytes, no dense arrays.
+
+Speed itself is measured by ``benchmarks/profile_run.py`` and ``benchmarks/peers.py``, not here.
+"""
+
+from __future__ import annotations
+
+import struct
+import warnings
+import zlib
+
+import numpy as np
+
+import o3d_seqcc as sc
+
+
+def _png_with_exif_after_pixels(path, img: np.ndarray, orientation: int) -> None:
+    """A PNG whose eXIf chunk follows its IDAT (allowed by the PNG 1.5 extension; Pillow writes it before)."""
+    from PIL import Image
+
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    payload = exif.tobytes()[6:] if exif.tobytes().startswith(b"Exif\x00\x00") else exif.tobytes()
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    h, w = img.shape[:2]
+    raw = b"".join(b"\x00" + img[y].tobytes() for y in range(h))
+    data = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"eXIf", payload) + chunk(b"IEND", b""))
+    path.write_bytes(data)
+
+
+def test_png_exif_orientation_found_without_decoding_twice(tmp_path, monkeypatch):
+    """read_image decodes a PNG once (OpenCV): its eXIf chunk, even after the pixels, is found from the chunk
+    headers, not by Pillow decoding the image (which doubled every photo read)."""
+    from PIL import ImageFile
+
+    from o3d_seqcc.io.files import read_image
+
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    _png_with_exif_after_pixels(tmp_path / "rot.png", img, 6)
+    from PIL import Image
+
+    Image.fromarray(img).save(tmp_path / "plain.png")
+    with Image.open(tmp_path / "rot.png") as im:  # Pillow itself sees the tag only by decoding the image
+        assert im.getexif().get(0x0112) == 6
+
+    def no_decode(self, *a, **k):
+        raise AssertionError("Pillow decoded the image")
+
+    monkeypatch.setattr(ImageFile.ImageFile, "load", no_decode)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        a = read_image(tmp_path / "rot.png")
+        b = read_image(tmp_path / "plain.png")
+    assert np.array_equal(a, img) and np.array_equal(b, img)
+    msgs = [str(w.message) for w in rec if "EXIF orientation" in str(w.message)]
+    assert len(msgs) == 1 and "rot.png has EXIF orientation 6" in msgs[0]
+
+
+def test_colour_samples_from_uint8_are_the_float_samples():
+    """The colour sampling of seqcc-global reads uint8 / uint16 photos directly, bit for bit the float path."""
+    from o3d_seqcc.correction.edge_summaries import _sample_flat, _sample_levels
+    from o3d_seqcc.imageops import img_as_float
+
+    rng = np.random.default_rng(1)
+    for dtype, top in ((np.uint8, 256), (np.uint16, 65536)):
+        img = rng.integers(0, top, (37, 53, 3)).astype(dtype)
+        uv = np.concatenate([rng.uniform(-2, 55, (500, 2)), [[0, 0], [52, 36], [52.5, 36.7], [51.999, 35.2]]])
+        for interp in ("bilinear", "nearest"):
+            want = _sample_flat(img_as_float(img), uv, interp)
+            got = _sample_levels(img, uv, interp)
+            assert got.dtype == want.dtype == np.float32
+            assert np.array_equal(got, want), (dtype, interp)
+
+
+def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch, tmp_path):
+    """raycast casts rows in chunks (memory): every array is bit for bit the one-chunk cast."""
+    from o3d_seqcc import render
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=2, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    mesh, view = scene.load_mesh(), scene.views[0]
+    monkeypatch.setattr(render, "RAY_CHUNK", 1 << 30)
+    whole = render.raycast(mesh, view)
+    monkeypatch.setattr(render, "RAY_CHUNK", 1000)  # 6 rows per chunk, the last one short
+    parts = render.raycast(mesh, view)
+    assert len(np.unique(whole.face_ids)) > 100
+    for name in ("face_ids", "bary", "depth", "cos_angle"):
+        assert np.array_equal(getattr(whole, name), getattr(parts, name)), name
+
+
+#: the dense (V, F) views of a Visibility, for tests and figures only
+DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth")
+
+
+def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
+    """`o3d-seqcc run`'s path (pipeline.run + save, report included) reads the sparse per-view records only:
+    every dense (V, F) property of Visibility raises inside the run."""
+    from o3d_seqcc.visibility import Visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
+    used = []
+
+    def forbidden(name):
+        def get(self):
+            used.append(name)
+            raise AssertionError(f"dense Visibility.{name} read on the default path")
+        return property(get)
+
+    for name in (*DENSE, "stage_masks"):
+        monkeypatch.setattr(Visibility, name, forbidden(name))
+    res = sc.pipeline.run(tmp_path / "room", t_npm=50)
+    res.save(tmp_path / "out")
+    assert used == []
+    assert (tmp_path / "out" / "report.html").is_file()
+    monkeypatch.undo()
+    assert res.visibility.usable.shape == (6, len(res.selection))  # the dense views still exist for tests
+
+
+def _digest(folder) -> dict:
+    """sha1 of every output file; report.json without its timings, report.html without its timings table."""
+    import hashlib
+    import json
+    import re
+
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if not (k.startswith("timings") or k == "time_s" or k == "files")}
+        return [strip(v) for v in x] if isinstance(x, list) else x
+
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if not p.is_file() or p.name == ".o3d_seqcc.json":
+            continue
+        data = p.read_bytes()
+        if p.name == "report.html":
+            data = re.sub(rb"<!-- timings -->.*?<!-- /timings -->", b"", data, flags=re.S)
+        if p.name == "report.json":
+            data = json.dumps(strip(json.loads(data)), sort_keys=True).encode()
+        out[str(p.relative_to(folder))] = hashlib.sha1(data).hexdigest()
+    return out
+
+
+def test_same_bytes_for_any_jobs(tmp_path):
+    """`o3d-seqcc run -j 1` and `-j 2` (threads in every stage, the export beside the report) write the same files."""
+    from o3d_seqcc.cli import main
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
+    digests = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        assert main(["-q", "-j", jobs, "run", str(tmp_path / "room"), "--out", str(out), "--t-npm", "50",
+                     "--save-images"]) == 0
+        digests.append(_digest(out))
+    assert {"mesh.glb", "mesh.obj", "mesh.png", "report.html", "report.json", "selection.png"} <= set(digests[0])
+    assert digests[0] == digests[1]
+
+
+def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
+    """A pair's picked mappings built alone (the correction's 8000, Table 2's 200 of a pair) are bit for bit
+    the full build's at those indices, in every mapping mode; the count comes without building."""
+    from o3d_seqcc.mappings import compute_mappings
+    from o3d_seqcc.pairs import thinned
+    from o3d_seqcc.visibility import compute_visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    vis = compute_visibility(scene)
+    rng = np.random.default_rng(3)
+    for mode in ("surface", "vertices", "dense"):
+        m = compute_mappings(scene, visibility=vis, mode=mode)
+        src = m.pairs.source
+        levels = 0
+        for key in m.pairs:
+            full = src.build(*key)
+            levels += len(np.unique(src._plan(*key)[1]))
+            assert src.size(*key) == full.n > 0
+            picks = [np.sort(rng.choice(full.n, min(full.n, 97), replace=False)), np.arange(full.n),
+                     np.zeros(0, np.int64), np.array([0, full.n - 1])]
+            for idx in picks:
+                n, part = thinned(m.pairs, key, lambda n, idx=idx: idx)
+                want = full.take(idx)
+                assert n == full.n and part.n == len(idx)
+                for name in ("uv_a", "uv_b", "face_ids", "weights"):
+                    x, y = getattr(part, name), getattr(want, name)
+                    assert (x is None) == (y is None), (mode, name)
+                    assert x is None or (x.dtype == y.dtype and np.array_equal(x, y)), (mode, key, name)
+            assert thinned(m.pairs, key, lambda n: None)[1].n == full.n
+        assert mode == "vertices" or levels > len(m.pairs)  # faces of several levels in a pair: groups crossed
+
+
+def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
+    """The gutter fill of an even-sided page pulls and pushes its full-resolution level in row bands (no
+    float copy of the page): the same bytes as the whole-page pyramid, for bands that do or do not divide it."""
+    import cv2
+
+    from o3d_seqcc.texturing import bake
+
+    rng = np.random.default_rng(5)
+    for H, W, band in ((512, 384, 64), (640, 256, 96), (514, 258, 128)):
+        img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+        blobs = cv2.resize(rng.random((H // 16 + 1, W // 16 + 1)).astype(np.float32), (W, H),
+                           interpolation=cv2.INTER_NEAREST)
+        mask = (blobs > 0.55) & (rng.random((H, W)) > 0.05)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", 1 << 20)  # one band: the whole-page path
+        whole = bake.push_pull_fill(img, mask)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", band)
+        banded = bake.push_pull_fill(img, mask)
+        assert np.array_equal(whole[mask], img[mask]) and not np.array_equal(whole, img)
+        assert np.array_equal(banded, whole), (H, W, band)
