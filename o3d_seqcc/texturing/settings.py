@@ -109,7 +109,7 @@ class TextureSettings:
         Width in texels of the band changed by the local leveling. The colour differences it
         removes along a seam are mostly the photos' misregistered detail on real scans: a wider
         band spreads them over the texture's own detail (Fountain 300k, render sharpness over
-        texrecon's, median of 8 views: band 8 0.92, 4 0.94, 2 0.95, at the same seam metric).
+        texrecon's, median of 8 views: band 8 0.94, 2 0.96, at the same seam metric).
     fallback : {"smooth", "flat"}, default "smooth"
         Colour of the faces seen by no view.
     """
