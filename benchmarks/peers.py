@@ -27,6 +27,7 @@ import json
 import logging
 import os
 import shutil
+import shlex
 import subprocess
 import sys
 import time
@@ -1033,7 +1034,8 @@ def _run_tool(tool: str, key: str, scene: Scene, data: Path, mesh: Path, out: Pa
     if tool == "texrecon":
         return run_texrecon(scene, d, overwrite=True, align_texels=not args.texrecon_exact_cameras)
     if tool in ("ours", "ours-texture"):
-        return run_ours(data, d, mesh=None if key in SYNTHETIC else mesh, command="run" if tool == "ours" else "texture")
+        return run_ours(data, d, mesh=None if key in SYNTHETIC else mesh, command="run" if tool == "ours" else "texture",
+                        args=shlex.split(args.ours_args))
     return run_peer_measured(tool, data, d, mesh=mesh)
 
 
@@ -1175,6 +1177,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--build-only", action="store_true", help="build (or find) texrecon, print its path and exit")
     ap.add_argument("--measure-only", action="store_true",
                     help="measure the outputs (and timings) an earlier run left in --out, without running the tools")
+    ap.add_argument("--ours-args", default="",
+                    help="extra arguments of ours / ours-texture, one string (e.g. \"--no-local-leveling\"): a variant "
+                         "measured against the same peers; the defaults without it")
     ap.add_argument("--texrecon-exact-cameras", action="store_true",
                     help="give texrecon the exact principal point (its texture is then half a texel off; see texrecon_cam)")
     args = ap.parse_args(argv)
@@ -1310,7 +1315,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         report["meshes"][key] = res
         _print_mesh(key, res, views_idx)
         # crops: the fixed ones for this mesh, then where texrecon's render most exceeds the photo's detail
-        order = [t for t in ("ours", "texrecon", "meshlab", "open3d") if t in loaded]
+        order = [t for t in ("ours", "ours-texture", "texrecon", "meshlab", "open3d") if t in loaded]
         spec = [(k, x, y, w, h, what) for (m, k, x, y, w, h, what) in CROPS if m == key and k in views]
         if "texrecon" in loaded and "ours" in loaded:
             # the view where texrecon's sharpness lead over ours is least backed by the second measure,
