@@ -164,6 +164,20 @@ class TextureSettings:
         return replace(self, **changes)
 
 
+def _auto_or_parsed(value: Any, parse: Any, message: str) -> Any:
+    """A command-line style value: ``"auto"`` (any case, spaces around) kept as ``"auto"``, another string
+    parsed with ``parse`` (``InputError(message)`` if it does not parse), anything else returned as given."""
+    if not isinstance(value, str):
+        return value
+    v = value.strip().lower()
+    if v == "auto":
+        return "auto"
+    try:
+        return parse(v)
+    except ValueError:
+        raise InputError(message) from None
+
+
 def parse_atlas_size(value: Any) -> int | str:
     """``"auto"`` or an integer side in 8..:data:`MAX_ATLAS_SIZE` (also given as a string, as on the command line).
 
@@ -172,14 +186,9 @@ def parse_atlas_size(value: Any) -> int | str:
     InputError
         Anything else.
     """
+    value = _auto_or_parsed(value, int, f"atlas_size (--atlas-size) must be 'auto' or an integer >= 8, got {value!r}")
     if isinstance(value, str):
-        v = value.strip().lower()
-        if v == "auto":
-            return "auto"
-        try:
-            value = int(v)
-        except ValueError:
-            raise InputError(f"atlas_size (--atlas-size) must be 'auto' or an integer >= 8, got {value!r}") from None
+        return value
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not np.isfinite(value) \
             or int(value) != value or int(value) < 8:
         raise InputError(f"atlas_size (--atlas-size) must be 'auto' or an integer >= 8, got {value!r}")
@@ -216,14 +225,9 @@ def parse_texels_per_pixel(value: Any) -> float | str:
     InputError
         Anything else.
     """
+    value = _auto_or_parsed(value, float, f"texels_per_pixel must be 'auto' or a number > 0, got {value!r}")
     if isinstance(value, str):
-        v = value.strip().lower()
-        if v == "auto":
-            return "auto"
-        try:
-            value = float(v)
-        except ValueError:
-            raise InputError(f"texels_per_pixel must be 'auto' or a number > 0, got {value!r}") from None
+        return value
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or not value > 0 \
             or not np.isfinite(value):
         raise InputError(f"texels_per_pixel must be 'auto' or a number > 0, got {value!r}")
