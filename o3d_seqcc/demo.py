@@ -130,6 +130,10 @@ def run_demo(
         raise InputError(f"--out {out} is a file; give a folder")
     if dataset not in DATASETS:
         raise InputError(f"unknown demo dataset {dataset!r}; valid: {', '.join(DATASETS)}")
+    if (out / "report.html").exists() and not (out / "demo_summary.json").is_file():
+        # the demo replaces its own page only (a folder it wrote has its summary beside the page)
+        raise InputError(f"--out {out} holds a report.html that no demo wrote (no demo_summary.json beside it); "
+                         "choose another folder")
     unknown = sorted(set(scene_options) - set(_SCENE_KEYS))
     if unknown:
         raise TypeError(f"run_demo got unknown option(s) {unknown}; valid: {sorted(_SCENE_KEYS)}")

@@ -75,3 +75,14 @@ def test_demo_scene_is_mostly_seen_and_quiet(demo_run, capsys):
     summ = json.loads((out / "demo_summary.json").read_text())["summary"]
     r = summ["run"]  # (faces split into parts: the unseen ones are counted in area and in input faces)
     assert r["unseen_area"] < 0.15 and r["unseen_input_faces"] < 0.15 * r["input_faces"], r
+
+
+def test_demo_never_replaces_a_report_it_did_not_write(tmp_path):
+    """A report.html in --out that no demo wrote (no demo_summary.json beside it) is refused before any work."""
+    from o3d_seqcc.demo import run_demo
+    from o3d_seqcc.errors import InputError
+
+    (tmp_path / "report.html").write_text("mine")
+    with pytest.raises(InputError, match="report.html that no demo wrote"):
+        run_demo(tmp_path, n_views=4)
+    assert (tmp_path / "report.html").read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["report.html"]
