@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from o3d_seqcc.render import gradient_similarity, raycast, render_textured, sharpness
-from o3d_seqcc.seams import seam_metric
+from o3d_seqcc.evaluation.render import gradient_similarity, raycast, render_textured, sharpness
+from o3d_seqcc.evaluation.seams import seam_metric
 from o3d_seqcc.texturing import TexturedMesh, load_textured_mesh
 
 
@@ -81,7 +81,7 @@ def holes(tm: TexturedMesh, mesh_in) -> dict:
 
 def texels_per_pixel(tm: TexturedMesh, view, hits) -> np.ndarray:
     """Per pixel hit in ``view``: sqrt(face area in texels / face area in the photo's pixels)."""
-    from o3d_seqcc.camera import project_points
+    from o3d_seqcc.geometry.camera import project_points
 
     txy = tm.texel_xy()[tm.faces]
     at = 0.5 * np.abs((txy[:, 1, 0] - txy[:, 0, 0]) * (txy[:, 2, 1] - txy[:, 0, 1])

@@ -21,8 +21,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.imageops import img_as_uint8, sample_bilinear
-from o3d_seqcc.meshops import face_adjacency, vertex_normals, weld_vertices
+from o3d_seqcc.imaging.arrays import img_as_uint8, sample_bilinear
+from o3d_seqcc.geometry.meshops import face_adjacency, vertex_normals, weld_vertices
 from o3d_seqcc.texturing.atlas import _check  # unchanged since 89e7de7: shared, not copied
 from o3d_seqcc.texturing.fallback import _propagate
 from o3d_seqcc.texturing.leveling import _rasterize_uv, _seam_edge_corners, seam_leveling_offsets

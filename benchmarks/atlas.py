@@ -82,7 +82,7 @@ def coverage(tm) -> float:
 
 def view_seams(tm, adjacency, wf) -> dict:
     """CIEDE2000 across every edge between seen faces of two different views (inside charts too)."""
-    from o3d_seqcc.imageops import delta_e_2000
+    from o3d_seqcc.imaging.arrays import delta_e_2000
     from o3d_seqcc.texturing.leveling import _seam_edge_corners
     from o3d_seqcc.texturing.textured_mesh import sample_texture
 
@@ -110,8 +110,8 @@ def view_seams(tm, adjacency, wf) -> dict:
 
 
 def measure(path_or_tm, scene, photo, n_in: int) -> dict:
-    from o3d_seqcc.render import raycast, render_textured, sharpness
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.render import raycast, render_textured, sharpness
+    from o3d_seqcc.evaluation.seams import seam_metric
     from o3d_seqcc.texturing import load_textured_mesh
 
     tm = load_textured_mesh(path_or_tm)
@@ -147,13 +147,13 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
 
     from _shelf_bake import bake_shelf
     from o3d_seqcc import load_scene
-    from o3d_seqcc.export import export_glb
-    from o3d_seqcc.gltf_validator import find_validator, validate_glb
-    from o3d_seqcc.meshops import face_adjacency, weld_vertices
-    from o3d_seqcc.orientation import up_axis_transform
-    from o3d_seqcc.seams import mip_bleed
+    from o3d_seqcc.io.export import export_glb
+    from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
+    from o3d_seqcc.geometry.meshops import face_adjacency, weld_vertices
+    from o3d_seqcc.geometry.orientation import up_axis_transform
+    from o3d_seqcc.evaluation.seams import mip_bleed
     from o3d_seqcc.texturing import TextureSettings, bake_texture, select_views
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     mesh_rel, size = MESHES[key]
     size = args.atlas_size or size
@@ -228,7 +228,7 @@ def yup_picture(tm, R, scene, images, glb: Path, path: Path) -> Path:
     """The Y-up GLB rendered by a Y-up viewer's camera (at the reference view, no roll) next to the photo."""
     import cv2
 
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.evaluation.render import render_textured
     from o3d_seqcc.scene import View
 
     v = scene.views[VIEW]
@@ -298,8 +298,8 @@ def evidence(ctx: dict, corrected, args, out: Path) -> list[dict]:
     """Coverage against the other constraints on the decimated mesh, at a 2048 atlas."""
     import xatlas
 
-    from o3d_seqcc.meshops import vertex_normals, weld_vertices
-    from o3d_seqcc.seams import mip_bleed, seam_metric
+    from o3d_seqcc.geometry.meshops import vertex_normals, weld_vertices
+    from o3d_seqcc.evaluation.seams import mip_bleed, seam_metric
     from o3d_seqcc.texturing import bake_texture
     from o3d_seqcc.texturing.charts import build_charts
 

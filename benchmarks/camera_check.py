@@ -36,7 +36,7 @@ def main() -> int:
         return 0
     warnings.simplefilter("ignore")
     from o3d_seqcc import InputError, Scene, load_scene
-    from o3d_seqcc.camera_checks import FLIP, check_cameras
+    from o3d_seqcc.visibility.camera_checks import FLIP, check_cameras
 
     for mesh in MESHES:
         load_scene(FOUNTAIN, mesh=mesh)  # warm: imports, the mesh cache

@@ -92,9 +92,9 @@ def write_colmap(syn, folder: Path, model: str, *, supersample=4, psf=0.5) -> Pa
     import open3d as o3d
     import pycolmap
 
-    from o3d_seqcc.imageops import img_as_dtype
+    from o3d_seqcc.imaging.arrays import img_as_dtype
     from o3d_seqcc.io.files import write_image
-    from o3d_seqcc.photometric import apply_photometric
+    from o3d_seqcc.evaluation.photometric import apply_photometric
     from o3d_seqcc.synthetic import room
 
     v0 = syn.scene.views[0]
@@ -123,8 +123,8 @@ def write_colmap(syn, folder: Path, model: str, *, supersample=4, psf=0.5) -> Pa
 
 def texture_delta_e(syn, a, b) -> float:
     """Mean CIEDE2000 between two textured meshes rendered from every camera of ``syn`` (mesh pixels)."""
-    from o3d_seqcc.metrics import image_delta_e
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.evaluation.metrics import image_delta_e
+    from o3d_seqcc.evaluation.render import render_textured
 
     return float(np.mean([image_delta_e(render_textured(b, v), render_textured(a, v), mask=syn.load_face_ids(k) >= 0)
                           for k, v in enumerate(syn.scene.views)]))
@@ -133,8 +133,8 @@ def texture_delta_e(syn, a, b) -> float:
 def face_delta_e(syn, a, b) -> float:
     """The same comparison per face: CIEDE2000 of the faces' mean colours in the renders (pixel-weighted),
     which leaves out what the resampling does to the detail within a face."""
-    from o3d_seqcc.imageops import delta_e_2000, img_as_float
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_float
+    from o3d_seqcc.evaluation.render import render_textured
 
     des, weights = [], []
     for k, v in enumerate(syn.scene.views):
@@ -152,7 +152,7 @@ def face_delta_e(syn, a, b) -> float:
 
 def measure(size: tuple[int, int], views: int, root: Path) -> None:
     import o3d_seqcc as sc
-    from o3d_seqcc.metrics import image_delta_e
+    from o3d_seqcc.evaluation.metrics import image_delta_e
 
     W, H = size
     syn = sc.make_synthetic_scene(root / "syn", n_views=views, width=W, height=H, cell_size=0.15, layout="two-rings")
@@ -176,7 +176,7 @@ def measure(size: tuple[int, int], views: int, root: Path) -> None:
         faces = face_delta_e(syn, runs["PINHOLE", "seqcc-global"].textured, runs[model, "seqcc-global"].textured)
         photos = np.mean([image_delta_e(scenes[model].views[k].load_image(), scenes["PINHOLE"].views[k].load_image(),
                                         mask=masks[k]) for k in range(views)])
-        from o3d_seqcc.render import render_textured
+        from o3d_seqcc.evaluation.render import render_textured
 
         def vs_gt(res):
             return np.mean([image_delta_e(render_textured(res.textured, v), gt[k], mask=masks[k])

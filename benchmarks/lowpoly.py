@@ -116,8 +116,8 @@ def _run(checkout: Path, scene_dir: Path, out: Path, reference: str, shift: floa
 def _resolution(root: Path) -> dict:
     """This checkout's pair counts on Fountain's 16k- and 300k-face meshes (same photos): surface vs vertex mappings."""
     import o3d_seqcc as sc
-    from o3d_seqcc.graph import resolve_t_npm
-    from o3d_seqcc.mappings import compute_mappings
+    from o3d_seqcc.correction.graph import resolve_t_npm
+    from o3d_seqcc.mappings.compute import compute_mappings
 
     counts = {}
     for mesh in ("mesh_decimated_uv_blender.ply", "tsdf_mesh.ply"):
@@ -157,8 +157,8 @@ def main(argv=None) -> int:
 
     import o3d_seqcc as sc
     from o3d_seqcc.demo import texture_ground_truth
-    from o3d_seqcc.metrics import image_delta_e
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.evaluation.metrics import image_delta_e
+    from o3d_seqcc.evaluation.render import render_textured
     from o3d_seqcc.synthetic import load_synthetic
 
     checkouts = [("this", REPO)] + [(Path(c).name or c, Path(c).resolve()) for c in args.compare]

@@ -55,7 +55,7 @@ def _ray_hits(rs, view, uv: np.ndarray) -> np.ndarray:
 
 
 def _reproject(view, P: np.ndarray) -> np.ndarray:
-    from o3d_seqcc.camera import project_points
+    from o3d_seqcc.geometry.camera import project_points
 
     uv, _ = project_points(P, view.intrinsic, view.extrinsic)
     return uv
@@ -65,9 +65,9 @@ def synthetic_quality(n_views: int, width: int, height: int, seed: int) -> None:
     import open3d as o3d
     import open3d.core as o3c
 
-    from o3d_seqcc.mappings import compute_mappings
+    from o3d_seqcc.mappings.compute import compute_mappings
     from o3d_seqcc.synthetic import make_synthetic_scene
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     with tempfile.TemporaryDirectory(prefix="o3d_seqcc_bench_map_") as tmp:
         t = time.perf_counter()
@@ -159,9 +159,9 @@ def _short_stats(st: dict) -> dict:
 
 
 def fountain_speed(mesh_name: str, n_jobs: int | None) -> None:
-    from o3d_seqcc.mappings import compute_mappings
+    from o3d_seqcc.mappings.compute import compute_mappings
     from o3d_seqcc.datasets import fountain
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     if not (FOUNTAIN / "scene" / mesh_name).is_file():
         print(f"fountain: {FOUNTAIN / 'scene' / mesh_name} not found, skipped")

@@ -756,7 +756,7 @@ def write_welded_ply(vertices: np.ndarray, faces: np.ndarray, path: str | os.Pat
         ((F_kept,) int64 ids of the input faces written, in order).
     """
     from o3d_seqcc.io.files import atomic_write_bytes
-    from o3d_seqcc.meshops import weld_vertices
+    from o3d_seqcc.geometry.meshops import weld_vertices
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
@@ -1225,7 +1225,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
 
     from o3d_seqcc import load_scene
-    from o3d_seqcc.render import raycast
+    from o3d_seqcc.evaluation.render import raycast
 
     pm = _measure_module()
     out = Path(args.out).resolve()

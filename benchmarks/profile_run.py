@@ -122,7 +122,7 @@ def _child(argv: list[str]) -> int:
     import o3d_seqcc.cli as cli  # the command's imports: part of start-up
     import o3d_seqcc.io.load as load_mod
     import o3d_seqcc.pipeline as pipeline_mod
-    from o3d_seqcc.progress import on_stage
+    from o3d_seqcc._shared.progress import on_stage
 
     inner = load_mod.load_scene
 

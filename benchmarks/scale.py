@@ -111,7 +111,7 @@ def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0) -> Path
     import open3d.core as o3c
 
     from o3d_seqcc import Scene, View, save_scene
-    from o3d_seqcc.photometric import apply_photometric, identity_photometric, sample_photometric
+    from o3d_seqcc.evaluation.photometric import apply_photometric, identity_photometric, sample_photometric
     from o3d_seqcc.synthetic.room import look_extrinsic
 
     rng = np.random.default_rng(seed)
@@ -206,7 +206,7 @@ def _warm() -> None:
     import sklearn.svm  # noqa: F401
 
     import o3d_seqcc.correction  # noqa: F401
-    import o3d_seqcc.view_visibility  # noqa: F401
+    import o3d_seqcc.visibility.per_view  # noqa: F401
 
 
 def child(scene: str, backend: str, out: str) -> dict:
@@ -214,7 +214,7 @@ def child(scene: str, backend: str, out: str) -> dict:
     import logging
 
     import o3d_seqcc as sc
-    from o3d_seqcc.progress import on_stage
+    from o3d_seqcc._shared.progress import on_stage
 
     logging.getLogger("o3d_seqcc").setLevel(logging.ERROR)
     client = cluster = None
@@ -257,7 +257,7 @@ def child(scene: str, backend: str, out: str) -> dict:
 def reference_timing(sizes=(400, 1000), seed: int = 0) -> None:
     """Time ``reference="auto"`` (graph + choice + paths) against an explicit reference (graph + paths)
     on street-like overlap graphs: every view shares mappings with its 8 neighbours on each side."""
-    from o3d_seqcc.graph import build_graph, choose_reference, correction_paths
+    from o3d_seqcc.correction.graph import build_graph, choose_reference, correction_paths
 
     rng = np.random.default_rng(seed)
     choose_reference(build_graph({(0, 1): 500, (1, 2): 500}, 3, t_npm=400))  # imports (SciPy's Dijkstra) not timed

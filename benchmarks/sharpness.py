@@ -53,8 +53,8 @@ def measure(views: int, width: int, height: int, seed: int, options: dict) -> di
     import numpy as np
 
     import o3d_seqcc as sc
-    from o3d_seqcc.metrics import image_delta_e
-    from o3d_seqcc.render import raycast, render_textured, sharpness
+    from o3d_seqcc.evaluation.metrics import image_delta_e
+    from o3d_seqcc.evaluation.render import raycast, render_textured, sharpness
 
     with tempfile.TemporaryDirectory(prefix="o3d_seqcc_sharp_") as tmp:
         syn = sc.make_synthetic_scene(Path(tmp) / "room", n_views=views, width=width, height=height, seed=seed,

@@ -69,12 +69,12 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from o3d_seqcc.io.files import write_json  # noqa: E402
-from o3d_seqcc.mappings import compute_mappings  # noqa: E402
-from o3d_seqcc.evaluation import evaluate_method  # noqa: E402
+from o3d_seqcc.mappings.compute import compute_mappings  # noqa: E402
+from o3d_seqcc.evaluation.fit import evaluate_method  # noqa: E402
 from o3d_seqcc.cli.common import t_npm_value  # noqa: E402
-from o3d_seqcc.graph import build_graph, correction_paths, resolve_t_npm  # noqa: E402
-from o3d_seqcc.metrics import contrast_ratios as library_contrast_ratios  # noqa: E402
-from o3d_seqcc.metrics import image_delta_e  # noqa: E402
+from o3d_seqcc.correction.graph import build_graph, correction_paths, resolve_t_npm  # noqa: E402
+from o3d_seqcc.evaluation.metrics import contrast_ratios as library_contrast_ratios  # noqa: E402
+from o3d_seqcc.evaluation.metrics import image_delta_e  # noqa: E402
 
 METHODS = (
     "none", "reinhard", "root-polynomial", "vandermonde", "gain-compensation", "histogram-matching", "seqcc", "seqcc-global",
@@ -181,7 +181,7 @@ def run_scene(
 
     oracle = None
     if gt is not None:
-        from o3d_seqcc.metrics import blur_images, evaluate
+        from o3d_seqcc.evaluation.metrics import blur_images, evaluate
 
         truth = [g for g, _ in gt]
         oracle = evaluate(blur_images(truth, blur) if blur > 0 else truth, mappings)
@@ -351,7 +351,7 @@ def synthetic_block(args, methods, method_options) -> dict:
 
 def semireal_block(args, methods, method_options) -> dict | None:
     """Fountain with a hidden camera-like change per view (:mod:`o3d_seqcc.semireal`)."""
-    from o3d_seqcc.semireal import coverage_masks, evaluate_semireal
+    from o3d_seqcc.evaluation.semireal import coverage_masks, evaluate_semireal
 
     loaded = _fountain(args, "semi-real block ")
     if loaded is None:
@@ -407,7 +407,7 @@ def _semireal_room(args, specs) -> dict:
     """The same protocol on a synthetic room whose photos are consistent (``photometric="none"``):
     there the originals are the truth in every pixel, so a method that removes the hidden change
     and nothing else can score near the quantisation floor."""
-    from o3d_seqcc.semireal import evaluate_semireal
+    from o3d_seqcc.evaluation.semireal import evaluate_semireal
     from o3d_seqcc.synthetic import make_synthetic_scene
 
     with tempfile.TemporaryDirectory(prefix="table2_semiroom_") as tmp:

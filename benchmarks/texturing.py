@@ -94,13 +94,13 @@ def main(argv: list[str] | None = None) -> int:
 
     from peers import meshlab_available, run_meshlab, run_open3d
     from o3d_seqcc.io.files import write_image
-    from o3d_seqcc.export import export_textured_mesh
-    from o3d_seqcc.render import raycast, render_selection, render_textured, sharpness
+    from o3d_seqcc.io.export import export_textured_mesh
+    from o3d_seqcc.evaluation.render import raycast, render_selection, render_textured, sharpness
     from o3d_seqcc import load_scene
-    from o3d_seqcc.meshops import face_adjacency
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.geometry.meshops import face_adjacency
+    from o3d_seqcc.evaluation.seams import seam_metric
     from o3d_seqcc.texturing import bake_texture, load_textured_mesh, select_views, selection_stats
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     data = Path(args.data)
     if not (data / "scene" / "key.log").is_file():

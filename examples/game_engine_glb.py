@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 import o3d_seqcc
-from o3d_seqcc.gltf_validator import find_validator, validate_glb
+from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
 
 
 def main() -> int:

@@ -197,7 +197,7 @@ def _param(keyword: str, label: str, defaults: dict[str, Any], docs: dict[str, s
 
 def _correction_parameters(run_defaults: dict, run_docs: dict) -> list[FilterParameter]:
     from o3d_seqcc.correction import available_methods
-    from o3d_seqcc.mappings import MODES
+    from o3d_seqcc.mappings.compute import MODES
 
     return [
         _param("reference", "Reference raster", run_defaults, run_docs, kind=str),
@@ -220,7 +220,7 @@ def _output_parameters(default_dir: str, save_defaults: dict, save_docs: dict, w
 def _registry() -> dict[str, MeshLabFilter]:
     from o3d_seqcc import pipeline
     from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
-    from o3d_seqcc.graph import WEIGHTS
+    from o3d_seqcc.correction.graph import WEIGHTS
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
     from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from .errors import InputError
 from .io.output import write_output_file, write_output_json
-from .metrics import image_delta_e
+from .evaluation.metrics import image_delta_e
 from .pipeline import RunResult, run
 from .datasets import DatasetUnavailable, fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
@@ -218,7 +218,7 @@ def texture_ground_truth(syn: SyntheticScene, textured, *, views=None) -> dict[s
         ``views`` (per view ``name``, ``ciede2000``, ``holes``), ``mean`` (CIEDE2000 over the
         views), ``holes`` (share of the covered pixels, all views together).
     """
-    from .render import raycast, render_textured
+    from .evaluation.render import raycast, render_textured
     from .texturing import load_textured_mesh
 
     tm = load_textured_mesh(textured)

@@ -41,11 +41,11 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import pipeline
-from .camera_checks import check_cameras
+from .visibility.camera_checks import check_cameras
 from .correction import DEFAULT_METHOD
 from .errors import InputError, warn
-from .imageops import img_as_dtype
-from .meshops import vertex_normals
+from .imaging.arrays import img_as_dtype
+from .geometry.meshops import vertex_normals
 from .scene import Mesh, Scene, View
 from .texturing.settings import TextureSettings
 

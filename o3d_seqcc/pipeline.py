@@ -32,29 +32,29 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .arguments import check_images_argument, check_scene_argument, check_type
+from ._shared.arguments import check_images_argument, check_scene_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
-from .export import DEFAULT_FORMATS, check_export_options, parse_formats
-from .images import scene_photos
+from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
+from .imaging.sequences import scene_photos
 from .io.files import write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
-from .mappings import DEFAULT_MODE, MODES, Mappings, compute_mappings
-from .meshops import face_adjacency
-from .metrics import before_after
-from .orientation import up_axis_transform
-from .parallel import use as use_executor
-from .progress import stage as _stage
-from .refine import coverage
-from .run_folder import write_run_folder
+from .mappings.compute import DEFAULT_MODE, MODES, Mappings, compute_mappings
+from .geometry.meshops import face_adjacency
+from .evaluation.metrics import before_after
+from .geometry.orientation import up_axis_transform
+from ._shared.parallel import use as use_executor
+from ._shared.progress import stage as _stage
+from .visibility.refine import coverage
+from .io.run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
 from .scene import Scene, resolve_view
-from .seams import SeamReport, seam_metric, selection_seams
+from .evaluation.seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
-from .visibility import Visibility, compute_visibility
+from .visibility.compute import Visibility, compute_visibility
 
 __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
 

@@ -19,10 +19,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .distortion import Distortion
+from .geometry.distortion import Distortion
 from .io.files import check_depth_file, check_image_file, open_regular, read_depth, read_image
 from .io.mesh_files import read_mesh, read_point_cloud
-from .meshops import face_normals
+from .geometry.meshops import face_normals
 from .errors import InputError
 
 __all__ = [

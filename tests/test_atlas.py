@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError, O3dSeqccWarning
-from o3d_seqcc.gltf_validator import find_validator, validate_glb
+from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
 from o3d_seqcc.scene import Mesh
 from o3d_seqcc.texturing import bake_texture, select_views
 from o3d_seqcc.texturing.bake import rasterize_faces
@@ -153,7 +153,7 @@ def test_pages_export_validates_and_reads_back(tmp_path, rng):
     one TextureFile per page and a texnumber per face, and trimesh reads every face's texture back."""
     import trimesh
 
-    from o3d_seqcc.export import export_meshlab_ply, export_textured_mesh
+    from o3d_seqcc.io.export import export_meshlab_ply, export_textured_mesh
 
     tm = _paged(rng)
     P = tm.pages
@@ -191,7 +191,7 @@ def test_jpeg_webp_textures(tmp_path, rng, fmt):
     EXT_texture_webp), OBJ with .jpg / .webp files."""
     import cv2
 
-    from o3d_seqcc.export import export_textured_mesh, glb_bytes
+    from o3d_seqcc.io.export import export_textured_mesh, glb_bytes
 
     tm = _paged(rng, cell=12)  # smooth colours: JPEG's chroma subsampling costs little there
     files = export_textured_mesh(tm, tmp_path, formats=("glb", "obj"), texture_format=fmt, quality=90)
@@ -244,7 +244,7 @@ def _cameras_with_up(up: np.ndarray, rng, n: int = 8) -> list[np.ndarray]:
 
 @pytest.mark.parametrize("up", [(0, 0, 1), (0, -1, 0), (1, 0, 0), (0.3, 0.2, 0.93)])
 def test_up_axis_from_cameras(rng, up):
-    from o3d_seqcc.orientation import up_axis_transform
+    from o3d_seqcc.geometry.orientation import up_axis_transform
 
     up = np.asarray(up, dtype=np.float64)
     up /= np.linalg.norm(up)
@@ -264,8 +264,8 @@ def test_up_axis_from_cameras(rng, up):
 @pytest.fixture(scope="module")
 def fountain_baked(fountain_scene):
     """Fountain (decimated, the scene's photos), mrf selection, the default bake."""
-    from o3d_seqcc.meshops import face_adjacency
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.geometry.meshops import face_adjacency
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     vis = compute_visibility(fountain_scene)
     adj = face_adjacency(vis.mesh.faces, vis.mesh.vertices)
@@ -278,7 +278,7 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     """The gutters continue every chart: at mip level 2 (a texel = 4 x 4 atlas texels) the lookup
     inside a face matches its own chart's (p99 CIEDE2000 <= 1, faces above 2 <= 0.1 %). Known
     failure: the same atlas with black gutters bleeds."""
-    from o3d_seqcc.seams import mip_bleed
+    from o3d_seqcc.evaluation.seams import mip_bleed
 
     tm, _ = fountain_baked
     # sized to the charts at the photos' resolution: one page, and the triangles alone would fill more than
@@ -315,9 +315,9 @@ def test_fountain_glb_opens_right_way_up(fountain_scene, fountain_baked, tmp_pat
     import cv2
     import trimesh
 
-    from o3d_seqcc.export import export_glb
-    from o3d_seqcc.orientation import up_axis_transform
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.io.export import export_glb
+    from o3d_seqcc.geometry.orientation import up_axis_transform
+    from o3d_seqcc.evaluation.render import render_textured
     from o3d_seqcc.scene import View
 
     tm, images = fountain_baked

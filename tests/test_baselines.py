@@ -8,14 +8,14 @@ import cv2
 import numpy as np
 import pytest
 
-import o3d_seqcc.correction.global_methods as baselines
-from o3d_seqcc.correction.global_methods import (
+import o3d_seqcc.correction.methods.global_methods as baselines
+from o3d_seqcc.correction.methods.global_methods import (
     affine_lut,
     gain_compensation_gains,
     histogram_matching_params,
     overlap_quantiles,
 )
-from o3d_seqcc.mappings import Mappings, PairMapping
+from o3d_seqcc.mappings.compute import Mappings, PairMapping
 
 GAINS = np.array([[1.0, 1.0, 1.0], [1.3, 1.1, 0.9], [0.8, 0.95, 1.15], [1.1, 0.7, 1.05]])
 OFFSETS = np.array([[0.0, 0.0, 0.0], [0.05, -0.03, 0.02], [-0.04, 0.06, 0.0], [0.02, 0.01, -0.05]])

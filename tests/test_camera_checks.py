@@ -15,7 +15,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc import InputError, load_scene
-from o3d_seqcc.camera_checks import FLIP, check_cameras
+from o3d_seqcc.visibility.camera_checks import FLIP, check_cameras
 from o3d_seqcc.cli import main
 from o3d_seqcc.io.meshlab import save_mlp
 

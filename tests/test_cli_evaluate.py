@@ -22,8 +22,8 @@ def test_evaluate_registered():
 
 
 def test_evaluate_prints_and_writes_json(syn, tmp_path, capsys):
-    from o3d_seqcc.mappings import compute_mappings
-    from o3d_seqcc.metrics import evaluate
+    from o3d_seqcc.mappings.compute import compute_mappings
+    from o3d_seqcc.evaluation.metrics import evaluate
 
     js = tmp_path / "ev.json"
     assert main(["evaluate", str(syn.root / "scene.json"), "--json", str(js)]) == 0

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from o3d_seqcc.cmf import CMF_METHODS, apply_lut, compose_luts, fit_cmf
+from o3d_seqcc.correction.cmf import CMF_METHODS, apply_lut, compose_luts, fit_cmf
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.jih import jih_samples, joint_histogram
+from o3d_seqcc.correction.jih import jih_samples, joint_histogram
 
 GRID = np.linspace(0, 1, 256)
 MID = (GRID > 0.05) & (GRID < 0.95)
@@ -212,7 +212,7 @@ def _misregistered(rng, g, shift=(3, 2), n=30000):
     [("gain 0.7 + 0.1", lambda v: 0.7 * v + 0.1), ("gamma 1.3", lambda v: v**1.3), ("gain 1.25", lambda v: 1.25 * v)],
 )
 def test_misregistered_correspondences_are_not_attenuated(rng, name, g):
-    from o3d_seqcc.cmf import contrast_ratio
+    from o3d_seqcc.correction.cmf import contrast_ratio
 
     x, y = _misregistered(rng, g)
     sel = (GRID > 0.15) & (GRID < 0.75)
@@ -240,7 +240,7 @@ def test_quantile_pairing_is_exact_on_clean_data_and_symmetric(rng):
 
 
 def test_quantile_samples_and_pairing_option(rng):
-    from o3d_seqcc.cmf import quantile_samples
+    from o3d_seqcc.correction.cmf import quantile_samples
 
     x = rng.random(1000)
     xq, yq, wq = quantile_samples(x, 2 * x, np.ones_like(x), n=50)
@@ -251,7 +251,7 @@ def test_quantile_samples_and_pairing_option(rng):
 
 
 def test_correlation_ratio(rng):
-    from o3d_seqcc.cmf import correlation_ratio
+    from o3d_seqcc.correction.cmf import correlation_ratio
 
     x = rng.random(20000)
     clean = x**1.6
@@ -261,7 +261,7 @@ def test_correlation_ratio(rng):
 
 
 def test_contrast_guard_rescales_a_compressing_fit(rng):
-    from o3d_seqcc.cmf import contrast_ratio
+    from o3d_seqcc.correction.cmf import contrast_ratio
 
     # noise in the target values only: the joint regression is flattened
     t = rng.uniform(0.1, 0.9, 20000)

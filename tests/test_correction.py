@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from o3d_seqcc.cmf import apply_lut, fit_cmf
+from o3d_seqcc.correction.cmf import apply_lut, fit_cmf
 from o3d_seqcc.correction import (
     METHODS,
     FunctionTransform,
@@ -15,11 +15,11 @@ from o3d_seqcc.correction import (
     LutTransform,
     correct,
 )
-from o3d_seqcc.imageops import img_as_dtype as from_float
-from o3d_seqcc.imageops import img_as_float as to_float
+from o3d_seqcc.imaging.arrays import img_as_dtype as from_float
+from o3d_seqcc.imaging.arrays import img_as_float as to_float
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.jih import jih_samples, joint_histogram
-from o3d_seqcc.mappings import Mappings, PairMapping
+from o3d_seqcc.correction.jih import jih_samples, joint_histogram
+from o3d_seqcc.mappings.compute import Mappings, PairMapping
 from o3d_seqcc.scene import Scene, View
 
 H, W = 48, 64
@@ -246,7 +246,7 @@ def test_lut_apply_levels_matches_float_path(rng, dtype):
 def test_seqcc_on_a_synthetic_room_gets_close_to_ground_truth(tmp_path):
     import o3d_seqcc.synthetic as synthetic
     from o3d_seqcc.io.files import read_image
-    from o3d_seqcc.metrics import image_delta_e
+    from o3d_seqcc.evaluation.metrics import image_delta_e
 
     ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=6, width=160, height=120, seed=3)
     scene = ss.scene
@@ -298,8 +298,8 @@ def test_seqcc_stays_close_to_ground_truth_with_pose_error(tmp_path):
     misregistered pairs themselves drifts back toward the uncorrected error."""
     import o3d_seqcc.synthetic as synthetic
     from o3d_seqcc.io.files import read_image
-    from o3d_seqcc.mappings import compute_mappings
-    from o3d_seqcc.metrics import image_delta_e
+    from o3d_seqcc.mappings.compute import compute_mappings
+    from o3d_seqcc.evaluation.metrics import image_delta_e
 
     ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=6, width=160, height=120, seed=3)
     scene = synthetic.perturb_poses(ss.scene, 1.0, seed=0)
@@ -332,8 +332,8 @@ def test_perturb_poses_rotates_about_the_camera_centre(tmp_path):
 
 
 def test_colour_inliers_drops_wrong_correspondences(rng):
-    from o3d_seqcc.cmf import fit_cmf
-    from o3d_seqcc.correction.seqcc import colour_inliers
+    from o3d_seqcc.correction.cmf import fit_cmf
+    from o3d_seqcc.correction.methods.seqcc import colour_inliers
 
     n = 4000
     ct = rng.uniform(0.05, 0.9, (n, 3))
@@ -348,8 +348,8 @@ def test_colour_inliers_drops_wrong_correspondences(rng):
 
 
 def test_quantile_luts_recover_a_known_tone_curve(rng):
-    from o3d_seqcc.cmf import quantile_samples
-    from o3d_seqcc.correction.seqcc import quantile_luts
+    from o3d_seqcc.correction.cmf import quantile_samples
+    from o3d_seqcc.correction.methods.seqcc import quantile_luts
 
     ct = rng.uniform(0.0, 1.0, (20000, 3))
     gammas = np.array([0.7, 1.0, 1.6])

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import o3d_seqcc as sc
-from o3d_seqcc import parallel
+from o3d_seqcc._shared import parallel
 from o3d_seqcc.cli import main
 
 distributed = pytest.importorskip("distributed")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.meshops import face_adjacency
+from o3d_seqcc.geometry.meshops import face_adjacency
 from o3d_seqcc.texturing import bake_texture, select_views
 from o3d_seqcc.texturing.data_costs import (
     _triangle_means,
@@ -65,7 +65,7 @@ def test_triangle_means_match_brute_force(rng):
         assert count[k] == inside.sum()
         if inside.any():
             np.testing.assert_allclose(mean[k], ch[inside].mean(axis=0), atol=2e-4)
-    from o3d_seqcc.imageops import sample_bilinear
+    from o3d_seqcc.imaging.arrays import sample_bilinear
 
     assert count[0] == 0
     c0 = tri[0].mean(axis=0)

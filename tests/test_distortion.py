@@ -19,13 +19,13 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc import InputError, load_scene
-from o3d_seqcc.camera import project_points
-from o3d_seqcc.distortion import Distortion
-from o3d_seqcc.imageops import delta_e_2000, img_as_dtype, img_as_float, sample_colors
+from o3d_seqcc.geometry.camera import project_points
+from o3d_seqcc.geometry.distortion import Distortion
+from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_dtype, img_as_float, sample_colors
 from o3d_seqcc.io.files import read_image, write_image
 from o3d_seqcc.io.meshlab import save_mlp
-from o3d_seqcc.metrics import image_delta_e
-from o3d_seqcc.render import render_textured
+from o3d_seqcc.evaluation.metrics import image_delta_e
+from o3d_seqcc.evaluation.render import render_textured
 from o3d_seqcc.scene import Scene, View
 
 K = np.array([[128.0, 0.0, 79.5], [0.0, 128.0, 59.5], [0.0, 0.0, 1.0]])

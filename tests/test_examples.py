@@ -39,7 +39,7 @@ def test_open3d_fountain_example(fountain_root, tmp_path):
 def test_game_engine_glb_example(tmp_path):
     r = _run("game_engine_glb.py", "--atlas-size", "1024", "--out", "asset", cwd=tmp_path)
     assert (tmp_path / "asset" / "mesh.glb").is_file()
-    from o3d_seqcc.gltf_validator import find_validator
+    from o3d_seqcc.io.gltf_validator import find_validator
 
     if find_validator() is not None:
         assert "0 errors, 0 warnings" in r.stdout

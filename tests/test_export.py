@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.gltf_validator import find_validator, validate_glb
-from o3d_seqcc.export import export_glb, export_meshlab_ply, export_obj, export_ply, export_textured_mesh, glb_bytes
+from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
+from o3d_seqcc.io.export import (
+    export_glb,
+    export_meshlab_ply,
+    export_obj,
+    export_ply,
+    export_textured_mesh,
+    glb_bytes,
+)
 from o3d_seqcc.texturing import TexturedMesh
 
 import pymeshlab
@@ -103,7 +110,7 @@ def test_glb_layout(textured):
 
 def _baked(rng) -> TexturedMesh:
     """A real bake: a 6 x 6 grid seen by two cameras, one face seen by none (fallback colour)."""
-    from o3d_seqcc.visibility import Visibility
+    from o3d_seqcc.visibility.compute import Visibility
 
     from o3d_seqcc.scene import Mesh
     from o3d_seqcc.texturing import bake_texture, select_views

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import o3d_seqcc as sc
-from o3d_seqcc.export import export_glb, export_meshlab_ply, export_obj, export_ply
-from o3d_seqcc.metrics import image_delta_e
-from o3d_seqcc.render import raycast, render_textured
+from o3d_seqcc.io.export import export_glb, export_meshlab_ply, export_obj, export_ply
+from o3d_seqcc.evaluation.metrics import image_delta_e
+from o3d_seqcc.evaluation.render import raycast, render_textured
 from o3d_seqcc.texturing import load_textured_mesh
-from o3d_seqcc.visibility import compute_visibility
+from o3d_seqcc.visibility.compute import compute_visibility
 
 ROOM = {"n_views": 8, "width": 160, "height": 120, "layout": "two-rings", "seen_only": True, "cell_size": 1.0}
 SHIFTS = {"origin": 0.0, "5e5": 5e5, "1e7": 1e7}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
+from o3d_seqcc.correction.graph import build_graph, choose_reference, correction_paths, graph_edges, scale_t_npm
 
 # 6 views; view 5 only shares a few mappings (below t_npm) -> isolated
 COUNTS = {(0, 1): 1000, (1, 2): 3000, (0, 2): 500, (2, 3): 2000, (1, 3): 400, (3, 4): 600, (0, 5): 100, (4, 5): 399}

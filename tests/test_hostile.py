@@ -404,7 +404,7 @@ def test_deleted_working_directory_is_a_clear_message(S, tmp_path):
 
 
 def test_no_task_still_runs_when_a_worker_raises():
-    from o3d_seqcc.parallel import LocalExecutor
+    from o3d_seqcc._shared.parallel import LocalExecutor
 
     running, lock = [0], threading.Lock()
 
@@ -450,7 +450,7 @@ def test_far_junk_does_not_veto_or_change_the_scene(S, kind):
         vis = sc.compute_visibility(sc.load_scene(S))
     assert vis.stats["usable"] == clean.stats["usable"] and vis.stats["valid"] == clean.stats["valid"]
     assert len(vis.mesh.faces) == len(clean.mesh.faces) and np.ptp(vis.mesh.vertices, axis=0).max() < 100
-    from o3d_seqcc.refine import coverage  # junk dropped, then the faces split: not counted as unseen input faces
+    from o3d_seqcc.visibility.refine import coverage  # junk dropped, then the faces split: not counted as unseen input faces
 
     none = np.full(len(vis.mesh.faces), -1)
     assert coverage(vis, none)["input_faces"] == coverage(clean, none)["input_faces"] == coverage(clean, none)[

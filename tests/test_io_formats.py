@@ -14,7 +14,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc import InputError, Scene, View, load_scene
-from o3d_seqcc.camera import project_points
+from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.cli import main
 from o3d_seqcc.io.load import SCENE_FORMATS
 from o3d_seqcc.io.meshlab import save_mlp

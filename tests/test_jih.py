@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.jih import column_samples, jih_samples, joint_histogram, weighted_samples
+from o3d_seqcc.correction.jih import column_samples, jih_samples, joint_histogram, weighted_samples
 
 
 def test_counts_known_answer():

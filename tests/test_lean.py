@@ -63,8 +63,8 @@ def test_png_exif_orientation_found_without_decoding_twice(tmp_path, monkeypatch
 
 def test_colour_samples_from_uint8_are_the_float_samples():
     """The colour sampling of seqcc-global reads uint8 / uint16 photos directly, bit for bit the float path."""
-    from o3d_seqcc.correction.edge_summaries import _sample_flat, _sample_levels
-    from o3d_seqcc.imageops import img_as_float
+    from o3d_seqcc.correction.methods.edge_summaries import _sample_flat, _sample_levels
+    from o3d_seqcc.imaging.arrays import img_as_float
 
     rng = np.random.default_rng(1)
     for dtype, top in ((np.uint8, 256), (np.uint16, 65536)):
@@ -79,7 +79,7 @@ def test_colour_samples_from_uint8_are_the_float_samples():
 
 def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch, tmp_path):
     """raycast casts rows in chunks (memory): every array is bit for bit the one-chunk cast."""
-    from o3d_seqcc import render
+    from o3d_seqcc.evaluation import render
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=2, width=160, height=120, cell_size=0.15)
     scene = sc.load_scene(tmp_path / "room")
@@ -100,7 +100,7 @@ DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area",
 def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
     """`o3d-seqcc run`'s path (pipeline.run + save, report included) reads the sparse per-view records only:
     every dense (V, F) property of Visibility raises inside the run."""
-    from o3d_seqcc.visibility import Visibility
+    from o3d_seqcc.visibility.compute import Visibility
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
     used = []
@@ -163,9 +163,9 @@ def test_same_bytes_for_any_jobs(tmp_path):
 def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
     """A pair's picked mappings built alone (the correction's 8000, Table 2's 200 of a pair) are bit for bit
     the full build's at those indices, in every mapping mode; the count comes without building."""
-    from o3d_seqcc.mappings import compute_mappings
-    from o3d_seqcc.pairs import thinned
-    from o3d_seqcc.visibility import compute_visibility
+    from o3d_seqcc.mappings.compute import compute_mappings
+    from o3d_seqcc.mappings.pairs import thinned
+    from o3d_seqcc.visibility.compute import compute_visibility
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
     scene = sc.load_scene(tmp_path / "room")

@@ -7,16 +7,11 @@ import pytest
 
 from _mapping_scenes import H, W, box, down_cameras, look_at, make_scene, merge, plane
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.mappings import (
-    MODES,
-    Mappings,
-    PairMapping,
-    compute_mappings,
-)
-from o3d_seqcc.imageops import sample_colors
+from o3d_seqcc.mappings.compute import MODES, Mappings, PairMapping, compute_mappings
+from o3d_seqcc.imaging.arrays import sample_colors
 from o3d_seqcc.io.mappings_npz import load_mappings, save_mappings
-from o3d_seqcc.render import plot_pair
-from o3d_seqcc.visibility import compute_visibility, project_points
+from o3d_seqcc.evaluation.render import plot_pair
+from o3d_seqcc.visibility.compute import compute_visibility, project_points
 
 
 @pytest.fixture(scope="module")

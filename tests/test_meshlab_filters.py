@@ -171,7 +171,7 @@ def plane_scene(tmp_path_factory) -> tuple[Scene, np.ndarray]:
 
 
 def _render_error(mesh_path: Path, scene: Scene, img: np.ndarray) -> float:
-    from o3d_seqcc.render import render_textured
+    from o3d_seqcc.evaluation.render import render_textured
 
     ren = render_textured(mesh_path, scene.views[0])
     centre = (slice(55, 105), slice(140, 180))  # well inside the plane and the raster

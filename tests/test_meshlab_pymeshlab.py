@@ -25,9 +25,9 @@ import trimesh
 import meshlab_filters as mf
 import o3d_seqcc as sc
 from o3d_seqcc import pipeline
-from o3d_seqcc.camera import project_points
+from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.imageops import delta_e_2000, img_as_float, sample_colors
+from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_float, sample_colors
 from o3d_seqcc.io.files import read_image
 from o3d_seqcc.io.meshlab import MeshLayer, save_mlp
 from o3d_seqcc.scene import Scene, View

@@ -9,18 +9,11 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.mappings import Mappings, PairMapping
-from o3d_seqcc.metrics import (
-    PSNR_CAP_DB,
-    Evaluation,
-    blur_images,
-    evaluate,
-    image_delta_e,
-    psnr,
-)
-from o3d_seqcc.imageops import ciede2000, rgb_to_lab
-from o3d_seqcc.imageops import delta_e_2000 as delta_e_2000_rgb
-from o3d_seqcc.imageops import img_as_float as to_unit_float
+from o3d_seqcc.mappings.compute import Mappings, PairMapping
+from o3d_seqcc.evaluation.metrics import PSNR_CAP_DB, Evaluation, blur_images, evaluate, image_delta_e, psnr
+from o3d_seqcc.imaging.arrays import ciede2000, rgb_to_lab
+from o3d_seqcc.imaging.arrays import delta_e_2000 as delta_e_2000_rgb
+from o3d_seqcc.imaging.arrays import img_as_float as to_unit_float
 
 # Sharma, Wu & Dalal (2005), "The CIEDE2000 color-difference formula: implementation notes,
 # supplementary test data, and mathematical observations", Color Res. Appl. 30(1), Table 1:
@@ -238,7 +231,7 @@ def test_holdout_split_is_disjoint_by_face():
 
 def test_evaluate_method_in_sample_and_held_out():
     import o3d_seqcc.correction  # noqa: F401
-    from o3d_seqcc.evaluation import evaluate_method
+    from o3d_seqcc.evaluation.fit import evaluate_method
 
     images, maps = _gained_setup()
     none = evaluate_method(images, maps, method="none", reference=0, holdout=0.5, t_npm=10)
@@ -261,7 +254,7 @@ def test_evaluate_method_in_sample_and_held_out():
 
 
 def test_evaluate_batching_does_not_change_results(monkeypatch):
-    import o3d_seqcc.metrics as metrics
+    import o3d_seqcc.evaluation.metrics as metrics
 
     images, maps = _gained_setup()
     full = evaluate(images, maps)
@@ -291,7 +284,7 @@ def test_delta_e_matches_colour_science():
 
 
 def test_thin_indices_are_evenly_spaced_and_strictly_increasing():
-    from o3d_seqcc.metrics import thin_indices
+    from o3d_seqcc.evaluation.metrics import thin_indices
 
     assert thin_indices(10, None) is None and thin_indices(10, 10) is None and thin_indices(3, 7) is None
     np.testing.assert_array_equal(thin_indices(11, 3), [0, 5, 10])
@@ -304,7 +297,7 @@ def test_thin_indices_are_evenly_spaced_and_strictly_increasing():
 
 
 def test_before_after_thinned_scores_weight_pairs_by_their_full_counts():
-    from o3d_seqcc.metrics import before_after, contrast_ratios
+    from o3d_seqcc.evaluation.metrics import before_after, contrast_ratios
 
     images, maps = _gained_setup()  # 3 views x 768 mappings per pair
     paths = {0: [0], 1: [1, 0], 2: [2, 1, 0]}

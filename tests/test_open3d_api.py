@@ -12,7 +12,7 @@ import pytest
 import o3d_seqcc as sc
 from o3d_seqcc import InputError
 from o3d_seqcc.cli import main
-from o3d_seqcc.render import render_textured
+from o3d_seqcc.evaluation.render import render_textured
 from o3d_seqcc.texturing import TexturedMesh
 
 

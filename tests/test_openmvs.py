@@ -15,7 +15,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc import InputError, load_scene
-from o3d_seqcc.camera import project_points
+from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.cli import main
 
 NO_ID = 0xFFFFFFFF

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from benchmarks.peers import texrecon_cam, write_texrecon_scene, write_welded_ply
-from o3d_seqcc.camera import project_points
+from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.scene import Mesh, Scene, View, load_mesh
 
 
@@ -111,7 +111,7 @@ def test_texrecon_texture_lines_up_with_its_photos(tmp_path):
     photo's camera reproduces that photo where texrecon textured the faces from it."""
     from benchmarks.peers import run_texrecon, texrecon_binary
     from o3d_seqcc import load_scene, make_synthetic_scene
-    from o3d_seqcc.render import gradient_similarity, raycast, render_textured
+    from o3d_seqcc.evaluation.render import gradient_similarity, raycast, render_textured
 
     exe = texrecon_binary()
     if exe is None:

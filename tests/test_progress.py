@@ -10,7 +10,7 @@ import sys
 import pytest
 
 import o3d_seqcc as sc
-from o3d_seqcc.progress import show_progress, steps, track
+from o3d_seqcc._shared.progress import show_progress, steps, track
 
 
 def test_track_and_steps_are_silent_unless_shown(capsys):

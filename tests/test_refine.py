@@ -10,12 +10,12 @@ import pytest
 from _mapping_scenes import H, K, W, box, down_cameras, grid, look_at, make_scene, merge, plane
 from o3d_seqcc.cli.common import t_npm_value
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.graph import AUTO_T_NPM_FRACTION, resolve_t_npm
-from o3d_seqcc.mappings import compute_mappings
-from o3d_seqcc.meshops import weld_vertices
-from o3d_seqcc.meshsplit import bisect
-from o3d_seqcc.refine import coverage, distortion
-from o3d_seqcc.visibility import compute_visibility
+from o3d_seqcc.correction.graph import AUTO_T_NPM_FRACTION, resolve_t_npm
+from o3d_seqcc.mappings.compute import compute_mappings
+from o3d_seqcc.geometry.meshops import weld_vertices
+from o3d_seqcc.geometry.meshsplit import bisect
+from o3d_seqcc.visibility.refine import coverage, distortion
+from o3d_seqcc.visibility.compute import compute_visibility
 
 
 def _quad_area_px(E: np.ndarray, corners: np.ndarray) -> float:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.render import (
+from o3d_seqcc.evaluation.render import (
     gradient_similarity,
     raycast,
     render_selection,
@@ -199,7 +199,7 @@ def test_supersampled_render_is_box_filtered():
 
 
 def test_resized_view_renders_the_same_picture_smaller():
-    from o3d_seqcc.render import resized_view, supersampled_view
+    from o3d_seqcc.evaluation.render import resized_view, supersampled_view
 
     mesh, tex, view = plane_and_camera()
     half = resized_view(view, W // 2)

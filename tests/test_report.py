@@ -17,7 +17,7 @@ import pytest
 import o3d_seqcc as sc
 from o3d_seqcc.cli import main
 from o3d_seqcc.io.output import MANIFEST
-from o3d_seqcc.luts import compose_luts
+from o3d_seqcc.correction.luts import compose_luts
 from o3d_seqcc.report import regenerate_report
 from o3d_seqcc.report.page import MAX_DETAIL_EDGES
 from o3d_seqcc.report.viewer import viewer_bundle
@@ -239,7 +239,7 @@ def test_table2_is_what_correct_gives_with_the_command_the_report_names(run_dir,
 
 
 def test_the_selection_legend_colours_are_told_apart_and_the_seam_steps_are_report_json_s(run_dir):
-    from o3d_seqcc.imageops import delta_e_2000
+    from o3d_seqcc.imaging.arrays import delta_e_2000
 
     page = (run_dir / "report.html").read_text(encoding="utf-8")
     sec = _sections(page)

@@ -22,7 +22,7 @@ import pytest
 
 from o3d_seqcc.cli import main
 from o3d_seqcc.io.load import load_scene
-from o3d_seqcc.render import render_textured, resized_view
+from o3d_seqcc.evaluation.render import render_textured, resized_view
 from o3d_seqcc.texturing import load_textured_mesh
 
 from _chromium import CHROMIUM, Browser

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.imageops import delta_e_2000
-from o3d_seqcc.seams import seam_metric
+from o3d_seqcc.imaging.arrays import delta_e_2000
+from o3d_seqcc.evaluation.seams import seam_metric
 from o3d_seqcc.texturing import load_textured_mesh, sample_texture
 
 import trimesh

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.semireal import (
+from o3d_seqcc.evaluation.semireal import (
     apply_camera_change,
     coverage_masks,
     evaluate_semireal,
@@ -15,7 +15,12 @@ from o3d_seqcc.semireal import (
     srgb_to_linear,
     view_errors,
 )
-from o3d_seqcc.photometric import CAMERA_CHANGE_RANGES, HARD_CHANGE_RANGES, identity_photometric, sample_camera_change
+from o3d_seqcc.evaluation.photometric import (
+    CAMERA_CHANGE_RANGES,
+    HARD_CHANGE_RANGES,
+    identity_photometric,
+    sample_camera_change,
+)
 from o3d_seqcc.synthetic import make_synthetic_scene
 
 
@@ -135,7 +140,7 @@ def test_camera_hard_synthetic_scene(tmp_path):
 
 def test_camera_change_lut_and_its_inverse(rng):
     from o3d_seqcc.correction import LutTransform
-    from o3d_seqcc.semireal import camera_change_lut
+    from o3d_seqcc.evaluation.semireal import camera_change_lut
 
     p = {"gain": 1.3, "white_balance": [1.1, 0.9, 1.0], "gamma": [1.2, 0.8, 1.0], "s_curve": 0.4}
     img = (rng.random((40, 50, 3)) * 190).astype(np.uint8)

@@ -10,17 +10,22 @@ import pytest
 import skimage.data
 
 from o3d_seqcc.correction import DEFAULT_METHOD, METHODS, CorrectionContext, available_methods, correct
-from o3d_seqcc.correction.edge_summaries import EdgeObservations, _sample_flat, edge_observations, edge_quantiles
-from o3d_seqcc.correction.joint_curves import linear_start, refine_curves
-from o3d_seqcc.correction.seqcc_global import sequential_start
+from o3d_seqcc.correction.methods.edge_summaries import (
+    EdgeObservations,
+    _sample_flat,
+    edge_observations,
+    edge_quantiles,
+)
+from o3d_seqcc.correction.methods.joint_curves import linear_start, refine_curves
+from o3d_seqcc.correction.methods.seqcc_global import sequential_start
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.graph import build_graph, correction_paths
-from o3d_seqcc.imageops import delta_e_2000, sample_colors
-from o3d_seqcc.imageops import img_as_dtype as from_float
-from o3d_seqcc.imageops import img_as_float as to_float
-from o3d_seqcc.luts import extend_curve
-from o3d_seqcc.mappings import Mappings, PairMapping
-from o3d_seqcc.photometric import apply_photometric, identity_photometric
+from o3d_seqcc.correction.graph import build_graph, correction_paths
+from o3d_seqcc.imaging.arrays import delta_e_2000, sample_colors
+from o3d_seqcc.imaging.arrays import img_as_dtype as from_float
+from o3d_seqcc.imaging.arrays import img_as_float as to_float
+from o3d_seqcc.correction.luts import extend_curve
+from o3d_seqcc.mappings.compute import Mappings, PairMapping
+from o3d_seqcc.evaluation.photometric import apply_photometric, identity_photometric
 from o3d_seqcc.scene import Scene, View
 
 H, W = 120, 160

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import o3d_seqcc as sc
-from o3d_seqcc.render import raycast, render_textured, sharpness
+from o3d_seqcc.evaluation.render import raycast, render_textured, sharpness
 from o3d_seqcc.scene import Scene, View
 
 from test_texturing import grid_mesh

@@ -11,15 +11,15 @@ import pytest
 
 from _mapping_scenes import box, look_at, make_scene, merge, plane
 from o3d_seqcc.correction import CorrectedImages, correct
-from o3d_seqcc.images import FloatImages, SceneImages
+from o3d_seqcc.imaging.sequences import FloatImages, SceneImages
 from o3d_seqcc.io.files import image_dtype, read_image
-from o3d_seqcc.mappings import compute_mappings
-from o3d_seqcc.meshops import face_adjacency
-from o3d_seqcc.pairs import shared_counts
+from o3d_seqcc.mappings.compute import compute_mappings
+from o3d_seqcc.geometry.meshops import face_adjacency
+from o3d_seqcc.mappings.pairs import shared_counts
 from o3d_seqcc.texturing import select_views
-from o3d_seqcc import visibility
-from o3d_seqcc.view_visibility import CHUNK_FACES, VisibilityJob
-from o3d_seqcc.visibility import FACE_UV_STEPS, compute_visibility
+from o3d_seqcc.visibility import compute as visibility
+from o3d_seqcc.visibility.per_view import CHUNK_FACES, VisibilityJob
+from o3d_seqcc.visibility.compute import FACE_UV_STEPS, compute_visibility
 
 
 @pytest.fixture(scope="module")

@@ -33,7 +33,7 @@ def _centroid_colours(tm: TexturedMesh) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("fmt", ["obj", "glb"])
 def test_our_pages_read_back_texel_for_texel(tmp_path, fmt):
-    from o3d_seqcc.export import export_glb, export_obj
+    from o3d_seqcc.io.export import export_glb, export_obj
 
     rng = np.random.default_rng(3)
     S, P = 64, 3

@@ -12,8 +12,8 @@ import pytest
 
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Mesh
-from o3d_seqcc.visibility import Visibility
-from o3d_seqcc.meshops import face_adjacency
+from o3d_seqcc.visibility.compute import Visibility
+from o3d_seqcc.geometry.meshops import face_adjacency
 from o3d_seqcc.texturing import (
     SELECTION_METHODS,
     bake_texture,
@@ -360,7 +360,7 @@ def test_bake_bad_input(scene_vis, rng):
 
 def test_fountain_selection_and_bake(fountain_scene):
     """Fountain (16k faces, 33 views): mrf cuts transitions; the atlas reproduces the photos."""
-    import o3d_seqcc.visibility as vis_mod
+    import o3d_seqcc.visibility.compute as vis_mod
 
     vis = vis_mod.compute_visibility(fountain_scene)
     mesh = vis.mesh
@@ -430,7 +430,7 @@ def _laplacian_var_in_faces(tm) -> float:
 
 @pytest.mark.parametrize("split", [False, True])
 def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0, split=split)
     plain = bake_texture(mesh, images, vis, labels, atlas_size=512, **RAW)
@@ -486,7 +486,7 @@ def test_smooth_fallback_interpolates_neighbour_colours():
     """Faces seen by no view, inside a region textured with a linear colour ramp: they are welded
     into the chart around them (no UV seam, no extra vertex) and the Gouraud fallback reproduces
     the ramp inside them, the flat one (a constant per face) does not."""
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.seams import seam_metric
 
     mesh = grid_mesh(8)
     cam = CAMS[0]  # fronto-parallel: the projection of the plane is affine
@@ -547,7 +547,7 @@ def _laplacian_var_away_from_seam(tm, min_abs_x: float) -> float:
 def test_local_leveling_removes_known_seam_and_keeps_detail(rng, split):
     """Two charts of one photo, one +20 levels: local leveling alone removes > 90% of the seam
     metric, changes only a strip along the seam and keeps the detail away from it."""
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0, split=split)
     band = 8
@@ -587,7 +587,7 @@ def test_local_leveling_default_is_a_thin_strip(rng):
     a wider strip spreads the seam's difference -- on real scans mostly misregistered detail -- over
     the texture's detail (Fountain 300k, sharpness over texrecon's, median of 8 views: band 8 0.94,
     band 2 0.96 at the same seam metric)."""
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.seams import seam_metric
     from o3d_seqcc.texturing.leveling import _rasterize_uv
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0)
@@ -604,7 +604,7 @@ def test_local_leveling_default_is_a_thin_strip(rng):
 
 
 def test_local_leveling_after_global_and_without_seams(rng):
-    from o3d_seqcc.seams import seam_metric
+    from o3d_seqcc.evaluation.seams import seam_metric
 
     mesh, vis, images, labels = _two_chart_offset_scene(rng, 20.0)
     glob = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=True, local_leveling=False)

@@ -11,7 +11,7 @@ import pytest
 from _mapping_scenes import H, K, W, box, down_cameras, grid, look_at, make_scene, merge, plane, render_depth
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Mesh, Scene, View
-from o3d_seqcc.visibility import FILTERS, compute_visibility, depth_from_point_cloud, project_points
+from o3d_seqcc.visibility.compute import FILTERS, compute_visibility, depth_from_point_cloud, project_points
 
 
 def unproject(E: np.ndarray, uv: np.ndarray, z: np.ndarray) -> np.ndarray:

@@ -208,7 +208,7 @@ def _client(address: str | None):
     """A Dask client for ``--scheduler`` (or ``O3D_SEQCC_SCHEDULER``), None for local threads."""
     import os
 
-    from ..parallel import SCHEDULER_ENV, connect
+    from .._shared.parallel import SCHEDULER_ENV, connect
 
     option = "--scheduler"
     if not address:
@@ -217,7 +217,7 @@ def _client(address: str | None):
 
 
 def _executor(client):
-    from ..parallel import use
+    from .._shared.parallel import use
 
     return use(client)
 
@@ -228,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     if problem:
         print(f"o3d-seqcc: error: {problem}", file=sys.stderr)
         return 2
-    from ..interrupts import Terminated, interruptible
+    from .._shared.interrupts import Terminated, interruptible
 
     try:
         with interruptible():  # SIGTERM / SIGHUP clean up like Ctrl-C
@@ -258,7 +258,7 @@ def _environment_problem() -> str | None:
 
 
 def _main(argv: list[str] | None) -> int:
-    from ..interrupts import Terminated
+    from .._shared.interrupts import Terminated
 
     try:
         parser = build_parser()
@@ -269,7 +269,7 @@ def _main(argv: list[str] | None) -> int:
         from joblib import parallel_config
 
         from ..io.files import set_max_image_pixels
-        from ..progress import show_progress
+        from .._shared.progress import show_progress
         from .common import progress_from_args
 
         try:

@@ -10,11 +10,11 @@ from typing import Any, Callable
 
 from ..correction import DEFAULT_METHOD, available_methods
 from ..errors import InputError
-from ..export import FORMATS, TEXTURE_FORMATS
+from ..io.export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
-from ..mappings import DEFAULT_MODE, MODES
-from ..orientation import UP_AXES
+from ..mappings.compute import DEFAULT_MODE, MODES
+from ..geometry.orientation import UP_AXES
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
@@ -262,7 +262,7 @@ def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
 
 def add_progress_argument(p: argparse.ArgumentParser) -> None:
     """``--progress-lines``: machine-readable progress on stderr (``run``, ``texture``, ``correct``)."""
-    from ..progress import LINE_PREFIX
+    from .._shared.progress import LINE_PREFIX
 
     p.add_argument("--progress-lines", action="store_true",
                    help=f"write machine-readable progress lines to stderr, '{LINE_PREFIX} PERCENT TEXT' (PERCENT an "
@@ -274,7 +274,7 @@ def progress_from_args(args: argparse.Namespace):
     with the command's plan (:data:`o3d_seqcc.progress.PLANS`)."""
     import sys
 
-    from ..progress import PLANS, progress_lines
+    from .._shared.progress import PLANS, progress_lines
 
     on = getattr(args, "progress_lines", False)
     return progress_lines(sys.stderr if on else None, PLANS.get(getattr(args, "command", ""), ()))

@@ -15,11 +15,17 @@ from __future__ import annotations
 
 import argparse
 
-from ..graph import WEIGHTS
+from ..correction.graph import WEIGHTS
 from ..pipeline import correct_scene
 from .common import add_progress_argument
-from .common import add_correction_arguments, add_scene_arguments, add_split_argument, prepare_out_dir, \
-    print_report_path, scene_from_args
+from .common import (
+    add_correction_arguments,
+    add_scene_arguments,
+    add_split_argument,
+    prepare_out_dir,
+    print_report_path,
+    scene_from_args,
+)
 
 
 def run(args: argparse.Namespace) -> int:

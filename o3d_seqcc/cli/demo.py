@@ -13,8 +13,14 @@ import argparse
 from ..datasets import DatasetUnavailable
 from ..demo import DATASETS, DEMO_SCENE, run_demo
 from ..errors import InputError
-from .common import add_atlas_arguments, add_export_arguments, add_t_npm_argument, library_default, save_options_from_args, \
-    texture_settings_from_args
+from .common import (
+    add_atlas_arguments,
+    add_export_arguments,
+    add_t_npm_argument,
+    library_default,
+    save_options_from_args,
+    texture_settings_from_args,
+)
 from .synthetic import add_synthetic_arguments, scene_options
 
 

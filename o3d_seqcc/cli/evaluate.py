@@ -18,9 +18,9 @@ import argparse
 
 from ..correction import available_methods
 from ..errors import InputError
-from ..evaluation import evaluate_scene
+from ..evaluation.fit import evaluate_scene
 from ..io.output import write_output_json
-from ..mappings import MODES
+from ..mappings.compute import MODES
 from .common import add_scene_arguments, add_t_npm_argument, library_default, refuse_input_overwrite, scene_from_args
 
 

@@ -14,7 +14,7 @@ import argparse
 import json
 import warnings
 
-from ..camera_checks import check_cameras
+from ..visibility.camera_checks import check_cameras
 from ..errors import InputError
 from ..io.load import camera_fixes, detect_format
 from ..scene import summarise

@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 
 from ..io.output import write_output_json
-from ..seams import seam_metric
+from ..evaluation.seams import seam_metric
 from .common import refuse_input_overwrite
 
 

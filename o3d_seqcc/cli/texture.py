@@ -14,8 +14,13 @@ from dataclasses import replace
 from .. import pipeline
 from ..io.files import read_view_images
 from .common import add_progress_argument
-from .common import add_scene_arguments, add_split_argument, add_texture_arguments, print_run_summary, \
-    texture_job_from_args
+from .common import (
+    add_scene_arguments,
+    add_split_argument,
+    add_texture_arguments,
+    print_run_summary,
+    texture_job_from_args,
+)
 
 
 def run(args: argparse.Namespace) -> int:

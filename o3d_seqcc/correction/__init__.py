@@ -29,10 +29,18 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import InputError, warn
-from ..graph import build_graph, check_t_npm, choose_reference, correction_paths, graph_edges, resolve_t_npm, t_npm_units
-from ..images import FloatImages, ImageSequence, image_dtypes
+from .graph import (
+    build_graph,
+    check_t_npm,
+    choose_reference,
+    correction_paths,
+    graph_edges,
+    resolve_t_npm,
+    t_npm_units,
+)
+from ..imaging.sequences import FloatImages, ImageSequence, image_dtypes
 from ..scene import resolve_view
-from . import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
+from .methods import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
 from .base import (
     DEFAULT_METHOD,
     METHODS,
@@ -180,7 +188,7 @@ def correct(
 
     t0 = time.perf_counter()
     if mappings is None:
-        from ..mappings import compute_mappings
+        from ..mappings.compute import compute_mappings
 
         mappings = compute_mappings(scene, mode=mappings_mode)
     if getattr(mappings, "n_views", n) != n:

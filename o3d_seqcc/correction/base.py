@@ -17,11 +17,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..luts import compose_luts
+from .luts import compose_luts
 from ..errors import InputError
-from ..imageops import img_as_dtype, img_as_float, sample_colors
-from ..images import ImageSequence, LRUCache, default_cache_bytes, image_dtypes
-from ..parallel import current as current_executor
+from ..imaging.arrays import img_as_dtype, img_as_float, sample_colors
+from ..imaging.sequences import ImageSequence, LRUCache, default_cache_bytes, image_dtypes
+from .._shared.parallel import current as current_executor
 
 __all__ = [
     "DEFAULT_METHOD",

@@ -25,7 +25,7 @@ from typing import Iterable
 
 import numpy as np
 
-from ..distortion import Distortion
+from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 

@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..camera_checks import FLIP, check_cameras
+from ..visibility.camera_checks import FLIP, check_cameras
 from ..errors import InputError, warn
 from ..scene import Scene, View
 from . import colmap, meshlab, meshroom, openmvs, rgbd_folder, scene_json

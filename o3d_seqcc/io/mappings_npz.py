@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..mappings import Mappings
-from ..pairs import LazyPairs, PairMapping, PairSource
+from ..mappings.compute import Mappings
+from ..mappings.pairs import LazyPairs, PairMapping, PairSource
 from ..scene import Mesh
-from ..visibility import UsableFaces
+from ..visibility.compute import UsableFaces
 from .files import atomic_write_bytes, to_jsonable
 
 __all__ = ["load_mappings", "save_mappings"]

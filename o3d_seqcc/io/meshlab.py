@@ -41,7 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..distortion import Distortion
+from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import atomic_write_bytes, join_path

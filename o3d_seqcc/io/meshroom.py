@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..distortion import Distortion
+from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import find_file

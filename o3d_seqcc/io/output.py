@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from ..errors import InputError, warn
-from ..interrupts import Terminated, interruptible
+from .._shared.interrupts import Terminated, interruptible
 from .files import atomic_path, atomic_write_bytes, default_mode
 
 __all__ = ["MANIFEST", "Terminated", "add_output_file", "check_output", "check_output_file", "interruptible",

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..parallel import current as current_executor
+from .._shared.parallel import current as current_executor
 from ..scene import Scene
 from .files import atomic_path, atomic_write_bytes, encode_image
 from .meshlab import MeshLayer, save_mlp

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..distortion import Distortion
+from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import FORMAT, Scene, View
 from .files import find_file, join_path, parse_json, write_json

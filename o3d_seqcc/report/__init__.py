@@ -35,7 +35,6 @@ selection, the textured mesh and the numbers from the folder.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from dataclasses import replace
@@ -72,7 +71,7 @@ IMAGE_CACHE_MAX_BYTES = 768 << 20
 
 def _bytes(images: Any) -> int:
     """Bytes of a sequence's images (views' sizes and header dtypes for a lazy one, 0 for None)."""
-    from ..images import image_dtypes
+    from ..imaging.sequences import image_dtypes
 
     if images is None:
         return 0
@@ -89,7 +88,7 @@ def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
     so that together they read each photo once (``None`` stays ``None``).
     """
     from ..correction.base import CorrectedImages
-    from ..images import CachedImages, LRUCache
+    from ..imaging.sequences import CachedImages, LRUCache
 
     if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos): the corrections join their cache
         if corrected is None or isinstance(corrected, CachedImages):
@@ -195,10 +194,10 @@ def _run_files(run_dir: Path) -> list[Path]:
 def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None, output=None) -> PageInputs:
     from ..correction import correct
     from ..io.load import load_scene
-    from ..mappings import compute_mappings
-    from ..metrics import before_after
+    from ..mappings.compute import compute_mappings
+    from ..evaluation.metrics import before_after
     from ..texturing import load_textured_mesh
-    from ..visibility import compute_visibility
+    from ..visibility.compute import compute_visibility
 
     f = facts(rep)
     src = scene if scene is not None else (rep.get("scene_path") or rep.get("scene"))

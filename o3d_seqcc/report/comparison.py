@@ -24,9 +24,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..render import RayHits, raycast, render_textured, resized_view
+from ..evaluation.render import RayHits, raycast, render_textured, resized_view
 from ..scene import View
-from ..seams import SelectionSeams, photo_colors
+from ..evaluation.seams import SelectionSeams, photo_colors
 
 __all__ = ["CLOSEUP_WIDTH", "SEAM_SCALE_MAX", "closeup_renders", "closeup_view", "correction_section", "seam_colors",
            "seam_scale_css"]

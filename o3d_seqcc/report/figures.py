@@ -15,7 +15,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from ..imageops import img_as_uint8
+from ..imaging.arrays import img_as_uint8
 from ..io.files import encode_image
 
 __all__ = [

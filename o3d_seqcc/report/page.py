@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from ..imageops import dtype_scale, img_as_uint8, sample_colors
-from ..metrics import thin_indices
-from ..parallel import carried
-from ..render import render_selection, render_textured, resized_view, selection_palette
+from ..imaging.arrays import dtype_scale, img_as_uint8, sample_colors
+from ..evaluation.metrics import thin_indices
+from .._shared.parallel import carried
+from ..evaluation.render import render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
-from ..seams import selection_seams
+from ..evaluation.seams import selection_seams
 from .comparison import correction_section
 from .figures import graph_figure, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
 from .html import esc, img, num
@@ -152,8 +152,8 @@ def _outlier_k(c) -> float | None:
 
 def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
     """(t, s) -> (inlier JIH, outlier JIH or None), from the photos' colours at the pair's mappings."""
-    from ..correction.seqcc import colour_inliers, quantile_luts
-    from ..jih import joint_histogram
+    from ..correction.methods.seqcc import colour_inliers, quantile_luts
+    from ..correction.jih import joint_histogram
 
     k = _outlier_k(inp.correction)
     out = {}
@@ -206,7 +206,7 @@ def _jih_section(inp: PageInputs, path: list[int] | None, jihs: dict, thumbs: di
 # ------------------------------------------------------------------------------ steps (Figure 8)
 def _steps_section(inp: PageInputs, path: list[int], thumbs: dict, width: int) -> str:
     from ..correction import LutTransform
-    from ..luts import compose_luts
+    from ..correction.luts import compose_luts
 
     v, luts, ref = path[0], inp.correction.edge_luts, inp.correction.reference
     top = [f'<figure class="{"ref" if u == ref else ""}">'

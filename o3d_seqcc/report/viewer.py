@@ -26,11 +26,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..export import glb_bytes
-from ..imageops import img_as_uint8
-from ..render import selection_palette
+from ..io.export import glb_bytes
+from ..imaging.arrays import img_as_uint8
+from ..evaluation.render import selection_palette
 from ..scene import View
-from ..seams import photo_colors
+from ..evaluation.seams import photo_colors
 from .figures import jpeg
 
 __all__ = ["VIEWER_MAX_FACES", "VIEWER_TEXTURE_SIZE", "model_section", "viewer_bundle", "viewer_html", "viewer_model",
@@ -168,7 +168,7 @@ def model_section(tm: Any, view: View, scene, photos, corrected, *, method: str 
     before seam leveling; otherwise the result, the corrected photos and the photos as taken.
     """
     from ..errors import InputError
-    from ..orientation import up_axis_transform
+    from ..geometry.orientation import up_axis_transform
     from .html import esc
 
     n = len(tm.faces)

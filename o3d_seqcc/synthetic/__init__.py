@@ -3,8 +3,14 @@ camera-like photometric changes (:mod:`o3d_seqcc.photometric`) by :mod:`.generat
 
 from __future__ import annotations
 
-from ..photometric import CAMERA_CHANGE_RANGES, HARD_CHANGE_RANGES, apply_photometric, identity_photometric, \
-    sample_camera_change, sample_photometric
+from ..evaluation.photometric import (
+    CAMERA_CHANGE_RANGES,
+    HARD_CHANGE_RANGES,
+    apply_photometric,
+    identity_photometric,
+    sample_camera_change,
+    sample_photometric,
+)
 from .generate import PHOTOMETRIC_MODES, SYNTHETIC_FORMAT, SyntheticScene, load_synthetic, make_synthetic_scene, perturb_poses
 from .room import ALBEDO_RANGE, DEFAULT_CELL_SIZE, ring_slots
 

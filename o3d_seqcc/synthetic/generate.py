@@ -29,7 +29,6 @@ import io
 import json
 import logging
 import os
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -37,16 +36,29 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import img_as_dtype
+from ..imaging.arrays import img_as_dtype
 from ..io import files as iofiles
 from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image, write_json
 from ..io.load import load_scene, save_scene
 from ..io.output import check_output, output_folder
-from ..photometric import HARD_CHANGE_RANGES, apply_photometric, identity_photometric, sample_camera_change, \
-    sample_photometric
+from ..evaluation.photometric import (
+    HARD_CHANGE_RANGES,
+    apply_photometric,
+    identity_photometric,
+    sample_camera_change,
+    sample_photometric,
+)
 from ..scene import Scene, View
-from .room import DEFAULT_CELL_SIZE, ROOM, RoomGeometry, build_geometry, keep_faces, look_extrinsic, render_view, \
-    sample_cameras
+from .room import (
+    DEFAULT_CELL_SIZE,
+    ROOM,
+    RoomGeometry,
+    build_geometry,
+    keep_faces,
+    look_extrinsic,
+    render_view,
+    sample_cameras,
+)
 
 __all__ = ["PHOTOMETRIC_MODES", "SYNTHETIC_FORMAT", "SyntheticScene", "load_synthetic", "make_synthetic_scene",
            "perturb_poses"]

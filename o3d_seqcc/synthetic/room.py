@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..imageops import img_as_dtype, sample_bilinear
+from ..imaging.arrays import img_as_dtype, sample_bilinear
 
 __all__ = ["ALBEDO_RANGE", "DEFAULT_CELL_SIZE", "LAYOUTS", "ROOM", "TEXTURES", "RoomGeometry", "build_geometry",
            "keep_faces", "look_extrinsic", "render_view", "ring_slots", "sample_cameras"]

@@ -43,9 +43,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import img_as_uint8
-from ..meshops import face_adjacency, vertex_normals, weld_vertices
-from ..progress import steps
+from ..imaging.arrays import img_as_uint8
+from ..geometry.meshops import face_adjacency, vertex_normals, weld_vertices
+from .._shared.progress import steps
 from .bake import barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, sample_image
 from .charts import build_charts
 from .fallback import fallback_corner_colors

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..meshops import weld_vertices
+from ..geometry.meshops import weld_vertices
 from .settings import VisibilityLike
 
 __all__ = ["ChartSet", "build_charts", "image_charts"]

@@ -34,7 +34,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import img_as_float, img_as_uint8, rgb_to_lab, sample_bilinear
+from ..imaging.arrays import img_as_float, img_as_uint8, rgb_to_lab, sample_bilinear
 from .bake import row_spans
 from .settings import DATA_TERMS, OUTLIER_REMOVALS
 

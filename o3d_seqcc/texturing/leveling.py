@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import sample_bilinear
+from ..imaging.arrays import sample_bilinear
 from .settings import LEVELING_SMOOTHNESS
 
 __all__ = ["corner_colors", "local_seam_leveling", "seam_leveling_offsets", "solve_corner_offsets"]

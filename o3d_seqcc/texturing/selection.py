@@ -22,7 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..meshops import face_adjacency
+from ..geometry.meshops import face_adjacency
 from .settings import MRF_SMOOTHNESS, TextureSettings, VisibilityLike
 
 __all__ = ["SELECTION_METHODS", "count_transitions", "register_selection", "select_views", "selection_stats"]

@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..imageops import dtype_scale, sample_bilinear
-from ..meshops import float32_offset
+from ..imaging.arrays import dtype_scale, sample_bilinear
+from ..geometry.meshops import float32_offset
 
 __all__ = ["TexturedMesh", "load_textured_mesh", "sample_texture"]
 

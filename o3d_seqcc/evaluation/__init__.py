@@ -1,0 +1,24 @@
+"""Evaluation (paper 4.2, Table 2) and ground truth: scores of a correction and of a texture.
+
+- :mod:`~o3d_seqcc.evaluation.metrics`: PSNR / CIEDE2000 over the mappings (:func:`evaluate`);
+- :mod:`~o3d_seqcc.evaluation.fit`: fit a method and score it, in-sample and held out (:func:`evaluate_method`);
+- :mod:`~o3d_seqcc.evaluation.photometric`: camera-like photometric changes (the synthetic and semi-real truth);
+- :mod:`~o3d_seqcc.evaluation.semireal`: semi-real ground truth on real photos (:func:`make_semireal`,
+  :func:`evaluate_semireal`);
+- :mod:`~o3d_seqcc.evaluation.seams`: the seam metric, the mip-bleed metric, the selection seams;
+- :mod:`~o3d_seqcc.evaluation.sharpness`: sharpness (Laplacian variance), gradient similarity;
+- :mod:`~o3d_seqcc.evaluation.render`: ray-cast renders of a textured mesh, selection pictures, mapping plots.
+"""
+
+from __future__ import annotations
+
+from .._shared.lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    **dict.fromkeys(("Evaluation", "evaluate", "before_after", "psnr"), "metrics"),
+    **dict.fromkeys(("MethodEvaluation", "evaluate_method", "evaluate_scene"), "fit"),
+    **dict.fromkeys(("make_semireal", "evaluate_semireal"), "semireal"),
+    **dict.fromkeys(("SeamReport", "seam_metric", "selection_seams"), "seams"),
+    **dict.fromkeys(("sharpness", "gradient_similarity"), "sharpness"),
+    **dict.fromkeys(("render_textured", "render_selection", "plot_pair"), "render"),
+})

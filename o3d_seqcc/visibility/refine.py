@@ -1,0 +1,434 @@
+"""Faces no photo holds whole, split until the photos that see their parts hold those parts whole.
+
+A face is usable in a photo only if all of it projects inside the photo and none of it is hidden
+(paper 3.1-3.2). Big triangles (a floor, a wall, a facade of a low-poly scan) are then often
+usable in no photo at all although every part of them is seen by some photo: their projection
+is clipped by the image border, or partly occluded, or larger than any image. Such faces are
+split (:func:`refine_visibility`, called by :func:`o3d_seqcc.visibility.compute_visibility`):
+
+1. *candidates*: faces usable in no view (and not degenerate), new since the last round;
+2. *probe*, one task per view: a candidate is *partly seen* in a view when it meets the view's
+   frustum, faces the camera, is larger than ``min_px`` there (its longest edge in pixels, or any
+   corner behind the camera), and one of its test points (a barycentric grid about 16 px apart,
+   at most 153 points) projects into the image, passes the oblique angle and the depth map, and is
+   not hidden by the mesh (the z-buffer rays of :mod:`o3d_seqcc.occlusion`);
+3. the partly seen faces are bisected twice (:func:`o3d_seqcc.meshsplit.bisect`: conforming
+   longest-edge bisection, so the mesh stays welded and free of T-junctions; neighbours split
+   where an edge of theirs is split), the visibility of every new face is computed by the same
+   per-view task as the others' (:func:`~o3d_seqcc.view_visibility.view_record`, ray cast against
+   the input mesh: the parts lie exactly on it), and merged into the views' records;
+
+until no candidate is partly seen or after ``max_rounds`` rounds (each divides a face's area by
+about 4). Faces wholly hidden or outside every photo are never split, and a part below
+``min_px`` stays as it is, so a dense mesh (faces of a few pixels) is left nearly untouched.
+Deterministic: the faces and their order depend only on the inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry.camera import project_columns
+from ..geometry.meshops import face_normals, weld_vertices
+from ..geometry.meshsplit import bisect
+from .occlusion import _hidden, _rays_to, bary_grid
+from .per_view import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
+
+__all__ = ["PROBE_SPACING", "Refinement", "coverage", "distortion", "refine_visibility"]
+
+#: spacing in pixels of the test points of a candidate face in :func:`probe_view`
+PROBE_SPACING = 16.0
+_MAX_PROBE_LEVEL = 16
+
+
+@dataclass(frozen=True, eq=False)
+class Refinement:
+    """The refined mesh and its visibility records (:func:`refine_visibility`).
+
+    Attributes
+    ----------
+    vertices : (N', 3) float64
+    faces : (F', 3) int64
+    vertex_normals : (N', 3) float64
+    normals : (F', 3) float64
+        Oriented unit face normals (a part has its face's).
+    degenerate : (F',) bool
+    parent : (F',) int64
+        The input face of every face.
+    records : list of ViewRecord
+    stats : dict
+        ``rounds``, ``faces_split`` (input faces), ``faces_added``, ``probed`` (candidate faces
+        probed over all rounds), ``distorted`` (faces split for their texture distortion).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    vertex_normals: np.ndarray
+    normals: np.ndarray
+    degenerate: np.ndarray
+    parent: np.ndarray
+    records: list
+    stats: dict = field(default_factory=dict)
+
+
+class ProbeJob:
+    """What every view's probe shares: the candidates' corners (c, 3, 3) and normals (c, 3), the base job."""
+
+    def __init__(self, base: VisibilityJob, tri: np.ndarray, normals: np.ndarray, min_px: float) -> None:
+        self.base = base
+        self.tri = np.asarray(tri, dtype=np.float64)
+        self.normals = np.asarray(normals, dtype=np.float64)
+        self.min_px = float(min_px)
+
+
+def probe_view(i: int, job: ProbeJob) -> np.ndarray:
+    """(c,) bool: the candidates partly seen in view ``i`` and larger than ``min_px`` there (module docstring)."""
+    base, opts = job.base, job.base.opts
+    view = base.views[i]
+    c = len(job.tri)
+    out = np.zeros(c, dtype=bool)
+    if not c:
+        return out
+    K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
+    W, H = view.width, view.height
+    pc = job.tri @ E[:3, :3].T + E[:3, 3]  # (c, 3, 3) camera frame
+    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    planes = np.array([[fx, s, cx + 0.5], [-fx, -s, W - 0.5 - cx], [0.0, fy, cy + 0.5], [0.0, -fy, H - 0.5 - cy],
+                       [0.0, 0.0, 1.0]])
+    outside = ((pc @ planes.T).max(axis=1) <= 0).any(axis=1)  # every corner beyond one plane
+    C = view.center
+    n = job.normals
+    facing = np.einsum("ij,ij->i", n, C - job.tri[:, 0])
+    front = np.ones(c, bool) if opts["two_sided"] else facing > 0
+    z = pc[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(z > 0, (fx * pc[..., 0] + s * pc[..., 1]) / z + cx, np.nan)
+        v = np.where(z > 0, fy * pc[..., 1] / z + cy, np.nan)
+    edge = np.sqrt((u - np.roll(u, -1, axis=1)) ** 2 + (v - np.roll(v, -1, axis=1)) ** 2).max(axis=1)
+    edge = np.where((z > 0).all(axis=1), edge, np.inf)
+    keep = np.flatnonzero(~outside & front & (edge > job.min_px))
+    if not len(keep):
+        return out
+    level = np.clip(np.ceil(np.minimum(edge[keep], 1e9) / PROBE_SPACING), 2, _MAX_PROBE_LEVEL).astype(np.int64)
+    pts, own = [], []
+    for L in np.unique(level):  # at most 15 groups
+        sel = keep[level == L]
+        w = bary_grid(int(L), interior_only=False)  # (m, 3), the corners included
+        pts.append(np.einsum("mj,kjc->kmc", w, job.tri[sel]).reshape(-1, 3))
+        own.append(np.repeat(sel, len(w)))
+    P, owner = np.concatenate(pts), np.concatenate(own)
+    pu, pv, pz = project_columns(np.ascontiguousarray(P.T), K, E)
+    with np.errstate(invalid="ignore"):
+        ok = (pz > 0) & (pu >= -0.5) & (pu < W - 0.5) & (pv >= -0.5) & (pv < H - 0.5)
+    if "oblique" in opts["filters"]:
+        d = C - P
+        dist = np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+        cos = np.einsum("ij,ij->i", n[owner], d) / dist if opts["oblique_reference"] == "ray" else n[owner] @ -view.axis
+        cos = np.abs(cos) if opts["two_sided"] else cos
+        ok &= cos >= math.cos(math.radians(opts["max_angle"]))
+    idx = np.flatnonzero(ok)
+    if len(idx) and "depth" in opts["filters"]:
+        D, _ = base.depth(i)
+        if D is not None:
+            col = np.clip(np.floor(pu[idx] + 0.5), 0, W - 1).astype(np.intp)
+            row = np.clip(np.floor(pv[idx] + 0.5), 0, H - 1).astype(np.intp)
+            d = D[row, col]
+            zi = pz[idx]
+            bad = (d > 0) & (np.abs(zi - d) > np.maximum(opts["depth_atol"], opts["depth_tol"] * zi))
+            idx = idx[~bad]
+    if len(idx) and "occlusion" in opts["filters"]:
+        rays = _rays_to(C, P[idx], float(opts["occlusion_tol"]), float(opts["occlusion_atol"]), base.origin)
+        idx = idx[~_hidden(base.raycaster(), rays)]
+    out[np.unique(owner[idx])] = True
+    return out
+
+
+#: barycentric points where :func:`distortion` compares the projective and the affine map (centroid, edge midpoints)
+_DISTORTION_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5]])
+
+
+def distortion(vertices: np.ndarray, faces: np.ndarray, records: list, views, among: np.ndarray) -> np.ndarray:
+    """(F,) float64: how far, in pixels, a face's texture would be displaced inside it in its largest usable view.
+
+    A face's texture coordinates are its corners' projections (image charts), and a renderer
+    interpolates them linearly over the face, while the photo maps the face projectively: inside
+    a face that spans a large range of depths the two differ (the texture slides). The error is
+    measured at the centroid and the edge midpoints, in the view where the face's projection is
+    largest among those where it is usable (the one the selection favours); 0 for faces not in
+    ``among`` ((F,) bool) or usable nowhere.
+    """
+    F = len(faces)
+    out = np.zeros(F)
+    vv, ff, aa = [], [], []
+    for v, r in enumerate(records):
+        k = (r.flags == 0) & among[r.faces]
+        vv.append(np.full(int(k.sum()), v, np.int64))
+        ff.append(r.faces[k].astype(np.int64))
+        aa.append(r.area[k])
+    if not vv:
+        return out
+    vv, ff, aa = np.concatenate(vv), np.concatenate(ff), np.concatenate(aa)
+    if not len(ff):
+        return out
+    order = np.lexsort((-aa, ff))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = ff[order][1:] != ff[order][:-1]
+    best_v, best_f = vv[order][first], ff[order][first]
+    X = np.asarray(vertices, dtype=np.float64)
+    for v in np.unique(best_v):
+        fs = best_f[best_v == v]
+        tri = X[faces[fs]]  # (m, 3, 3)
+        K, E = np.asarray(views[v].intrinsic, np.float64), np.asarray(views[v].extrinsic, np.float64)
+        pts = np.concatenate([tri, np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, tri)], axis=1)  # (m, 7, 3)
+        u, w, _ = project_columns(np.ascontiguousarray(pts.reshape(-1, 3).T), K, E)
+        uv = np.stack([u, w], axis=1).reshape(len(fs), 7, 2)
+        affine = np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, uv[:, :3])
+        err = np.linalg.norm(uv[:, 3:] - affine, axis=2).max(axis=1)
+        out[fs] = np.nan_to_num(err, nan=np.inf)
+    return out
+
+
+def _merge(old: ViewRecord, new: ViewRecord, old_to_new: np.ndarray, new_ids: np.ndarray) -> ViewRecord:
+    """One view's record over the refined faces: the unsplit faces' entries renumbered, the parts' added."""
+    keep = old_to_new[old.faces] >= 0
+    faces = np.concatenate([old_to_new[old.faces[keep]], new_ids[new.faces]])
+    order = np.argsort(faces, kind="stable")
+    flags = np.concatenate([old.flags[keep], new.flags])[order]
+    info = dict(old.info)
+    info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
+                depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
+                oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
+    secs = {k: old.seconds.get(k, 0.0) + new.seconds.get(k, 0.0) for k in set(old.seconds) | set(new.seconds)}
+    return ViewRecord(faces=faces[order].astype(np.int32), flags=flags,
+                      area=np.concatenate([old.area[keep], new.area])[order],
+                      cos_angle=np.concatenate([old.cos_angle[keep], new.cos_angle])[order], info=info,
+                      n_rays=old.n_rays + new.n_rays, n_known=old.n_known, seconds=secs)
+
+
+def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: np.ndarray, min_px: float = 4.0,
+                      max_distortion: float = 0.5, max_rounds: int = 8) -> Refinement:
+    """Split the faces no view can use whole but some view sees in part (module docstring).
+
+    Parameters
+    ----------
+    job : VisibilityJob
+        The job ``records`` were computed with (mesh, oriented normals, options, views).
+    records : list of ViewRecord
+        One per view.
+    ex : executor
+        :func:`o3d_seqcc.parallel.current`'s (the probes and the parts' visibility run on it).
+    vertex_normals : (N, 3) float64
+    min_px : float, default 4.0
+        A face is split only where its longest edge is above this many pixels in a view that sees
+        part of it.
+    max_distortion : float, default 0.5
+        Faces usable somewhere are split when their texture would be displaced by more than this
+        many pixels inside them (:func:`distortion`; large faces seen in depth); ``inf``: never.
+    max_rounds : int, default 8
+        Rounds of (probe, two bisections, visibility of the parts).
+
+    Returns
+    -------
+    Refinement
+        The input arrays themselves when nothing is split.
+    """
+    X, f = job.X, job.faces
+    fn = np.stack(job.fn, axis=1)
+    deg = job.degenerate
+    vn = np.asarray(vertex_normals, dtype=np.float64)
+    F0 = len(f)
+    parent = np.arange(F0, dtype=np.int64)
+    fresh = np.ones(F0, dtype=bool)
+    welded = ends = None
+    V = len(job.views)
+    stats = {"rounds": 0, "probed": 0, "distorted": 0, "merged_back": 0}
+    for _ in range(int(max_rounds)):
+        usable_any = _usable_any(records, len(f))
+        cand = np.flatnonzero(fresh & ~usable_any & ~deg)
+        if not V:
+            break
+        marked = np.zeros(0, dtype=np.int64)
+        if len(cand):
+            stats["probed"] += int(len(cand))
+            seen = ex.map(probe_view, range(V), ex.share(ProbeJob(job, X[f[cand]], fn[cand], min_px)),
+                          desc="split faces", unit="view")
+            marked = cand[np.logical_or.reduce(seen)]
+        if np.isfinite(max_distortion):
+            bent = np.flatnonzero(distortion(X, f, records, job.views, fresh & usable_any & ~deg) > max_distortion)
+            stats["distorted"] = stats.get("distorted", 0) + int(len(bent))
+            marked = np.union1d(marked, bent)
+        if not len(marked):
+            break
+        stats["rounds"] += 1
+        if welded is None:
+            welded = weld_vertices(X)
+            ends = np.full((len(X), 2), -1, dtype=np.int64)
+        b1 = bisect(X, f, marked, vertex_normals=vn, welded=welded)
+        w1 = np.concatenate([welded, welded.max() + 1 + np.arange(b1.n_new_vertices)])
+        twice = np.flatnonzero(np.isin(b1.parent, marked))
+        b2 = bisect(b1.vertices, b1.faces, twice, vertex_normals=b1.vertex_normals, welded=w1)
+        welded = np.concatenate([w1, w1.max() + 1 + np.arange(b2.n_new_vertices)])
+        ends = np.concatenate([ends, b1.edge_vertices, b2.edge_vertices])  # what every new vertex is the midpoint of
+        up = b1.parent[b2.parent]  # face of this round -> face before it
+        n1 = np.bincount(b1.parent, minlength=len(f))
+        n2 = np.bincount(b2.parent, minlength=len(b1.faces))
+        unsplit = (n1[up] == 1) & (n2[b2.parent] == 1)
+        old_to_new = np.full(len(f), -1, dtype=np.int64)
+        old_to_new[up[unsplit]] = np.flatnonzero(unsplit)
+        X, f, vn = b2.vertices, b2.faces, b2.vertex_normals
+        new = np.flatnonzero(~unsplit)
+        fn, deg, parent = fn[up], deg[up].copy(), parent[up]
+        deg[new] = face_normals(X, f[new], rel_tol=1e-12)[1]  # rel_tol of oriented_face_normals, whole-mesh extent
+        records = _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new)
+        fresh = np.zeros(len(f), dtype=bool)
+        fresh[new] = True
+    if stats["rounds"]:  # parts no view can use, all of one bisection: merged back (fewer unseen faces)
+        f2, origin, rep = _coarsen(f, welded, ends, ~_usable_any(records, len(f)))
+        if (origin < 0).any():
+            n_old = len(f)
+            old_to_new = np.full(n_old, -1, dtype=np.int64)
+            old_to_new[origin[origin >= 0]] = np.flatnonzero(origin >= 0)
+            parent, fn = parent[rep], fn[rep]
+            used = np.unique(f2)
+            remap = np.full(len(X), -1, dtype=np.int64)
+            remap[used] = np.arange(len(used))
+            X, vn, f = X[used], vn[used], remap[f2]
+            new = np.flatnonzero(origin < 0)
+            deg = deg[rep].copy()
+            deg[new] = face_normals(X, f[new], rel_tol=1e-12)[1]
+            records = _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new)
+            stats["merged_back"] = int(n_old - len(f))
+    split = np.bincount(parent, minlength=F0) > 1
+    stats.update(input_faces=int(F0), faces_split=int(split.sum()), faces_added=int(len(f) - F0))
+    return Refinement(vertices=X, faces=f, vertex_normals=vn, normals=fn, degenerate=deg, parent=parent,
+                      records=list(records), stats=stats)
+
+
+def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np.ndarray):
+    """Undo the bisections whose every part is unseen (reverse of :func:`o3d_seqcc.meshsplit.bisect`).
+
+    A vertex ``m`` made as the midpoint of edge ``(p, q)`` (``ends[m]``) is removed when every
+    face around it is unseen and they pair up, per apex ``C``, as the two halves ``(A, m, C)`` and
+    ``(m, B, C)`` of a face ``(A, B, C)`` with ``{A, B} = {p, q}`` (welded ids): on both sides of
+    the edge at once, so the mesh stays conforming. The newest midpoints go first, repeatedly,
+    until none qualifies.
+
+    Returns
+    -------
+    faces : (F', 3) int64
+        The unchanged faces in their order, each merged face where its first half was.
+    origin : (F',) int64
+        Index into ``faces`` of an unchanged face, -1 for a merged one.
+    rep : (F',) int64
+        One input face each output face is (part of), for its attributes (parent, normal).
+    """
+    w = np.asarray(welded)
+    cur = np.asarray(faces, dtype=np.int64).copy()
+    origin = np.arange(len(cur), dtype=np.int64)
+    rep = origin.copy()
+    pos = origin.astype(np.float64)
+    dark = np.asarray(unseen, dtype=bool).copy()
+    is_mid = ends[:, 0] >= 0
+    while True:
+        fi, j = np.nonzero(is_mid[cur])
+        if not len(fi):
+            break
+        m = cur[fi, j]
+        o1, o2 = cur[fi, (j + 1) % 3], cur[fi, (j + 2) % 3]
+        wp, wq = w[ends[m, 0]], w[ends[m, 1]]
+        e1 = (w[o1] == wp) | (w[o1] == wq)
+        e2 = (w[o2] == wp) | (w[o2] == wq)
+        follow, precede = e1 & ~e2, e2 & ~e1  # (m, B, C) / (A, m, C)
+        ok = dark[fi] & (follow ^ precede)
+        apex = np.where(follow, o2, o1)
+        end = np.where(follow, o1, o2)
+        nm = len(w)
+        key = m * (int(w.max()) + 1) + w[apex]
+        uk, g = np.unique(key, return_inverse=True)
+        n_pre = np.bincount(g, weights=precede & ok, minlength=len(uk))
+        n_fol = np.bincount(g, weights=follow & ok, minlength=len(uk))
+        n_all = np.bincount(g, minlength=len(uk))
+        good_g = (n_pre == 1) & (n_fol == 1) & (n_all == 2)
+        bad_m = np.bincount(m, weights=~good_g[g], minlength=nm) > 0
+        n_groups = np.bincount(uk // (int(w.max()) + 1), minlength=nm)
+        cand = ~bad_m & (n_groups >= 1) & (n_groups <= 2)
+        cand_pair = cand[m]
+        if not cand_pair.any():
+            break
+        owner = np.full(len(cur), -1, dtype=np.int64)  # a face with two candidate midpoints: the newest takes it
+        np.maximum.at(owner, fi[cand_pair], m[cand_pair])
+        lost = np.bincount(m[cand_pair], weights=owner[fi[cand_pair]] != m[cand_pair], minlength=nm) > 0
+        take = cand_pair & ~lost[m]
+        if not take.any():
+            break
+        gi = g[take]
+        order = np.argsort(gi, kind="stable")
+        fi_t, gi_t = fi[take][order], gi[order]
+        pre_t, end_t, apex_t = precede[take][order], end[take][order], apex[take][order]
+        # two entries per group, sorted by group: the "precede" half gives A, the "follow" half B
+        first = np.flatnonzero(np.r_[True, gi_t[1:] != gi_t[:-1]])
+        a_idx = np.where(pre_t[first], first, first + 1)
+        b_idx = np.where(pre_t[first], first + 1, first)
+        merged = np.stack([end_t[a_idx], end_t[b_idx], apex_t[first]], axis=1)
+        halves = np.stack([fi_t[a_idx], fi_t[b_idx]], axis=1)
+        alive = np.ones(len(cur), dtype=bool)
+        alive[halves.reshape(-1)] = False
+        cur = np.concatenate([cur[alive], merged])
+        origin = np.concatenate([origin[alive], np.full(len(merged), -1, dtype=np.int64)])
+        rep = np.concatenate([rep[alive], rep[halves[:, 0]]])
+        pos = np.concatenate([pos[alive], pos[halves].min(axis=1)])
+        dark = np.concatenate([dark[alive], np.ones(len(merged), dtype=bool)])
+    order = np.argsort(pos, kind="stable")
+    return cur[order], origin[order], rep[order]
+
+
+def _usable_any(records: list, n: int) -> np.ndarray:
+    out = np.zeros(n, dtype=bool)
+    for r in records:
+        out[r.faces[r.flags == 0]] = True
+    return out
+
+
+def _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new) -> list:
+    """Every view's record over the current faces: the kept faces' entries renumbered, the new faces' computed."""
+    used = np.unique(f[new])
+    local = np.empty(len(X), dtype=np.int64)
+    local[used] = np.arange(len(used))
+    part_job = VisibilityJob(job.views, X[used], local[f[new]], fn[new], deg[new], job.opts, occluder=job)
+    parts = ex.map(view_record, range(len(job.views)), ex.share(part_job), desc="split faces", unit="view")
+    return [_merge(o, p, old_to_new, new) for o, p in zip(records, parts)]
+
+
+def coverage(vis, labels: np.ndarray) -> dict:
+    """How much of the input mesh a selection textures, counted in the input's faces and in area.
+
+    Parameters
+    ----------
+    vis : Visibility
+        Its ``mesh`` (maybe refined) and ``parent_faces``.
+    labels : (F,) int
+        A view per face of ``vis.mesh``, -1 = none.
+
+    Returns
+    -------
+    dict
+        ``input_faces`` (those kept: far-away junk dropped by the visibility is not counted),
+        ``split_input_faces`` (split into parts), ``unseen_input_faces`` (no part textured), ``partly_seen_input_faces`` (some parts textured, some not) and
+        ``unseen_area`` (the untextured share of the surface area, in [0, 1]).
+    """
+    X = np.asarray(vis.mesh.vertices, dtype=np.float64)
+    f = np.asarray(vis.mesh.faces, dtype=np.int64)
+    seen = np.asarray(labels) >= 0
+    parent = vis.parent_faces if vis.parent_faces is not None else np.arange(len(f))
+    n_in = int((vis.stats.get("split") or {}).get("input_faces") or (int(parent.max()) + 1 if len(parent) else 0))
+    area = 0.5 * np.linalg.norm(np.cross(X[f[:, 1]] - X[f[:, 0]], X[f[:, 2]] - X[f[:, 0]]), axis=1)
+    some = np.bincount(parent, weights=seen, minlength=n_in) > 0
+    gaps = np.bincount(parent, weights=~seen, minlength=n_in) > 0
+    parts = np.bincount(parent, minlength=n_in)
+    kept = parts > 0  # far-away junk left out of the visibility (stray.py) is not counted
+    return {"input_faces": int(kept.sum()), "split_input_faces": int((parts > 1).sum()),
+            "unseen_input_faces": int((kept & ~some).sum()), "partly_seen_input_faces": int((some & gaps).sum()),
+            "unseen_area": round(float(area[~seen].sum() / max(area.sum(), 1e-300)), 6)}
