@@ -32,7 +32,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ._shared.arguments import check_images_argument, check_scene_argument, check_type
+from ._shared.arguments import check_images_argument, check_type
 from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
 from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
@@ -48,10 +48,10 @@ from .geometry.orientation import up_axis_transform
 from ._shared.parallel import use as use_executor
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
-from .io.run_folder import write_run_folder
+from .run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
-from .scene import Scene, resolve_view
+from .scene import Scene, check_scene_argument, resolve_view
 from .evaluation.seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility.compute import Visibility, compute_visibility

@@ -15,7 +15,7 @@ import os
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from .geometry.distortion import Distortion
 from .io.files import check_depth_file, check_image_file, open_regular, read_depth, read_image
 from .io.mesh_files import read_mesh, read_point_cloud
 from .geometry.meshops import face_normals
+from ._shared.arguments import shown
 from .errors import InputError
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "Mesh",
     "Scene",
     "View",
+    "check_scene_argument",
     "load_mesh",
     "resolve_view",
     "summarise",
@@ -567,3 +569,12 @@ def summarise(scene: Scene) -> dict:
         "mesh_bounds": [m.vertices.min(0).round(3).tolist(), m.vertices.max(0).round(3).tolist()],
         "camera_centre_bounds": [centres.min(0).round(3).tolist(), centres.max(0).round(3).tolist()],
     }
+
+
+def check_scene_argument(scene: Any, mesh: Any = None) -> None:
+    """``scene``: a :class:`~o3d_seqcc.scene.Scene` or a non-empty path; ``mesh``: None or a path."""
+    if not isinstance(scene, (Scene, str, os.PathLike)) or isinstance(scene, str) and not scene:
+        raise InputError(f"scene must be a Scene or the path of a scene (scene.json or its folder, a .mlp, a COLMAP "
+                         f"model, ...), got {shown(scene)}")
+    if mesh is not None and (not isinstance(mesh, (str, os.PathLike)) or isinstance(mesh, str) and not mesh):
+        raise InputError(f"mesh must be the path of a mesh file, got {shown(mesh)}")

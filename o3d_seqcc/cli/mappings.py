@@ -14,7 +14,8 @@ from pathlib import Path
 from ..errors import InputError
 from ..io.mappings_npz import save_mappings
 from ..io.output import check_output_file, output_file
-from ..mappings.compute import MODES, compute_mappings, mappings_summary
+from ..correction.graph import mappings_summary
+from ..mappings.compute import MODES, compute_mappings
 from ..evaluation.render import plot_pair
 from ..visibility.compute import FILTERS, compute_visibility
 from .common import add_scene_arguments, library_default, scene_from_args

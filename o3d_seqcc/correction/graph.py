@@ -33,7 +33,7 @@ units (``"auto"``: the paper's 400).
 from __future__ import annotations
 
 import logging
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import networkx as nx
 import numpy as np
@@ -41,7 +41,10 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["AUTO_T_NPM_FRACTION", "PAPER_T_NPM", "WEIGHTS", "build_graph", "check_t_npm", "choose_reference",
-           "correction_paths", "graph_edges", "resolve_t_npm", "scale_t_npm", "t_npm_units"]
+           "correction_paths", "graph_edges", "mappings_summary", "resolve_t_npm", "scale_t_npm", "t_npm_units"]
+
+if TYPE_CHECKING:
+    from ..mappings.compute import Mappings
 
 logger = logging.getLogger(__name__)
 
@@ -292,3 +295,29 @@ def scale_t_npm(t_npm: float, mappings) -> int:
         t_npm, scaled, mode, 3.0 * density,
     )
     return scaled
+
+
+def mappings_summary(mappings: Mappings, *, t_npm: int | str = "auto") -> dict[str, Any]:
+    """A JSON-friendly summary: pairs, pairs with at least ``t_npm`` (see
+    :func:`resolve_t_npm`), totals, filter counts, timings."""
+    st = mappings.filter_stats
+    counts = sorted(mappings.counts.values())
+    try:
+        t_eff, _ = resolve_t_npm(t_npm, mappings)
+    except InputError:
+        t_eff = None
+    return {
+        "mode": mappings.mode,
+        "views": mappings.n_views,
+        "count_units": t_npm_units(mappings.mode),
+        "pairs_with_mappings": len(counts),
+        "t_npm": t_eff,
+        "pairs_at_least_t_npm": None if t_eff is None else sum(c >= t_eff for c in counts),
+        "mappings_total": mappings.total,
+        "mappings_per_pair_median": counts[len(counts) // 2] if counts else 0,
+        "filters (face-view incidences)": {
+            k: st.get(k) for k in ("valid", "occluded", "depth_inconsistent", "oblique", "usable")
+        },
+        "views_seeing_nothing": st.get("views_seeing_nothing", []),
+        "seconds": {k: round(v, 3) for k, v in st.get("timings", {}).items()},
+    }

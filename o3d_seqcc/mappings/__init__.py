@@ -9,6 +9,6 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    **dict.fromkeys(("DEFAULT_MODE", "MODES", "Mappings", "compute_mappings", "mappings_summary"), "compute"),
+    **dict.fromkeys(("DEFAULT_MODE", "MODES", "Mappings", "compute_mappings"), "compute"),
     **dict.fromkeys(("PairMapping", "shared_counts", "shared_area"), "pairs"),
 })

@@ -42,7 +42,6 @@ __all__ = [
     "Mappings",
     "PairMapping",
     "compute_mappings",
-    "mappings_summary",
 ]
 
 logger = logging.getLogger(__name__)
@@ -381,31 +380,3 @@ def compute_mappings(
         image_sizes=getattr(visibility, "image_sizes", None)
         or (tuple((v.width, v.height) for v in scene.views) if scene is not None else None),
     )
-
-
-def mappings_summary(mappings: Mappings, *, t_npm: int | str = "auto") -> dict[str, Any]:
-    """A JSON-friendly summary: pairs, pairs with at least ``t_npm`` (see
-    :func:`~o3d_seqcc.graph.resolve_t_npm`), totals, filter counts, timings."""
-    from ..correction.graph import resolve_t_npm, t_npm_units
-
-    st = mappings.filter_stats
-    counts = sorted(mappings.counts.values())
-    try:
-        t_eff, _ = resolve_t_npm(t_npm, mappings)
-    except InputError:
-        t_eff = None
-    return {
-        "mode": mappings.mode,
-        "views": mappings.n_views,
-        "count_units": t_npm_units(mappings.mode),
-        "pairs_with_mappings": len(counts),
-        "t_npm": t_eff,
-        "pairs_at_least_t_npm": None if t_eff is None else sum(c >= t_eff for c in counts),
-        "mappings_total": mappings.total,
-        "mappings_per_pair_median": counts[len(counts) // 2] if counts else 0,
-        "filters (face-view incidences)": {
-            k: st.get(k) for k in ("valid", "occluded", "depth_inconsistent", "oblique", "usable")
-        },
-        "views_seeing_nothing": st.get("views_seeing_nothing", []),
-        "seconds": {k: round(v, 3) for k, v in st.get("timings", {}).items()},
-    }

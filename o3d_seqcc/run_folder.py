@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from .export import export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
-from .files import atomic_write_bytes, write_json
-from .result_files import meshlab_project, write_images
-from .._shared.parallel import carried
-from ..evaluation.render import write_selection_picture
-from ..report import REPORT_FILE, cached_images
+from .io.export import export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
+from .io.files import atomic_write_bytes, write_json
+from .io.result_files import meshlab_project, write_images
+from ._shared.parallel import carried
+from .evaluation.render import write_selection_picture
+from .report import REPORT_FILE, cached_images
 
 __all__ = ["write_run_folder"]
 
@@ -85,8 +85,8 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
     report : bool
         Also write ``report.html`` and Table 2.
     """
-    from ..report import write_report
-    from ..report.page import timings_block
+    from .report import write_report
+    from .report.page import timings_block
 
     table2 = report and res.correction is not None and res.mappings is not None and res.originals is not None
     images = cached_images(*((res.originals, res.images) if res.originals else (res.images, None)))
