@@ -3,19 +3,19 @@
 Every tool's output file is read by the same loader (``o3d_seqcc.texturing.load_textured_mesh``:
 texrecon's multi-material OBJ keeps its pages texel for texel) and measured the same way:
 
-- renders from the photos' cameras (``o3d_seqcc.render.render_textured``, 3 x 3 rays per pixel,
+- renders from the photos' cameras (``o3d_seqcc.evaluation.render.render_textured``, 3 x 3 rays per pixel,
   box-filtered), on one **common mask** per view: the pixels where the scene's mesh and every
   tool's mesh are hit (so a tool with holes is not scored on the others' pixels, nor they on its
   background), eroded by 2 pixels;
 - ``sharpness``: variance of the Laplacian of the render over the photo's
-  (``o3d_seqcc.render.sharpness``; 1 = as sharp; it rewards any high frequency, doubled edges
+  (``o3d_seqcc.evaluation.render.sharpness``; 1 = as sharp; it rewards any high frequency, doubled edges
   included);
-- ``gsim``: gradient similarity with the photo (``o3d_seqcc.render.gradient_similarity``: per
+- ``gsim``: gradient similarity with the photo (``o3d_seqcc.evaluation.render.gradient_similarity``: per
   24-px tile, ``2 <g, h> / (|g|^2 + |h|^2)`` of the render's and the photo's gradient fields at
   the best shift within 3 px, weighted by the photo's gradient energy; 1 = the photo's gradients
   in place; the scan's misregistration within 3 px is forgiven, blur, faint blends, doubled edges,
   edges misplaced by more and noise are not);
-- seams: ``o3d_seqcc.seams.seam_metric`` mean and share of edges > 5 (CIEDE2000);
+- seams: ``o3d_seqcc.evaluation.seams.seam_metric`` mean and share of edges > 5 (CIEDE2000);
 - holes: input faces missing from the output and the share of the input's surface area the
   output lacks (texrecon deletes the faces no photo sees; MeshLab and Open3D drop
   non-manifold faces);
@@ -132,7 +132,7 @@ def artefact_window(render: np.ndarray, photo: np.ndarray, mask: np.ndarray, siz
     sharper photo or an artefact (doubled edges at a misregistered seam, aliasing). Of the
     ``candidates`` non-overlapping windows (on the common mask) where the render's Laplacian
     energy most exceeds the photo's, this returns the one least like the photo
-    (:func:`o3d_seqcc.render.gradient_similarity` of the window): the place to crop to show it.
+    (:func:`o3d_seqcc.evaluation.render.gradient_similarity` of the window): the place to crop to show it.
     """
     import cv2
 

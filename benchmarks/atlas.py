@@ -16,12 +16,12 @@ Figures per row: ``coverage`` (triangle area in texels / atlas area), ``used`` (
 atlas read by bilinear lookups inside the triangles: the texels within one texel of a triangle;
 the same measure for every tool, from its output file), atlas size, pages, GLB bytes (PNG; JPEG
 q90 and WebP q90 for ours), output / input vertices, seam metric mean and share of edges > 5
-(``o3d_seqcc.seams.seam_metric`` on the output file), ``view seams`` (ours and today: CIEDE2000
+(``o3d_seqcc.evaluation.seams.seam_metric`` on the output file), ``view seams`` (ours and today: CIEDE2000
 across every edge between faces textured from two different views, also inside a chart, which the
 seam metric scores 0), sharpness of a 3x3-supersampled render from the reference view (16) over
 the photo's, and the bake time (ours and today: ``--repeats`` alternating runs in this process,
 median; MeshLab and Open3D: their filter's wall time, once). Ours also: the mip-bleed test
-(``o3d_seqcc.seams.mip_bleed``, levels 1-3), the Khronos validator per texture format, and a Y-up
+(``o3d_seqcc.evaluation.seams.mip_bleed``, levels 1-3), the Khronos validator per texture format, and a Y-up
 picture (the Y-up GLB rendered by a Y-up viewer's camera at the reference view, next to the photo).
 
 ``--evidence`` adds, on the decimated mesh, the coverage xatlas reaches with other settings

@@ -701,7 +701,7 @@ def texrecon_cam(view: Any, *, align_texels: bool = True) -> str:
     texture half a texel (half a photo pixel) up and left of the photo. Measured on Fountain 16k,
     over the faces texrecon textured from the photo rendered (13 photos with >= 15k such pixels),
     gradient similarity with the photo with no shift forgiven
-    (``o3d_seqcc.render.gradient_similarity(..., max_shift=0)``): exact principal point 0.63-0.86
+    (``o3d_seqcc.evaluation.render.gradient_similarity(..., max_shift=0)``): exact principal point 0.63-0.86
     at the photo's camera, 0.947-0.965 with the render's camera moved by (-0.5, -0.5) px; with
     this compensation 0.951-0.965 at the camera, 0.65-0.79 moved by -0.5 or +0.5 px.
     ``align_texels=True`` gives texrecon the principal point half a pixel
@@ -740,7 +740,7 @@ def write_welded_ply(vertices: np.ndarray, faces: np.ndarray, path: str | os.Pat
 
     A triangle soup (every face with its own three vertices, as Fountain's 16k-face mesh) gives
     texrecon no adjacent faces: it would make one texture patch per face. Vertices at the same
-    position (:func:`o3d_seqcc.meshops.weld_vertices`) are merged and faces left degenerate by the
+    position (:func:`o3d_seqcc.geometry.meshops.weld_vertices`) are merged and faces left degenerate by the
     merge dropped. The file holds ``float x, y, z`` and ``list uchar int vertex_indices`` only.
 
     Parameters

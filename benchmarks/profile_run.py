@@ -8,7 +8,7 @@ recorder (this file's ``_child`` entry, which then calls the command's own ``mai
 - ``start-up``: from the process's start (``/proc/self/stat``) to the command's ``main``: the
   interpreter and the imports of the command line;
 - ``load``: ``load_scene`` (reading the cameras and the mesh, the camera check);
-- the pipeline's stages as :func:`o3d_seqcc.progress.on_stage` reports them (visibility,
+- the pipeline's stages as :func:`o3d_seqcc._shared.progress.on_stage` reports them (visibility,
   mappings, correction, selection, bake, seams, export; the report is written inside
   ``export`` and shown on its own line from ``report.json``'s ``timings_s``);
 - ``exit``: the command's end to the process's end (interpreter shutdown, threads joined).

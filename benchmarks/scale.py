@@ -3,7 +3,7 @@
 A synthetic street (:func:`make_street`): one long building front with recessed windows and a
 pavement, textured procedurally (bricks, window frames, per-brick colour noise), photographed
 by ``n_views`` 640x480 cameras walking along it 1 m apart, 7 m away, at alternating heights and
-yaws, each with a camera-like photometric change (:func:`o3d_seqcc.photometric.sample_photometric`)
+yaws, each with a camera-like photometric change (:func:`o3d_seqcc.evaluation.photometric.sample_photometric`)
 and a depth map. The street is as long as the walk (a larger capture covers a larger site, as
 in practice), and the mesh has ``n_faces`` faces (85 % facade, 15 % pavement), so the faces a
 view sees shrink as the site grows at a fixed face count. Scenes are written to a temporary
@@ -12,7 +12,7 @@ folder (``--tmp``, default the system's), never into the repository, and removed
 Every configuration runs ``o3d_seqcc.pipeline.run`` + ``RunResult.save`` (the command line's
 defaults: vertices mappings, seqcc, mrf selection, leveled atlas, GLB + OBJ) in a fresh child
 process, so runs do not share caches or memory; a sampling thread (psutil, every 10 ms) records
-the peak resident memory of the child per stage (``o3d_seqcc.progress.on_stage``), and on the
+the peak resident memory of the child per stage (``o3d_seqcc._shared.progress.on_stage``), and on the
 cluster backend (a ``dask.distributed.LocalCluster`` of 2 worker processes, 1 thread each,
 started and warmed up before the clock starts) that of every worker process too.
 

@@ -4,14 +4,14 @@ The synthetic room (:func:`o3d_seqcc.synthetic.make_synthetic_scene`, ``--views`
 down, a mesh of what they see, camera-like photometric changes; ``--width`` x ``--height`` photos) has a ground truth:
 ``gt/vNN.png``, the render of the surface albedo itself from each camera. ``o3d_seqcc.pipeline.run`` (the command
 line's defaults, reference ``v00``, dense mappings) textures the mesh from the corrected photos; the textured mesh is
-ray-cast from every camera (:func:`o3d_seqcc.render.render_textured`, one ray per pixel, bilinear lookup) and compared
+ray-cast from every camera (:func:`o3d_seqcc.evaluation.render.render_textured`, one ray per pixel, bilinear lookup) and compared
 with the truth over the pixels the mesh covers (eroded by 2 px):
 
-- ``sharpness``: variance of the Laplacian of the render over that of the truth (:func:`o3d_seqcc.render.sharpness`;
+- ``sharpness``: variance of the Laplacian of the render over that of the truth (:func:`o3d_seqcc.evaluation.render.sharpness`;
   1 = as sharp as the albedo), mean and minimum over the views;
 - ``photo_sharpness``: the same ratio for the corrected photo itself (what a texture can keep at most: the
   photos are renders of the albedo, antialiased, with camera-like changes), mean over the views;
-- ``ciede2000``: mean CIEDE2000 between render and truth (:func:`o3d_seqcc.metrics.image_delta_e`), mean over views;
+- ``ciede2000``: mean CIEDE2000 between render and truth (:func:`o3d_seqcc.evaluation.metrics.image_delta_e`), mean over views;
 - the atlas (page size, pages, texels per photo pixel) and the seam metric.
 
 With ``--baseline REF`` (default ``main``) the same measurement runs first on that commit of this repository, in a

@@ -8,13 +8,13 @@ Usage::
 
 For every method (Table 1 #1-#7: none, reinhard, root-polynomial, vandermonde,
 gain-compensation, histogram-matching, seqcc), ``seqcc-global`` (the joint refinement over
-every graph edge, :mod:`o3d_seqcc.correction.seqcc_global`) and ``seqcc-joint`` (the paper's literal
+every graph edge, :mod:`o3d_seqcc.correction.methods.seqcc_global`) and ``seqcc-joint`` (the paper's literal
 joint-histogram regression, added whenever ``seqcc`` runs) it prints PSNR and CIEDE2000 over the view
 pairs' filtered vertex mappings -- mean, weighted mean (by number of mappings), std -- in two
 protocols: *in-sample* (the paper's: fitted on all mappings, scored on all) and *held-out*
 (fitted on the mappings of half of the mesh faces, scored on the other half), plus the wall
 time of the ``correct`` call and the improvement over "none" in per cent, and (in-sample) the
-*contrast ratio* of every method (:func:`o3d_seqcc.metrics.contrast_ratios`: std of the corrected target over std
+*contrast ratio* of every method (:func:`o3d_seqcc.evaluation.metrics.contrast_ratios`: std of the corrected target over std
 of the corrected source at the mappings, ~1.0 for an honest correction, < 1 for a method that
 washes images out -- pairwise scores at misregistered mappings reward such shrinkage, so read
 PSNR / CIEDE2000 together with it).
@@ -31,7 +31,7 @@ Three blocks:
    the mappings, ~1.0 for an honest correction, < 1 for a method that washes images out --
    pairwise scores at misregistered mappings reward such shrinkage). The corrected images are
    blurred by ``--blur`` px (default 1.5, scoring only).
-2. **Semi-real fountain** (:mod:`o3d_seqcc.semireal`): every view but the reference
+2. **Semi-real fountain** (:mod:`o3d_seqcc.evaluation.semireal`): every view but the reference
    (``--semireal-reference``, default "01" = index 1) gets a hidden camera-like change
    (exposure 0.6-1.6, white balance +-20 %, per-channel gamma 0.64-1.51, S-curve 0-0.6, in
    linear light, 8-bit), one per seed of ``--semireal-seeds``; each method corrects the changed
@@ -106,7 +106,7 @@ def _header(extra: str = "") -> str:
 
 
 def contrast_ratios(corrected, mappings, reference: int, *, t_npm: int, min_n: int = 50) -> np.ndarray:
-    """:func:`o3d_seqcc.metrics.contrast_ratios` along the Dijkstra paths of the graph at ``t_npm``
+    """:func:`o3d_seqcc.evaluation.metrics.contrast_ratios` along the Dijkstra paths of the graph at ``t_npm``
     (the target of a pair is the view farther from the reference, the source the nearer one)."""
     g = build_graph({k: int(v) for k, v in mappings.counts.items()}, len(corrected),
                     t_npm=resolve_t_npm(t_npm, mappings)[0])
@@ -350,7 +350,7 @@ def synthetic_block(args, methods, method_options) -> dict:
 
 
 def semireal_block(args, methods, method_options) -> dict | None:
-    """Fountain with a hidden camera-like change per view (:mod:`o3d_seqcc.semireal`)."""
+    """Fountain with a hidden camera-like change per view (:mod:`o3d_seqcc.evaluation.semireal`)."""
     from o3d_seqcc.evaluation.semireal import coverage_masks, evaluate_semireal
 
     loaded = _fountain(args, "semi-real block ")

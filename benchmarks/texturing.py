@@ -5,14 +5,14 @@ Runs, on the same scene (fountain key frames + the decimated mesh) and the same 
 reference="auto")``):
 
 - ours: per-face selection (largest-area, random, mrf) + atlas bake + GLB export
-  (``o3d_seqcc.texturing`` / ``o3d_seqcc.export``), each without and with global seam leveling
+  (``o3d_seqcc.texturing`` / ``o3d_seqcc.io.export``), each without and with global seam leveling
   (``+lev``: ``bake_texture(leveling=True)``) and with global + local seam leveling (``+lev+local``:
   ``bake_texture(leveling=True, local_leveling=True)``, the command-line default);
 - MeshLab's ``compute_texcoord_parametrization_and_texture_from_registered_rasters``
   (colorcorrection on) through pymeshlab, in a headless subprocess under xvfb-run;
 - Open3D's ``compute_uvatlas`` + ``project_images_to_albedo``.
 
-For each: wall time, seam metric (``o3d_seqcc.seams.seam_metric``: CIEDE2000 across interior
+For each: wall time, seam metric (``o3d_seqcc.evaluation.seams.seam_metric``: CIEDE2000 across interior
 edges, UV-seam edges sampled ``--seam-offset`` texels inside each face, edges inside a chart count
 0; mean, p99, fraction > 5, number of UV-seam edges and their mean), and the sharpness ratio of a
 render from view 16 against that view's photo (variance of the Laplacian inside the mesh

@@ -22,7 +22,7 @@ MeshLab filter                                         child process
 
 ``PROJECT`` is the current mesh (placement matrix applied, binary PLY) and every raster, written
 by the plugin to a temporary folder; the child runs with ``-v --progress-lines`` and its log and
-progress go to MeshLab's log and progress bar (:func:`o3d_seqcc.progress.progress_lines`).
+progress go to MeshLab's log and progress bar (:func:`o3d_seqcc._shared.progress.progress_lines`).
 
 Run ``python -m meshlab_filters.native json`` to see what the plugin is built with, and
 ``python -m meshlab_filters.native script "Seamless texture from rasters (o3d_seqcc)" tnpm=100``

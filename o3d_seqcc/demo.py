@@ -108,7 +108,7 @@ def run_demo(
     t_npm : "auto" or int, default "auto"
         Minimum pair count for a graph edge: with surface mappings pixels of shared surface
         (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
-        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.graph.resolve_t_npm`.
+        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.correction.graph.resolve_t_npm`.
     overwrite : bool, default False
         Regenerate the synthetic scene.
     settings : TextureSettings, optional
@@ -198,9 +198,9 @@ def run_demo(
 def texture_ground_truth(syn: SyntheticScene, textured, *, views=None) -> dict[str, Any]:
     """A textured mesh of a synthetic scene against the true albedo: rendered from each view, scored like the photos.
 
-    Each view's camera renders ``textured`` (:func:`o3d_seqcc.render.render_textured`, one ray per
+    Each view's camera renders ``textured`` (:func:`o3d_seqcc.evaluation.render.render_textured`, one ray per
     pixel) and the render is compared with the view's ground-truth render over the pixels the
-    mesh covers (:func:`o3d_seqcc.metrics.image_delta_e`, as the corrected photos are in
+    mesh covers (:func:`o3d_seqcc.evaluation.metrics.image_delta_e`, as the corrected photos are in
     :func:`run_demo`); *holes* are the covered pixels whose ray hits a face textured by no photo
     (the fallback colour; ``TexturedMesh.face_view`` -1).
 

@@ -28,7 +28,7 @@ Accepted inputs (checked before any work; a wrong type or size raises
   (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays.
 
 Everything runs in memory (an in-memory :class:`~o3d_seqcc.scene.Scene`): nothing is written.
-The cameras are checked against the mesh first (:func:`~o3d_seqcc.camera_checks.check_cameras`):
+The cameras are checked against the mesh first (:func:`~o3d_seqcc.visibility.camera_checks.check_cameras`):
 camera-to-world poses given as extrinsics, OpenGL axes or other units than the mesh's raise
 :class:`~o3d_seqcc.errors.InputError` naming the fix.
 """
@@ -272,7 +272,7 @@ def correct_images(
     t_npm : "auto" or int, default "auto"
         Minimum pair count for a graph edge: with surface mappings pixels of shared surface
         (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
-        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.graph.resolve_t_npm`.
+        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.correction.graph.resolve_t_npm`.
     mappings : {"surface", "vertices", "dense"}, default "surface"
     depth_scale : float, default 1000.0
         Units per metre of integer depth images.

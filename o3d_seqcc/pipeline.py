@@ -14,11 +14,11 @@ user and the command line get byte-identical files for the same scene and option
     res.save("out/")                                               # mesh.glb, mesh.obj, report.json ...
     res.textured.to_open3d()                                       # an Open3D textured mesh
 
-The work runs as tasks (:mod:`o3d_seqcc.parallel`): visibility per view, mappings + joint
+The work runs as tasks (:mod:`o3d_seqcc._shared.parallel`): visibility per view, mappings + joint
 histogram + CMF fit per graph edge, image encoding per view, on local threads or, with
 ``client=`` (a ``dask.distributed.Client``), on a Dask cluster; lookup-table composition,
 view selection, the atlas and the export run here. Images are read when a stage needs them
-(:class:`~o3d_seqcc.images.SceneImages`), never all at once.
+(:class:`~o3d_seqcc.imaging.sequences.SceneImages`), never all at once.
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ class RunResult:
     scene : Scene
     images : sequence of (H, W, 3) arrays
         The images the mesh was textured with (corrected by :func:`run`); lazy (an
-        :class:`~o3d_seqcc.images.ImageSequence`: each access reads and corrects the view's
+        :class:`~o3d_seqcc.imaging.sequences.ImageSequence`: each access reads and corrects the view's
         image) unless a list was given.
     visibility : Visibility
     selection : (F,) int64
@@ -150,8 +150,8 @@ class RunResult:
                selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types).
 
-        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.metrics.before_after`);
-        ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`.
+        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.evaluation.metrics.before_after`);
+        ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`.
         """
         s = self.settings
         names = self.scene.names
@@ -223,7 +223,7 @@ class RunResult:
         up_axis : {"y", "z", "none"}, default "y"
             Up axis of the GLB, OBJ and PLY (glTF is Y-up): the scene's up direction, estimated
             from its cameras, is rotated onto it and the rotation baked into the vertices
-            (:func:`o3d_seqcc.orientation.up_axis_transform`, recorded in the report's
+            (:func:`o3d_seqcc.geometry.orientation.up_axis_transform`, recorded in the report's
             ``export``); ``"none"`` keeps the scene's frame. The MeshLab layer always keeps it
             (the project's rasters must match it).
         texture_format : {"png", "jpg", "webp"}, default "png"
@@ -315,7 +315,7 @@ def texture(
     split_faces : bool, default True
         As :func:`run`.
     client : dask.distributed.Client, optional
-        Run the per-view tasks on its cluster (:mod:`o3d_seqcc.parallel`); default local threads.
+        Run the per-view tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`); default local threads.
     **texture_options
         Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
         ``atlas_size=4096``, ...).
@@ -367,7 +367,7 @@ def run(
     method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
         Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
     t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): pixels of
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.correction.graph.resolve_t_npm`): pixels of
         shared surface, ``"auto"`` = 1 % of a photo (surface mappings), or vertex mappings.
     mappings : {"surface", "vertices", "dense"}, default "surface"
         Pairwise mapping mode (:func:`o3d_seqcc.mappings.compute_mappings`; vertices: the paper's).
@@ -381,9 +381,9 @@ def run(
         Also bake the uncorrected images (in memory) and report their seam metric.
     split_faces : bool, default True
         Split the faces no photo holds whole (clipped, partly hidden, too large, or whose texture
-        would slide inside them) into parts (:mod:`o3d_seqcc.refine`); False keeps the input's.
+        would slide inside them) into parts (:mod:`o3d_seqcc.visibility.refine`); False keeps the input's.
     client : dask.distributed.Client, optional
-        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`; the
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`; the
         scene's files must be readable at the same paths on every worker); default local
         threads (``joblib.parallel_config``). The outputs are identical either way.
     **texture_options
@@ -509,7 +509,7 @@ def correct_scene(
     split_faces : bool, default True
         As :func:`run`.
     client : dask.distributed.Client, optional
-        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc.parallel`).
+        Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`).
 
     Returns
     -------

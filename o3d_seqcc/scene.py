@@ -151,7 +151,7 @@ class View:
     distortion : Distortion, optional
         The photo's lens distortion: the image (and depth map) is undistorted as it is read
         (:meth:`load_image`, :meth:`load_depth`) to the pinhole camera ``intrinsic`` (same size);
-        see :mod:`o3d_seqcc.distortion`.
+        see :mod:`o3d_seqcc.geometry.distortion`.
     """
 
     name: str
@@ -199,7 +199,7 @@ class View:
             raise InputError(f"{where}: depth_scale must be > 0 (units per metre), got {self.depth_scale}")
         object.__setattr__(self, "depth_scale", ds)
         if self.distortion is not None and not isinstance(self.distortion, Distortion):
-            raise InputError(f"{where}: distortion must be an o3d_seqcc.distortion.Distortion, got "
+            raise InputError(f"{where}: distortion must be an o3d_seqcc.geometry.distortion.Distortion, got "
                              f"{type(self.distortion).__name__}")
         self._freeze_memory(where)
 
@@ -211,7 +211,7 @@ class View:
                 raise InputError(f"{where}: pixels must be ({self.height}, {self.width}, 3) RGB, got shape {px.shape}")
             if px.dtype not in (np.uint8, np.uint16):
                 raise InputError(f"{where}: pixels must be uint8 or uint16, got {px.dtype} (convert floats with "
-                                 "o3d_seqcc.imageops.img_as_dtype)")
+                                 "o3d_seqcc.imaging.arrays.img_as_dtype)")
             px = np.array(px, copy=True)
             px.setflags(write=False)
             object.__setattr__(self, "pixels", px)

@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.correction.global_methods: Brown & Lowe gain compensation and Moulon et al. histogram matching."""
+"""Tests of o3d_seqcc.correction.methods.global_methods: Brown & Lowe gain compensation and Moulon et al. histogram matching."""
 
 from __future__ import annotations
 

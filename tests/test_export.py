@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.export: OBJ+MTL+PNG, GLB (glTF 2.0, Khronos validator), PLY, MeshLab's textured PLY."""
+"""Tests of o3d_seqcc.io.export: OBJ+MTL+PNG, GLB (glTF 2.0, Khronos validator), PLY, MeshLab's textured PLY."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The package layout: no import loop, small modules, thin commands.
+"""The package layout: the tree of stage packages, one-way imports, small modules, thin commands.
 
 Run as a script to print the module graph (``python tests/test_layout.py``): one line per module
 with the package modules it imports (at module level or inside functions).
@@ -7,11 +7,62 @@ with the package modules it imports (at module level or inside functions).
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "o3d_seqcc"
 MAX_LINES = 620
+ARCHITECTURE = PKG.parent / "docs" / "ARCHITECTURE.md"
+
+#: the tree: package -> its modules ("" is the top level). A new module goes here and into
+#: docs/ARCHITECTURE.md's drawing, in the stage it belongs to.
+TREE: dict[str, set[str]] = {
+    "": {"__init__", "__main__", "errors", "scene", "settings", "pipeline", "run_folder", "open3d_api", "demo",
+         "datasets"},
+    "_shared": {"__init__", "arguments", "interrupts", "lazy", "parallel", "progress", "registry"},
+    "imaging": {"__init__", "arrays", "sequences"},
+    "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
+    "visibility": {"__init__", "settings", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
+                   "compute"},
+    "mappings": {"__init__", "pairs", "compute"},
+    "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
+    "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "pairwise",
+                           "global_methods"},
+    "texturing": {"__init__", "settings", "selection", "data_costs", "charts", "packing", "bake", "atlas", "fallback",
+                  "leveling", "textured_mesh"},
+    "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
+    "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
+           "colmap", "openmvs", "mappings_npz", "output", "result_files", "export", "gltf_validator"},
+    "report": {"__init__", "page", "viewer", "comparison", "figures", "html", "validate"},
+    "synthetic": {"__init__", "room", "generate"},
+    "cli": {"__init__", "common", "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info",
+            "demo", "synthetic"},
+}
+#: at most this many modules at the top level, besides the package's __init__ and __main__
+MAX_TOP_LEVEL = 8
+
+#: the layers, bottom up: a module imports only from its own layer and the layers below (the pipeline's
+#: one-way flow). io's file layer (files, headers, mesh_files) sits at the bottom, used by the scene model
+#: and the image sequences; its formats (readers and writers) sit above the stages whose objects they write.
+LAYERS: list[tuple[str, ...]] = [
+    ("errors",),
+    ("_shared", "io.files", "io.headers", "io.mesh_files"),
+    ("imaging",),
+    ("geometry",),
+    ("scene",),
+    ("visibility",),
+    ("mappings",),
+    ("correction",),
+    ("texturing",),
+    ("evaluation",),
+    ("io",),
+    ("report",),
+    ("synthetic", "datasets", "settings"),
+    ("pipeline", "run_folder"),
+    ("open3d_api", "demo"),
+    ("cli", "__main__"),
+]
 
 
 def _module_name(path: Path) -> str:
@@ -97,6 +148,120 @@ def test_modules_are_small():
     sizes = {p.relative_to(PKG.parent).as_posix(): len(p.read_text().splitlines()) for p in PKG.rglob("*.py")}
     big = {k: n for k, n in sizes.items() if n > MAX_LINES}
     assert not big, f"modules over {MAX_LINES} lines: {big}"
+
+
+def _tree_on_disk() -> dict[str, set[str]]:
+    tree: dict[str, set[str]] = {}
+    for p in PKG.rglob("*.py"):
+        rel = p.relative_to(PKG).with_suffix("")
+        tree.setdefault(".".join(rel.parts[:-1]), set()).add(rel.parts[-1])
+    return tree
+
+
+def test_tree_is_the_documented_one():
+    on_disk = _tree_on_disk()
+    extra = {f"{k}.{m}".strip("."): None for k, ms in on_disk.items() for m in ms - TREE.get(k, set())}
+    missing = {f"{k}.{m}".strip("."): None for k, ms in TREE.items() for m in ms - on_disk.get(k, set())}
+    assert not extra and not missing, f"modules not in TREE: {sorted(extra)}; in TREE but absent: {sorted(missing)}"
+
+
+def test_top_level_is_small():
+    top = TREE[""] - {"__init__", "__main__"}
+    assert len(top) <= MAX_TOP_LEVEL, sorted(top)
+    assert {"errors", "scene", "pipeline", "open3d_api"} <= top
+
+
+def test_architecture_draws_the_tree():
+    """docs/ARCHITECTURE.md's layout block names every package and module of the tree."""
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    block = text[text.index("```text"):]
+    block = block[: block.index("```", 3)]
+    for pkg, modules in TREE.items():
+        if pkg:
+            assert re.search(rf"^\s*{re.escape(pkg.split('.')[-1])}/", block, re.M), f"{pkg}/ not drawn"
+        for m in modules - {"__init__", "__main__"}:
+            assert re.search(rf"^\s*{re.escape(m)}\.py\b", block, re.M), f"{pkg or 'o3d_seqcc'}.{m} not drawn"
+
+
+def layer_of(module: str) -> int:
+    """The index in :data:`LAYERS` of a module (``o3d_seqcc.x.y``): its longest matching prefix."""
+    rel = module.removeprefix("o3d_seqcc").lstrip(".")
+    best, length = None, -1
+    for i, layer in enumerate(LAYERS):
+        for prefix in layer:
+            if (rel == prefix or rel.startswith(prefix + ".")) and len(prefix) > length:
+                best, length = i, len(prefix)
+    if best is None:
+        raise AssertionError(f"{module} is in no layer of LAYERS")
+    return best
+
+
+def direct_imports() -> dict[str, set[str]]:
+    """Module -> the package modules it names in an import (no parent packages added).
+
+    A parent package's ``__init__`` runs too, but every package ``__init__`` below the pipeline imports
+    nothing of its own stage eagerly (lazy re-exports), so only the named module is a dependency.
+    """
+    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
+    out: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        is_pkg = path.name == "__init__.py"
+        base = name.split(".") if is_pkg else name.split(".")[:-1]
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                root = (".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
+                        if node.level else node.module or "")
+                for a in node.names:
+                    sub = f"{root}.{a.name}"
+                    deps.add(sub if sub in modules else root)
+            elif isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names)
+        out[name] = {d for d in deps if d in modules and d not in ("o3d_seqcc", name)}
+    return out
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{m} -> {d}" for m, deps in graph.items() if m != "o3d_seqcc" for d in deps
+                  if layer_of(d) > layer_of(m))
+
+
+def test_imports_flow_one_way():
+    graph = direct_imports()
+    assert len(graph) > 60
+    assert not upward_imports(graph), "imports against the pipeline's flow: " + "; ".join(upward_imports(graph))
+
+
+def test_upward_import_is_caught():
+    graph = direct_imports()
+    graph["o3d_seqcc.visibility.compute"] = graph["o3d_seqcc.visibility.compute"] | {"o3d_seqcc.texturing.atlas"}
+    assert upward_imports(graph) == ["o3d_seqcc.visibility.compute -> o3d_seqcc.texturing.atlas"]
+
+
+def test_package_inits_import_no_stage_eagerly():
+    """A stage package's ``__init__`` re-exports lazily (``_shared.lazy``), so importing one leaf module never
+    runs its siblings (and the layers above stay out of the layers below)."""
+    graph = direct_imports()
+    eager = {pkg: sorted(graph[f"o3d_seqcc.{pkg}"] - {"o3d_seqcc._shared.lazy"})
+             for pkg in ("_shared", "imaging", "geometry", "visibility", "mappings", "evaluation", "io",
+                         "correction.methods")}
+    assert not any(eager.values()), eager
+
+
+def test_no_private_names_across_packages():
+    """``from ..other_stage.module import _private`` is an internal reaching across a stage boundary."""
+    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
+    stage = lambda m: m.split(".")[1] if m.count(".") else ""  # noqa: E731
+    bad = []
+    for name, path in modules.items():
+        base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("o3d_seqcc")):
+                root = (".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
+                        if node.level else node.module)
+                bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names
+                        if a.name.startswith("_") and not a.name.startswith("__") and stage(root) != stage(name)]
+    assert not bad, bad
 
 
 def test_library_does_not_import_the_cli():

@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.metrics: CIEDE2000 on Sharma et al. (2005), PSNR known answers, summaries."""
+"""Tests of o3d_seqcc.evaluation.metrics: CIEDE2000 on Sharma et al. (2005), PSNR known answers, summaries."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of o3d_seqcc.render: ray-cast textured renders, selection colouring, sharpness, gradient similarity."""
+"""Tests of o3d_seqcc.evaluation.render: ray-cast textured renders, selection colouring, sharpness, gradient similarity."""
 
 from __future__ import annotations
 

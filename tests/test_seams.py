@@ -1,4 +1,4 @@
-"""Tests of the seam metric (o3d_seqcc.seams) on synthetic textured planes with known seams."""
+"""Tests of the seam metric (o3d_seqcc.evaluation.seams) on synthetic textured planes with known seams."""
 
 from __future__ import annotations
 

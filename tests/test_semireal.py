@@ -1,4 +1,4 @@
-"""Semi-real ground truth (o3d_seqcc.semireal) and the camera-like change sampler."""
+"""Semi-real ground truth (o3d_seqcc.evaluation.semireal) and the camera-like change sampler."""
 
 from __future__ import annotations
 

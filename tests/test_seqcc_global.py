@@ -1,4 +1,4 @@
-"""seqcc-global (o3d_seqcc.correction.seqcc_global): joint refinement over every graph edge and curves that cover the whole range,
+"""seqcc-global (o3d_seqcc.correction.methods.seqcc_global): joint refinement over every graph edge and curves that cover the whole range,
 checked against known photometric changes (known curves must come back)."""
 
 from __future__ import annotations

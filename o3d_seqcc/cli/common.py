@@ -119,7 +119,7 @@ def t_npm_value(text: str) -> int | str:
 
 
 def add_t_npm_argument(p: argparse.ArgumentParser, default: int | str, *, extra: str = "") -> None:
-    """``--t-npm auto|N``, with the library function's default (:func:`o3d_seqcc.graph.resolve_t_npm`)."""
+    """``--t-npm auto|N``, with the library function's default (:func:`o3d_seqcc.correction.graph.resolve_t_npm`)."""
     p.add_argument("--t-npm", type=t_npm_value, default=default, metavar="auto|N",
                    help=f"minimum pair count for a colour-correction graph edge (default {default}): pixels of "
                    "shared surface with --mappings surface (auto: 1%% of the median photo's pixels), vertex "
@@ -270,8 +270,8 @@ def add_progress_argument(p: argparse.ArgumentParser) -> None:
 
 
 def progress_from_args(args: argparse.Namespace):
-    """The :func:`o3d_seqcc.progress.progress_lines` context of ``--progress-lines`` (a no-op without it),
-    with the command's plan (:data:`o3d_seqcc.progress.PLANS`)."""
+    """The :func:`o3d_seqcc._shared.progress.progress_lines` context of ``--progress-lines`` (a no-op without it),
+    with the command's plan (:data:`o3d_seqcc._shared.progress.PLANS`)."""
     import sys
 
     from .._shared.progress import PLANS, progress_lines

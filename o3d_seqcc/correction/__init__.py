@@ -2,18 +2,18 @@
 
 :func:`correct` is the one entry point: it computes the filtered pairwise mappings (unless
 given), builds the colour-correction graph and the Dijkstra paths to the reference
-(:mod:`o3d_seqcc.graph`), runs a method from the registry :data:`METHODS` and applies the
+(:mod:`o3d_seqcc.correction.graph`), runs a method from the registry :data:`METHODS` and applies the
 per-view transforms it returns. The methods, one module per family:
 
-- :mod:`~o3d_seqcc.correction.seqcc_global`: ``"seqcc-global"`` (:data:`DEFAULT_METHOD`:
+- :mod:`~o3d_seqcc.correction.methods.seqcc_global`: ``"seqcc-global"`` (:data:`DEFAULT_METHOD`:
   ``seqcc``'s sequential estimate refined jointly over every graph edge, curves continued over
-  the whole value range; its steps in :mod:`~o3d_seqcc.correction.edge_summaries` and
-  :mod:`~o3d_seqcc.correction.joint_curves`);
-- :mod:`~o3d_seqcc.correction.seqcc`: ``"seqcc"`` (the paper's #7, contrast-keeping CMF fit)
+  the whole value range; its steps in :mod:`~o3d_seqcc.correction.methods.edge_summaries` and
+  :mod:`~o3d_seqcc.correction.methods.joint_curves`);
+- :mod:`~o3d_seqcc.correction.methods.seqcc`: ``"seqcc"`` (the paper's #7, contrast-keeping CMF fit)
   and ``"seqcc-joint"`` (the paper's literal joint-histogram regression);
-- :mod:`~o3d_seqcc.correction.pairwise`: ``"none"``, ``"reinhard"``, ``"root-polynomial"``,
+- :mod:`~o3d_seqcc.correction.methods.pairwise`: ``"none"``, ``"reinhard"``, ``"root-polynomial"``,
   ``"vandermonde"`` (#1-#4, per path edge);
-- :mod:`~o3d_seqcc.correction.global_methods`: ``"gain-compensation"``,
+- :mod:`~o3d_seqcc.correction.methods.global_methods`: ``"gain-compensation"``,
   ``"histogram-matching"`` (#5-#6, over all pairs at once).
 
 Unknown method names raise ``ValueError`` listing the valid ones; unknown options
@@ -114,27 +114,27 @@ def correct(
         The scene; may be omitted when both ``images`` and ``mappings`` are given (views are
         then named by ``mappings.view_names`` or their index).
     reference : str or int, default "auto"
-        View name, index, or ``"auto"`` (:func:`o3d_seqcc.graph.choose_reference`).
+        View name, index, or ``"auto"`` (:func:`o3d_seqcc.correction.graph.choose_reference`).
     method : str, default :data:`DEFAULT_METHOD` ("seqcc-global")
         A name of :data:`METHODS` (see the module docstring); ``"seqcc"`` is the paper's.
     t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge (:func:`o3d_seqcc.graph.resolve_t_npm`): with
+        Minimum pair count for a graph edge (:func:`o3d_seqcc.correction.graph.resolve_t_npm`): with
         surface mappings (the default) pixels of shared surface, ``"auto"`` = 1 % of the median
         photo's pixels; with vertex and dense mappings vertex mappings (scaled for dense by
-        :func:`o3d_seqcc.graph.scale_t_npm`), ``"auto"`` = the paper's 400.
+        :func:`o3d_seqcc.correction.graph.scale_t_npm`), ``"auto"`` = the paper's 400.
     mappings : o3d_seqcc.mappings.Mappings, optional
         Precomputed filtered mappings (default: ``compute_mappings(scene, mode=mappings_mode)``).
     mappings_mode : {"surface", "vertices", "dense"}, default "surface"
     images : list of (H, W, 3) arrays or ImageSequence, optional
         Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]). A lazy
-        :class:`~o3d_seqcc.images.ImageSequence` (e.g. ``SceneImages(scene.views)``) is read
+        :class:`~o3d_seqcc.imaging.sequences.ImageSequence` (e.g. ``SceneImages(scene.views)``) is read
         view by view when needed, and the result's ``images`` are then lazy too
         (:class:`~o3d_seqcc.correction.base.CorrectedImages`).
     seed : int, default 0
     interpolation : {"bilinear", "nearest"}, default "bilinear"
         Colour sampling at the mappings.
     graph_weight : {"paper", "log"}, default "paper"
-        Edge weight formula (:func:`o3d_seqcc.graph.build_graph`).
+        Edge weight formula (:func:`o3d_seqcc.correction.graph.build_graph`).
     **options
         Options of the method (e.g. seqcc: ``cmf="csvr"``, ``cmf_options={...}``, ``bits``);
         unknown names raise ``TypeError``.
@@ -143,7 +143,7 @@ def correct(
     -------
     CorrectionResult
         Corrected images in the input dtypes; inputs are not modified. Per-edge fits run on the
-        active executor (:mod:`o3d_seqcc.parallel`: threads, or a Dask cluster).
+        active executor (:mod:`o3d_seqcc._shared.parallel`: threads, or a Dask cluster).
 
     Raises
     ------

@@ -2,8 +2,8 @@
 
 A correction method is ``fn(ctx: CorrectionContext, **options) -> list[Transform]`` (one
 transform per view) registered under a name with :func:`register_method`; the method modules
-(:mod:`~o3d_seqcc.correction.seqcc`, :mod:`~o3d_seqcc.correction.seqcc_global`,
-:mod:`~o3d_seqcc.correction.pairwise`, :mod:`~o3d_seqcc.correction.global_methods`) import this module and register themselves, and
+(:mod:`~o3d_seqcc.correction.methods.seqcc`, :mod:`~o3d_seqcc.correction.methods.seqcc_global`,
+:mod:`~o3d_seqcc.correction.methods.pairwise`, :mod:`~o3d_seqcc.correction.methods.global_methods`) import this module and register themselves, and
 :mod:`o3d_seqcc.correction` imports all of them explicitly. Views without a path to the
 reference keep an :class:`IdentityTransform`.
 """
@@ -292,7 +292,7 @@ class CorrectionResult:
     images : list of (H, W, 3) arrays, or CorrectedImages
         Corrected images, each in its input dtype (uint8 / uint16 rounded and clipped); a lazy
         :class:`CorrectedImages` (computed on access) when the input images were a lazy
-        :class:`~o3d_seqcc.images.ImageSequence`.
+        :class:`~o3d_seqcc.imaging.sequences.ImageSequence`.
     transforms : list of transforms
         One per view (:class:`LutTransform`, :class:`FunctionTransform`, :class:`IdentityTransform`).
     reference : int
@@ -308,7 +308,7 @@ class CorrectionResult:
     method : str
     t_npm : int
         Edge threshold used, in the units of the mappings (pixels of shared surface for surface
-        mappings; see :func:`o3d_seqcc.graph.resolve_t_npm`).
+        mappings; see :func:`o3d_seqcc.correction.graph.resolve_t_npm`).
     edge_luts : dict[(int, int), (3, L) float64]
         Per directed path edge ``(target, source)``: the colour mapping function fitted on it
         (R, G, B lookup tables over L evenly spaced inputs), for the methods that compose lookup
@@ -340,7 +340,7 @@ def path_steps(ctx: CorrectionContext, make_step: Callable[[int, int], Any], *, 
     """Per view, the per-edge steps ``make_step(t, s)`` along its path (each directed edge made
     once, even when several paths share it); None for the reference and unreachable views.
 
-    One task per edge on the active executor (:mod:`o3d_seqcc.parallel`): joblib threads
+    One task per edge on the active executor (:mod:`o3d_seqcc._shared.parallel`): joblib threads
     (``n_jobs``, joblib semantics: None = the active ``joblib.parallel_config`` or 1, -1 = all
     cores; scikit-learn's SVR fit releases the GIL), or a Dask cluster, to which ``make_step``
     (with the context it closes over: the visibility records, the image references) is

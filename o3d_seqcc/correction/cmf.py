@@ -2,7 +2,7 @@
 
 A CMF maps the values x of one channel of a target image T to the values y of the same channel
 in a source image S (``y ~ f(x)``); it is fitted on corresponding colours (usually the weighted
-cells of a joint image histogram, :mod:`o3d_seqcc.jih`) and returned as a lookup table over
+cells of a joint image histogram, :mod:`o3d_seqcc.correction.jih`) and returned as a lookup table over
 evenly spaced inputs in [0, 1]. All values are in [0, 1] (divide 8-bit values by 255).
 
 Methods (``fit_cmf(..., method=...)``, registry :data:`CMF_METHODS`):
@@ -54,9 +54,9 @@ Common pre-processing and guards (``guard=True``, the default, for every method)
    attenuation, is symmetric (swapping x and y gives the inverse function) and is exact on clean
    data. ``pairing="joint"``: the paper's literal input, the JIH's joint observations,
    aggregated by ``aggregate="columns"`` (one sample per JIH column: the weighted mean of y in
-   the column at the mean x, weighted by the column's count, :func:`o3d_seqcc.jih.column_samples`)
+   the column at the mean x, weighted by the column's count, :func:`o3d_seqcc.correction.jih.column_samples`)
    or ``aggregate="cells"`` (the occupied JIH cells with their counts as weights, merged into at
-   most ``max_points`` centroids, :func:`o3d_seqcc.jih.weighted_samples`).
+   most ``max_points`` centroids, :func:`o3d_seqcc.correction.jih.weighted_samples`).
 3. Fallbacks, logged at INFO: fewer than ``min_count`` (30) observations left -> identity; the
    target values (x) span less than 4/255 (a constant image) -> offset ``x + mean(y) - mean(x)``.
 4. Where the data are sparse (fewer than ``sparse_count`` (20) observations in the 1/32-wide x

@@ -2,7 +2,7 @@
 
 A joint image histogram (JIH) of a channel counts, for every pairwise mapping, the combination
 (target value x, source value y): ``jih[c, x, y]``. The colour mapping function of that channel
-is then fitted on the JIH (:mod:`o3d_seqcc.cmf`), which turns the fit cost from "number of
+is then fitted on the JIH (:mod:`o3d_seqcc.correction.cmf`), which turns the fit cost from "number of
 mappings" into "number of occupied cells"; :func:`jih_samples` reduces it further to a bounded
 number of weighted samples.
 """

@@ -1,7 +1,7 @@
 """Per-channel lookup tables (LUTs): evaluation, extrapolation and composition along a path.
 
 A LUT is an (L,) float array over L evenly spaced inputs in [0, 1]; values between are
-interpolated linearly (:func:`apply_lut`). Colour mapping functions (:mod:`o3d_seqcc.cmf`) are
+interpolated linearly (:func:`apply_lut`). Colour mapping functions (:mod:`o3d_seqcc.correction.cmf`) are
 tabulated as LUTs and composed along a view's correction path (:func:`compose_luts`), so an
 image is transformed once, in floating point. A table trusted only over part of its inputs is
 continued beyond it as power laws (:func:`extend_curve`) or straight lines (:func:`extend_line`).

@@ -1,7 +1,7 @@
 """Fitting a colour-correction method and scoring it: the paper's protocol and a held-out one.
 
 :func:`evaluate_method` runs :func:`o3d_seqcc.correction.correct` and scores the corrected
-images with :func:`o3d_seqcc.metrics.evaluate` in two protocols: *in-sample* (the paper's:
+images with :func:`o3d_seqcc.evaluation.metrics.evaluate` in two protocols: *in-sample* (the paper's:
 fitted on all mappings, scored on all) and *held-out* (fitted on the mappings of part of the
 mesh faces, :meth:`o3d_seqcc.mappings.Mappings.split`, scored on the others).
 """
@@ -111,7 +111,7 @@ def evaluate_method(
         Seed of the face split.
     t_npm : "auto" or int, default "auto"
         Minimum pair count per graph edge (passed to ``correct``;
-        :func:`o3d_seqcc.graph.resolve_t_npm`). With ``holdout`` the fit half has fewer
+        :func:`o3d_seqcc.correction.graph.resolve_t_npm`). With ``holdout`` the fit half has fewer
         mappings per pair; ``t_npm`` (``"auto"`` resolved first) is scaled by ``1 - holdout``
         for the held-out fit so the graph keeps the same edges.
     blur : float, default 0.0

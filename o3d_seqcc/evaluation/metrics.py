@@ -1,14 +1,14 @@
 """Image-based colour-similarity metrics over pairwise mappings (paper section 4, Table 2).
 
 For every view pair ``(a, b)`` the two images are sampled at the pair's filtered mappings
-(:func:`o3d_seqcc.imageops.sample_colors`) and compared:
+(:func:`o3d_seqcc.imaging.arrays.sample_colors`) and compared:
 
 - **PSNR** ``20 log10(L / RMS)`` over all mapped channel values, computed on colours scaled
   to [0, 1] (``L = 1``; identical to ``L = 255`` on 8-bit values and ``L = 65535`` on 16-bit
   values, so 8- and 16-bit images agree). Higher is more similar. Identical colours give
   ``inf``; summaries cap every pair at :data:`PSNR_CAP_DB` (100 dB) so a single perfect pair
   cannot make a mean infinite (the per-pair record keeps ``inf``).
-- **CIEDE2000** (:func:`o3d_seqcc.imageops.delta_e_2000`, scikit-image) between the CIE Lab
+- **CIEDE2000** (:func:`o3d_seqcc.imaging.arrays.delta_e_2000`, scikit-image) between the CIE Lab
   values of the two colours (sRGB with its transfer function -> XYZ -> Lab, D65), averaged
   over the pair's mappings. Lower is more similar.
 
@@ -500,7 +500,7 @@ def contrast_ratios(
         One per view.
     mappings : o3d_seqcc.mappings.Mappings
     paths : dict[int, list[int]]
-        ``view -> [view, ..., reference]`` (:func:`o3d_seqcc.graph.correction_paths`,
+        ``view -> [view, ..., reference]`` (:func:`o3d_seqcc.correction.graph.correction_paths`,
         ``CorrectionResult.paths``); views absent from it are left out.
     min_n : int, default 50
         Pairs with fewer mappings are left out.

@@ -5,7 +5,7 @@
 :func:`sample_photometric` draws camera-like parameters (most draws moderate),
 :func:`sample_camera_change` draws them uniformly over whole ranges (:data:`HARD_CHANGE_RANGES`:
 the synthetic ``photometric="camera-hard"`` mode; :data:`CAMERA_CHANGE_RANGES`: the semi-real
-protocol's hidden change, :mod:`o3d_seqcc.semireal`), :func:`identity_photometric` is the
+protocol's hidden change, :mod:`o3d_seqcc.evaluation.semireal`), :func:`identity_photometric` is the
 identity.
 """
 
@@ -28,7 +28,7 @@ __all__ = [
 ]
 
 #: Ranges of :func:`sample_camera_change` by default: the semi-real protocol's hidden change
-#: (:mod:`o3d_seqcc.semireal`): exposure factor, white balance +- share per channel, per-channel
+#: (:mod:`o3d_seqcc.evaluation.semireal`): exposure factor, white balance +- share per channel, per-channel
 #: gamma, S-curve strength.
 CAMERA_CHANGE_RANGES: dict[str, Any] = {"exposure": (0.6, 1.6), "white_balance": 0.2, "gamma": (0.64, 1.51), "s_curve": (0.0, 0.6)}
 #: Ranges of ``photometric="camera-hard"``: the hard room of issue 12 (S-curves up to 0.6,

@@ -382,7 +382,7 @@ def photo_colors(views: Any, points: np.ndarray, view_ids: np.ndarray, *image_se
 
     Each point is projected by its view's camera (once, whatever the number of image sets) and
     the image looked up bilinearly, clamped at the border (the definition of
-    :func:`o3d_seqcc.imageops.sample_bilinear`, by OpenCV's ``remap``: weights in 1/32 pixel).
+    :func:`o3d_seqcc.imaging.arrays.sample_bilinear`, by OpenCV's ``remap``: weights in 1/32 pixel).
     Every image needed is read once.
 
     Parameters

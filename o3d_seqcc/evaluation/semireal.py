@@ -7,7 +7,7 @@ real scene (its geometry, its registration error, its textures) and adds a known
 
 1. :func:`make_semireal`: every view except the reference gets a hidden, random camera-like
    change (:func:`apply_camera_change`: exposure, white balance, per-channel gamma, S-curve, in
-   linear light, then 8-bit quantised; ranges :data:`o3d_seqcc.photometric.CAMERA_CHANGE_RANGES`).
+   linear light, then 8-bit quantised; ranges :data:`o3d_seqcc.evaluation.photometric.CAMERA_CHANGE_RANGES`).
    The original photos are the truth: they were consistent enough to texture the mesh, and the
    reference stays as it was.
 2. The changed photos are corrected with any method (:func:`o3d_seqcc.correction.correct`).
@@ -64,7 +64,7 @@ def linear_to_srgb(values: np.ndarray) -> np.ndarray:
 def apply_camera_change(image: np.ndarray, params: dict[str, Any]) -> np.ndarray:
     """Apply a camera-like change to an sRGB photo in linear light.
 
-    The photo is decoded to linear light, changed by :func:`o3d_seqcc.photometric.apply_photometric`
+    The photo is decoded to linear light, changed by :func:`o3d_seqcc.evaluation.photometric.apply_photometric`
     (``clip(x * gain * wb[c]) ** gamma[c]``, then the S-curve) and encoded back to sRGB.
 
     Parameters
@@ -73,7 +73,7 @@ def apply_camera_change(image: np.ndarray, params: dict[str, Any]) -> np.ndarray
         sRGB photo.
     params : dict
         ``gain``, ``white_balance`` (3), ``gamma`` (3), ``s_curve``, e.g. from
-        :func:`o3d_seqcc.photometric.sample_camera_change`.
+        :func:`o3d_seqcc.evaluation.photometric.sample_camera_change`.
 
     Returns
     -------
@@ -161,8 +161,8 @@ def make_semireal(
     seed : int, default 0
         Seed of ``numpy.random.default_rng``; the draws depend only on it and the number of views.
     ranges : dict, optional
-        Keyword ranges of :func:`o3d_seqcc.photometric.sample_camera_change` (default
-        :data:`o3d_seqcc.photometric.CAMERA_CHANGE_RANGES`: exposure 0.6-1.6, white balance
+        Keyword ranges of :func:`o3d_seqcc.evaluation.photometric.sample_camera_change` (default
+        :data:`o3d_seqcc.evaluation.photometric.CAMERA_CHANGE_RANGES`: exposure 0.6-1.6, white balance
         +-20 %, gamma 0.64-1.51 per channel, S-curve 0-0.6).
 
     Returns
@@ -192,7 +192,7 @@ def coverage_masks(scene, *, mesh: Any = None) -> list[np.ndarray]:
     ----------
     scene : o3d_seqcc.Scene
     mesh : optional
-        Anything :func:`o3d_seqcc.render.raycast` takes (default: ``scene.load_mesh()``).
+        Anything :func:`o3d_seqcc.evaluation.render.raycast` takes (default: ``scene.load_mesh()``).
 
     Returns
     -------
@@ -345,7 +345,7 @@ def evaluate_semireal(
     masks : sequence of (H, W) bool arrays, optional
         Scored pixels (default :func:`coverage_masks`).
     t_npm : "auto" or int, default "auto"
-        Graph threshold (:func:`o3d_seqcc.graph.resolve_t_npm`).
+        Graph threshold (:func:`o3d_seqcc.correction.graph.resolve_t_npm`).
     ranges : dict, optional
         Ranges of the hidden change (:func:`make_semireal`).
     stride : int, default 2

@@ -10,7 +10,7 @@ all the faces around it), keeps the triangles' shapes (the angles of the childre
 by those of the parent, Rivara 1984) and lies exactly on the input surface (midpoints of
 straight edges, the children of a planar triangle in its plane).
 
-Edges are identified through welded vertex ids (:func:`~o3d_seqcc.meshops.weld_vertices`), so
+Edges are identified through welded vertex ids (:func:`~o3d_seqcc.geometry.meshops.weld_vertices`), so
 an unwelded mesh (three vertices per face, as many exporters write) is split consistently
 across its seams too; a midpoint is one new vertex shared by the faces on both sides. The
 longest edge of a face is chosen by (length, edge id), the same order on both sides of an
@@ -87,7 +87,7 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
     vertex_normals : (N, 3) float, optional
         Interpolated to the new vertices.
     welded : (N,) int64, optional
-        Welded vertex ids (default :func:`~o3d_seqcc.meshops.weld_vertices`).
+        Welded vertex ids (default :func:`~o3d_seqcc.geometry.meshops.weld_vertices`).
 
     Returns
     -------

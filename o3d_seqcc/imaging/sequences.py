@@ -6,7 +6,7 @@ The pipeline never holds every photo in memory at once. Its stages see a *sequen
 - :class:`SceneImages`: ``views[v].load_image()`` (a file read, or the view's in-memory
   pixels); pickles as the views alone, so a Dask worker reads the files itself;
 - :class:`FloatImages`: another sequence's images as float64 in [0, 1]
-  (:func:`~o3d_seqcc.imageops.img_as_float`), with a least-recently-used cache of at most
+  (:func:`~o3d_seqcc.imaging.arrays.img_as_float`), with a least-recently-used cache of at most
   ``cache_bytes`` (default :data:`CACHE_BYTES`, the environment variable
   ``O3D_SEQCC_IMAGE_CACHE_MB`` overrides it): what the correction methods sample colours from.
 

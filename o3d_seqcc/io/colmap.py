@@ -1,9 +1,9 @@
 """COLMAP sparse models, text (``cameras.txt``, ``images.txt``) or binary (``cameras.bin``, ``images.bin``).
 
 Pinhole cameras (PINHOLE, SIMPLE_PINHOLE) are read as they are; distorted ones are undistorted
-on the fly (:mod:`o3d_seqcc.distortion`): SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV as
+on the fly (:mod:`o3d_seqcc.geometry.distortion`): SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV as
 OpenCV's model, OPENCV_FISHEYE, SIMPLE_RADIAL_FISHEYE and RADIAL_FISHEYE as OpenCV's fisheye
-model; the view's camera is then the pinhole :meth:`~o3d_seqcc.distortion.Distortion.pinhole`
+model; the view's camera is then the pinhole :meth:`~o3d_seqcc.geometry.distortion.Distortion.pinhole`
 of the same size. FOV and THIN_PRISM_FISHEYE cameras are refused (``colmap
 image_undistorter`` makes PINHOLE ones). COLMAP's pixel convention (the centre of the top-left pixel at 0.5) is converted to ours (pixel
 centres at integers): cx, cy are shifted by -0.5. COLMAP's ``images`` hold world-to-camera

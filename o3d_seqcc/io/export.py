@@ -13,7 +13,7 @@ material and one primitive per page in the GLB (the primitives share one vertex 
 ``usemtl`` per page in the OBJ, ``TextureFile`` comments and a per-face ``texnumber`` in MeshLab's
 PLY. Textures are PNG (lossless), JPEG (``quality``) or WebP (``quality``; in the GLB through the
 ``EXT_texture_webp`` extension, required). ``transform`` (a 3 x 3 rotation, e.g. from
-:func:`o3d_seqcc.orientation.up_axis_transform`) is applied to positions and normals.
+:func:`o3d_seqcc.geometry.orientation.up_axis_transform`) is applied to positions and normals.
 
 Far from the origin (geo-referenced scans: UTM-like coordinates of 1e5-1e7 m) the files keep the
 input's frame at full precision: OBJ writes as many digits as the coordinates need, PLY writes
@@ -407,7 +407,7 @@ def export_glb(
         JPEG / WebP quality.
     transform : (3, 3) float, optional
         Rotation applied to positions and normals (glTF is Y-up:
-        :func:`o3d_seqcc.orientation.up_axis_transform`).
+        :func:`o3d_seqcc.geometry.orientation.up_axis_transform`).
     encoded : list of bytes, optional
         Already encoded textures, one per page, in ``texture_format``.
 
@@ -584,7 +584,7 @@ def export_textured_mesh(
         JPEG / WebP quality.
     transform : (3, 3) float, optional
         Rotation applied to the positions and normals of every file (e.g. to make the scene
-        Y-up: :func:`o3d_seqcc.orientation.up_axis_transform`).
+        Y-up: :func:`o3d_seqcc.geometry.orientation.up_axis_transform`).
 
     Returns
     -------

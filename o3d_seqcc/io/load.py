@@ -158,7 +158,7 @@ def load_scene(
         cameras given in its place are refused by the camera check. Same formats as
         ``extrinsic``.
     check_cameras : bool, default True
-        Check the cameras against the mesh (:func:`o3d_seqcc.camera_checks.check_cameras`):
+        Check the cameras against the mesh (:func:`o3d_seqcc.visibility.camera_checks.check_cameras`):
         an :class:`InputError` when they look camera-to-world, OpenGL or in other units than
         the mesh (the message names the fix), warnings when most of the mesh faces no camera.
         Needs ``validate``.
@@ -254,7 +254,7 @@ def camera_fixes(fmt: SceneFormat) -> dict[str, str]:
 
 def run_camera_check(scene: Scene, fmt: SceneFormat, target: Path, *, extrinsic: str | None = None,
                      axes: str | None = None, raise_on_mistake: bool = True, **options: Any):
-    """:func:`~o3d_seqcc.camera_checks.check_cameras` with the fixes of ``fmt``; warnings emitted.
+    """:func:`~o3d_seqcc.visibility.camera_checks.check_cameras` with the fixes of ``fmt``; warnings emitted.
 
     The conventions stated (``extrinsic``, ``axes``) are not second-guessed.
     """

@@ -25,7 +25,7 @@ absolute difference) with this shift; with ``(0, 0)`` the render is offset by ha
 x and in y (texture sizes 512 to 2048 alike). Pass ``center_shift=(0, 0)`` for the plain
 convention ``cx = CenterPx.x, cy = height - CenterPx.y``.
 A non-zero ``LensDistortion`` (its first coefficient: vcglib uses only that one) is removed on
-the fly the way MeshLab's ``Camera::Project`` applies it (:mod:`o3d_seqcc.distortion`, model
+the fly the way MeshLab's ``Camera::Project`` applies it (:mod:`o3d_seqcc.geometry.distortion`, model
 ``"meshlab"``); the view's camera is then the pinhole of the same size, and a project written
 for the original photos gets the photo's camera and ``LensDistortion`` back.
 """

@@ -21,7 +21,7 @@ The principal point is relative to the image centre from file version 1.2.1 on (
 before); AliceVision's pixel centres are at integers, as ours. Distortion (``type`` or
 ``distortionType`` radial1 / radialk1, radial3 / radialk3, brown, fisheye4, on focal-normalised
 coordinates as AliceVision's ``addDistortion``) is removed on the fly
-(:mod:`o3d_seqcc.distortion`); other distorted types are refused (undistort the images first,
+(:mod:`o3d_seqcc.geometry.distortion`); other distorted types are refused (undistort the images first,
 e.g. with Meshroom's PrepareDenseScene).
 Views without a pose (not reconstructed) are skipped, with a warning.
 """

@@ -14,7 +14,7 @@
 
 Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
 1000), ``point_cloud`` and ``distortion`` are optional. ``extrinsic`` is world-to-camera in
-OpenCV axes. ``distortion`` (:class:`~o3d_seqcc.distortion.Distortion`: model, coefficients,
+OpenCV axes. ``distortion`` (:class:`~o3d_seqcc.geometry.distortion.Distortion`: model, coefficients,
 the photo's own intrinsic) says the image is a distorted photo, undistorted when read to the
 pinhole camera ``intrinsic``.
 """

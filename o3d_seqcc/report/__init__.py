@@ -18,7 +18,7 @@ from an output folder. Sections, each only when the command produced its data:
 - the sequential steps of that path (Figure 8): the source view corrected step by step;
 - a before / after grid of all views, reference marked (Figure 10);
 - Table 2: PSNR / CIEDE2000 mean, weighted mean and std over the view pairs, before and after,
-  with the contrast ratio (:func:`o3d_seqcc.metrics.before_after`);
+  with the contrast ratio (:func:`o3d_seqcc.evaluation.metrics.before_after`);
 - the per-face image selection with a legend (Figure 9);
 - renders of the textured mesh from two views beside the photos (Figures 12-13);
 - seam metric, timings and the run's settings.
@@ -145,7 +145,7 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
     report : dict, optional
         The ``report.json`` content to show (numbers, settings, timings, Table 2 under
         ``"metrics"``); default the result's own report (without Table 2 for ``run``: see
-        :func:`o3d_seqcc.metrics.before_after`).
+        :func:`o3d_seqcc.evaluation.metrics.before_after`).
     thumb_width : int, default 160
         Width in pixels of the views' thumbnails (photos beside renders: twice that).
 
@@ -164,7 +164,7 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     A ``selection.png`` beside ``path`` rendered from the view the report names
     (``report["selection"]["picture_view"]``, as :meth:`~o3d_seqcc.pipeline.RunResult.save`
     writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
-    (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.seams.SelectionSeams`, computed when
+    (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`, computed when
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
     result's (e.g. :func:`cached_images` shared with whoever read them before). ``write=False``
     returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).

@@ -10,7 +10,7 @@ changes photo most visibly) is rendered by ray casting
 the last two before any atlas or seam leveling, so that they differ only by the correction; and
 the selection seams (edges where the texturing photo changes) are drawn on the close-up in the
 colour of the step they show in the photos, uncorrected and corrected
-(:func:`o3d_seqcc.seams.selection_seams`). The seam metric of the finished texture hardly
+(:func:`o3d_seqcc.evaluation.seams.selection_seams`). The seam metric of the finished texture hardly
 changes with the correction (seam leveling hides the steps either way); these steps, and the
 colours on either side of them, are what it changes.
 """

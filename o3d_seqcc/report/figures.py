@@ -40,7 +40,7 @@ CHANNEL_RGB = ((200, 30, 30), (30, 150, 40), (35, 70, 210))
 
 
 def png(image: np.ndarray) -> bytes:
-    """PNG bytes of an (H, W, 3) image (any dtype :func:`~o3d_seqcc.imageops.img_as_uint8` takes)."""
+    """PNG bytes of an (H, W, 3) image (any dtype :func:`~o3d_seqcc.imaging.arrays.img_as_uint8` takes)."""
     return encode_image(img_as_uint8(image), ".png")
 
 

@@ -1,6 +1,6 @@
 """The report's 3D viewer: the textured model, inline, in a WebGL viewer that works offline.
 
-The model is embedded as a GLB (:func:`o3d_seqcc.export.glb_bytes`: unlit, Y-up, the atlas
+The model is embedded as a GLB (:func:`o3d_seqcc.io.export.glb_bytes`: unlit, Y-up, the atlas
 reduced to :data:`VIEWER_TEXTURE_SIZE` texels and JPEG-encoded) in base64, beside two more
 textures of the same UV layout, made here by looking every texel up in the photo that
 textures its face (:func:`viewer_textures`): the corrected photos and the photos as taken, both
@@ -128,7 +128,7 @@ def viewer_html(small: Any, view: View, rotation: np.ndarray, n_views: int, mode
     view : View
         The first camera.
     rotation : (3, 3) float
-        The scene's frame to the viewer's Y-up frame (:func:`o3d_seqcc.orientation.up_axis_transform`).
+        The scene's frame to the viewer's Y-up frame (:func:`o3d_seqcc.geometry.orientation.up_axis_transform`).
     n_views : int
         Palette size of the selection colours.
     modes : list of (key, label, texture)

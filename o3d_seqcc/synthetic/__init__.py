@@ -1,5 +1,5 @@
 """Synthetic scenes with ground truth: a textured room (:mod:`.room`) rendered with known
-camera-like photometric changes (:mod:`o3d_seqcc.photometric`) by :mod:`.generate`."""
+camera-like photometric changes (:mod:`o3d_seqcc.evaluation.photometric`) by :mod:`.generate`."""
 
 from __future__ import annotations
 

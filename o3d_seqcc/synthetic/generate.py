@@ -206,8 +206,8 @@ def make_synthetic_scene(
         drawn camera-like (:func:`sample_photometric`); the textures' albedo is in
         :data:`ALBEDO_RANGE` so exposure clips only a little;
         ``"camera-hard"``: the same model drawn uniformly over
-        :data:`~o3d_seqcc.photometric.HARD_CHANGE_RANGES` (exposure 0.65-1.42, gamma 0.67-1.43
-        independently per channel, S-curve 0-0.6; :func:`~o3d_seqcc.photometric.sample_camera_change`);
+        :data:`~o3d_seqcc.evaluation.photometric.HARD_CHANGE_RANGES` (exposure 0.65-1.42, gamma 0.67-1.43
+        independently per channel, S-curve 0-0.6; :func:`~o3d_seqcc.evaluation.photometric.sample_camera_change`);
         ``"none"``: the images are the ground-truth renders.
     overwrite : bool, default False
         Replace an existing ``out_dir`` that holds an earlier output of o3d_seqcc (a folder

@@ -133,7 +133,7 @@ def bake_texture(
         line's defaults: sized to the charts at the photos' resolution, 4 texels of padding,
         global and local seam leveling on).
     adjacency : (E, 2) int array, optional
-        Face adjacency (:func:`o3d_seqcc.meshops.face_adjacency`), computed when omitted.
+        Face adjacency (:func:`o3d_seqcc.geometry.meshops.face_adjacency`), computed when omitted.
     **options
         Fields of :class:`TextureSettings` overriding ``settings`` (e.g. ``atlas_size=1024``,
         ``leveling=False``); unknown names raise ``TypeError``.

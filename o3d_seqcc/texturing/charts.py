@@ -396,7 +396,7 @@ def build_charts(
     adjacency : (E, 2) int64
         Faces sharing an edge.
     wpos : (N,) int64, optional
-        Welded vertex ids (:func:`o3d_seqcc.meshops.weld_vertices`), computed when omitted.
+        Welded vertex ids (:func:`o3d_seqcc.geometry.meshops.weld_vertices`), computed when omitted.
     merge_faces : int, default 3
         Charts of at most this many faces are merged into a neighbour's parametrisation (0: off).
 

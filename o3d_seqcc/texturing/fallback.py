@@ -56,7 +56,7 @@ def fallback_corner_colors(
         Colour (0-255 units) of every corner of every seen face: its view at the corner's
         projection, plus the seam-leveling offset; rows of unseen faces are ignored.
     wf : (F, 3) int
-        Welded vertex id of every face corner (:func:`o3d_seqcc.meshops.weld_vertices`).
+        Welded vertex id of every face corner (:func:`o3d_seqcc.geometry.meshops.weld_vertices`).
     labels : (F,) int
         View of every face, -1 = unseen.
     adjacency : (E, 2) int

@@ -228,7 +228,7 @@ def solve_corner_offsets(
         Colour of every face corner in its chart (:func:`corner_colors` ``mean``, 0-255 units);
         rows of unseen faces are ignored.
     wf : (F, 3) int
-        Welded vertex id of every face corner (:func:`o3d_seqcc.meshops.weld_vertices`).
+        Welded vertex id of every face corner (:func:`o3d_seqcc.geometry.meshops.weld_vertices`).
     labels : (F,) int
         View of every face, -1 = unseen (offset 0).
     face_chart : (F,) int

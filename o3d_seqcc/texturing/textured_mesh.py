@@ -4,7 +4,7 @@ UV convention (the OBJ / trimesh / Open3D one): ``uv`` in [0, 1], origin at the 
 corner of the texture, u to the right, v up. The centre of texel (column X, row Y, row 0 at the
 top of the image) of a W x H texture is at ``((X + 0.5) / W, 1 - (Y + 0.5) / H)``;
 :meth:`TexturedMesh.texel_xy` converts back to texel coordinates. glTF puts the origin at the
-top-left: :mod:`o3d_seqcc.export` writes ``(u, 1 - v)`` there.
+top-left: :mod:`o3d_seqcc.io.export` writes ``(u, 1 - v)`` there.
 
 A :class:`TexturedMesh` holds either a texture atlas with per-vertex UVs (vertices duplicated
 along UV seams), or per-vertex colours. An atlas of several square pages is held as one image
@@ -129,7 +129,7 @@ class TexturedMesh:
         ``defaultLit`` material, so ``o3d.visualization.draw`` shows it textured and
         ``o3d.t.io.write_triangle_mesh`` writes it. A vertex-coloured mesh gets ``vertex.colors``.
         Positions are float64 where float32 would not hold them (far from the origin,
-        :func:`~o3d_seqcc.meshops.float32_offset`).
+        :func:`~o3d_seqcc.geometry.meshops.float32_offset`).
         """
         import open3d as o3d
 

@@ -30,10 +30,10 @@ For every view ``v`` and mesh face ``f``:
 Face normals come from the winding and are flipped where they disagree with the mesh's vertex
 normals (which :func:`~o3d_seqcc.scene.load_mesh` computes when the file has none).
 
-Storage is sparse: :class:`Visibility` keeps one small :class:`~o3d_seqcc.view_visibility.ViewRecord`
+Storage is sparse: :class:`Visibility` keeps one small :class:`~o3d_seqcc.visibility.per_view.ViewRecord`
 per view (the ids of the faces valid in it, a filter bit per face, projected areas, angles),
-computed by one task per view (:mod:`o3d_seqcc.view_visibility`; local threads or a Dask
-cluster, :mod:`o3d_seqcc.parallel`). Vertex projections are recomputed from the cameras when
+computed by one task per view (:mod:`o3d_seqcc.visibility.per_view`; local threads or a Dask
+cluster, :mod:`o3d_seqcc._shared.parallel`). Vertex projections are recomputed from the cameras when
 asked for (:meth:`Visibility.vertex_uv`). The dense (V, F) and (V, N) arrays of earlier versions
 (``valid``, ``usable``, ``area``, ``uv``, ...) are still there as properties, built on first
 access and cached: fine for small scenes and tests, never used by the pipeline's hot paths.
@@ -116,7 +116,7 @@ class Visibility(UsableFaces):
         The mesh the records refer to.
     records : tuple of ViewRecord
         Per view: ids of the valid faces (ascending int32), filter bits, projected areas (px^2,
-        float32) and cosines (float32); see :class:`~o3d_seqcc.view_visibility.ViewRecord`.
+        float32) and cosines (float32); see :class:`~o3d_seqcc.visibility.per_view.ViewRecord`.
     stats : dict
         Counts (face-view incidences) per filter, per view and timings; see
         :func:`compute_visibility`.
@@ -486,26 +486,26 @@ def compute_visibility(
     split_faces : bool, default True
         Split the faces that no view can use whole but some view sees in part (clipped by the
         image border, partly hidden, larger than any photo) until their parts are usable
-        (:mod:`o3d_seqcc.refine`: conforming longest-edge bisection); the result's ``mesh`` is
+        (:mod:`o3d_seqcc.visibility.refine`: conforming longest-edge bisection); the result's ``mesh`` is
         then the refined mesh and ``parent_faces`` maps its faces to the input's.
     split_min_px : float, default 4.0
         ... down to parts whose longest edge is this many pixels in the views seeing them.
     split_max_distortion : float, default 0.5
         Also split faces whose texture would slide by more than this many pixels inside them
         (their corners' projections interpolated linearly vs the photo's perspective:
-        :func:`o3d_seqcc.refine.distortion`; large faces seen in depth); ``inf`` turns it off.
+        :func:`o3d_seqcc.visibility.refine.distortion`; large faces seen in depth); ``inf`` turns it off.
     split_max_rounds : int, default 8
         ... in at most this many rounds (each divides a split face's area by about 4).
     n_jobs : int, optional
         Threads for the per-view tasks (projection, depth maps, ray queries), joblib semantics
         (None: the active ``joblib.parallel_config`` or 1; -1: all cores). Inside
-        :func:`o3d_seqcc.parallel.use` with a Dask client the tasks run on its cluster instead.
+        :func:`o3d_seqcc._shared.parallel.use` with a Dask client the tasks run on its cluster instead.
 
     Returns
     -------
     Visibility
         One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
-        ``normals_flipped``, ``split`` (:class:`~o3d_seqcc.refine.Refinement` stats), the totals (face-view incidences) ``valid``, ``occluded``,
+        ``normals_flipped``, ``split`` (:class:`~o3d_seqcc.visibility.refine.Refinement` stats), the totals (face-view incidences) ``valid``, ``occluded``,
         ``depth_inconsistent``, ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
         ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
         ``views_seeing_nothing`` (names), ``rays`` and ``timings`` (seconds per stage).

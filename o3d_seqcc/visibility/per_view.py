@@ -120,7 +120,7 @@ class VisibilityJob:
         The filter options of :func:`~o3d_seqcc.visibility.compute_visibility`.
     occluder : VisibilityJob, optional
         The job whose mesh hides faces from the cameras (default: this one's). A job over some
-        faces of a mesh (the parts of split faces, :mod:`o3d_seqcc.refine`) casts its rays
+        faces of a mesh (the parts of split faces, :mod:`o3d_seqcc.visibility.refine`) casts its rays
         against the whole mesh this way, and shares its ray-casting tree.
 
     Ray casting is single precision (Open3D): it works in a local frame, the mesh and the rays

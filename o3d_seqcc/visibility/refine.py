@@ -11,11 +11,11 @@ split (:func:`refine_visibility`, called by :func:`o3d_seqcc.visibility.compute_
    frustum, faces the camera, is larger than ``min_px`` there (its longest edge in pixels, or any
    corner behind the camera), and one of its test points (a barycentric grid about 16 px apart,
    at most 153 points) projects into the image, passes the oblique angle and the depth map, and is
-   not hidden by the mesh (the z-buffer rays of :mod:`o3d_seqcc.occlusion`);
-3. the partly seen faces are bisected twice (:func:`o3d_seqcc.meshsplit.bisect`: conforming
+   not hidden by the mesh (the z-buffer rays of :mod:`o3d_seqcc.visibility.occlusion`);
+3. the partly seen faces are bisected twice (:func:`o3d_seqcc.geometry.meshsplit.bisect`: conforming
    longest-edge bisection, so the mesh stays welded and free of T-junctions; neighbours split
    where an edge of theirs is split), the visibility of every new face is computed by the same
-   per-view task as the others' (:func:`~o3d_seqcc.view_visibility.view_record`, ray cast against
+   per-view task as the others' (:func:`~o3d_seqcc.visibility.per_view.view_record`, ray cast against
    the input mesh: the parts lie exactly on it), and merged into the views' records;
 
 until no candidate is partly seen or after ``max_rounds`` rounds (each divides a face's area by
@@ -219,7 +219,7 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
     records : list of ViewRecord
         One per view.
     ex : executor
-        :func:`o3d_seqcc.parallel.current`'s (the probes and the parts' visibility run on it).
+        :func:`o3d_seqcc._shared.parallel.current`'s (the probes and the parts' visibility run on it).
     vertex_normals : (N, 3) float64
     min_px : float, default 4.0
         A face is split only where its longest edge is above this many pixels in a view that sees
@@ -308,7 +308,7 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
 
 
 def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np.ndarray):
-    """Undo the bisections whose every part is unseen (reverse of :func:`o3d_seqcc.meshsplit.bisect`).
+    """Undo the bisections whose every part is unseen (reverse of :func:`o3d_seqcc.geometry.meshsplit.bisect`).
 
     A vertex ``m`` made as the midpoint of edge ``(p, q)`` (``ends[m]``) is removed when every
     face around it is unseen and they pair up, per apex ``C``, as the two halves ``(A, m, C)`` and

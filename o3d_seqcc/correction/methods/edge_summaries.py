@@ -1,12 +1,12 @@
 """Edge summaries: each graph edge's colours reduced to matched per-channel quantiles.
 
-The first step of ``method="seqcc-global"`` (:mod:`~o3d_seqcc.correction.seqcc_global`): for
+The first step of ``method="seqcc-global"`` (:mod:`~o3d_seqcc.correction.methods.seqcc_global`): for
 **every** edge of the colour-correction graph (not only the path tree) the colours at the
 pair's mappings, wrong correspondences dropped (the joint rule of
-:func:`~o3d_seqcc.correction.seqcc.colour_inliers`), are summarised per channel by their matched
+:func:`~o3d_seqcc.correction.methods.seqcc.colour_inliers`), are summarised per channel by their matched
 quantiles ``(Q_a(p), Q_b(p))`` -- the JIH's quantile-paired marginals, which misregistration by
-a few pixels does not flatten (:mod:`o3d_seqcc.cmf`). The joint solves of
-:mod:`~o3d_seqcc.correction.joint_curves` work on these summaries only.
+a few pixels does not flatten (:mod:`o3d_seqcc.correction.cmf`). The joint solves of
+:mod:`~o3d_seqcc.correction.methods.joint_curves` work on these summaries only.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def edge_quantiles(ca: np.ndarray, cb: np.ndarray, *, levels: int = 64, trim: fl
     -------
     qa, qb : (3, levels) float64
         ``qa[c, i]`` and ``qb[c, i]`` are the same quantile of channel c in the two views
-        (plotting positions ``(i + 0.5) / n``, as :func:`o3d_seqcc.cmf.quantile_samples`).
+        (plotting positions ``(i + 0.5) / n``, as :func:`o3d_seqcc.correction.cmf.quantile_samples`).
     """
     ca = np.asarray(ca, dtype=np.float64)
     cb = np.asarray(cb, dtype=np.float64)
@@ -62,7 +62,7 @@ def edge_quantiles(ca: np.ndarray, cb: np.ndarray, *, levels: int = 64, trim: fl
 
 
 def _rank_inliers(ca: np.ndarray, cb: np.ndarray, order_a: np.ndarray, sorted_b: np.ndarray, *, k: float) -> np.ndarray:
-    """:func:`o3d_seqcc.correction.seqcc.colour_inliers` with the pair's empirical quantile-quantile
+    """:func:`o3d_seqcc.correction.methods.seqcc.colour_inliers` with the pair's empirical quantile-quantile
     curve as the prediction: each mapping's colour in view a is mapped, channel by channel, to
     the value of view b of the same rank (no lookup table to build or interpolate). Same rule:
     residuals in robust sigmas (1.4826 MAD, at least 1/255), joint norm <= ``k * sqrt(3)``."""
@@ -79,7 +79,7 @@ def _rank_inliers(ca: np.ndarray, cb: np.ndarray, order_a: np.ndarray, sorted_b:
 
 def _sample_flat(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.ndarray:
     """(n, 2) pixel positions -> (n, 3) float32 colours of an (H, W, 3) float image, as
-    :func:`o3d_seqcc.imageops.sample_colors` but on a float32 copy (its sorts are twice as fast)."""
+    :func:`o3d_seqcc.imaging.arrays.sample_colors` but on a float32 copy (its sorts are twice as fast)."""
     img = np.asarray(img)
     H, W = img.shape[:2]
     flat = np.ascontiguousarray(img, dtype=np.float32).reshape(-1, 3)
@@ -105,7 +105,7 @@ def _sample_levels(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.nd
     """:func:`_sample_flat` of ``img_as_float(img)`` for a uint8 / uint16 image, without the float image.
 
     The pixels the samples touch are gathered as integers and turned into float32 through a
-    table of ``float32(level / scale)`` (float64 division, as :func:`~o3d_seqcc.imageops.img_as_float`
+    table of ``float32(level / scale)`` (float64 division, as :func:`~o3d_seqcc.imaging.arrays.img_as_float`
     then the float32 copy do), so every value, and every bilinear weight and product after it, is
     bit for bit :func:`_sample_flat`'s: the (H, W, 3) float64 and float32 copies (24 + 12 bytes
     per pixel, 216 MB for a 6 MP photo) are never made.
@@ -138,7 +138,7 @@ def _sample_view_task(item: tuple[int, np.ndarray], images, interpolation: str) 
     """One view's task: read its image once and sample it at every position its edges need.
 
     ``images`` is the context's float sequence; over uint8 / uint16 photos
-    (:class:`~o3d_seqcc.images.FloatImages`) the photo itself is sampled (:func:`_sample_levels`:
+    (:class:`~o3d_seqcc.imaging.sequences.FloatImages`) the photo itself is sampled (:func:`_sample_levels`:
     the same values, no float copy of the photo).
     """
     from ...imaging.sequences import FloatImages
@@ -223,11 +223,11 @@ def edge_observations(
     outlier_k : float or None, default 3.0
         Drop mappings whose colours disagree with the pair's quantile-quantile curve by more
         than this many robust sigmas jointly over the channels
-        (:func:`o3d_seqcc.correction.seqcc.colour_inliers`); None keeps all.
+        (:func:`o3d_seqcc.correction.methods.seqcc.colour_inliers`); None keeps all.
     n_jobs : int or None, default None
         Threads of the local executor (joblib semantics: None = the active
         ``joblib.parallel_config`` or 1, -1 = all cores). The colours are sampled by one task
-        per view on the active executor (:mod:`o3d_seqcc.parallel`: its image read once, at
+        per view on the active executor (:mod:`o3d_seqcc._shared.parallel`: its image read once, at
         every position its edges need, then released; on a Dask cluster the workers read it);
         the per-edge summaries run in local threads.
 

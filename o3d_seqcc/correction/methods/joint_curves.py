@@ -2,7 +2,7 @@
 
 The paper's sequential correction composes one colour mapping function per path edge: every
 edge's error is carried to all views behind it. This module solves all views' per-channel
-curves at once from the edge summaries of :mod:`~o3d_seqcc.correction.edge_summaries`, the way
+curves at once from the edge summaries of :mod:`~o3d_seqcc.correction.methods.edge_summaries`, the way
 global bundle adjustment follows incremental structure-from-motion:
 
 - :func:`linear_start`: least squares on the corrected values over all edges (convex, no view
@@ -13,7 +13,7 @@ global bundle adjustment follows incremental structure-from-motion:
   measured values, which no common contraction of the curves can lower; the corrections are the
   responses' inverses.
 
-``method="seqcc-global"`` (:mod:`~o3d_seqcc.correction.seqcc_global`) runs them in that order.
+``method="seqcc-global"`` (:mod:`~o3d_seqcc.correction.methods.seqcc_global`) runs them in that order.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class RefineResult:
     luts : (V, 3, L) float64
         Per view and channel the correction curve (view value -> reference value) on
         ``np.linspace(0, 1, L)``, the inverse of ``response``; flat beyond the response's range
-        (see :func:`o3d_seqcc.luts.extend_curve`). The reference's is the identity; views not solved keep ``init``.
+        (see :func:`o3d_seqcc.correction.luts.extend_curve`). The reference's is the identity; views not solved keep ``init``.
     response : (V, 3, K) float64
         Per view and channel the estimated response: the view's value at each knot of the
         reference's value range (``knots``); the reference's is the identity.
@@ -192,7 +192,7 @@ def refine_curves(
     Parameters
     ----------
     obs : EdgeObservations
-        Matched quantiles of every edge (:func:`~o3d_seqcc.correction.edge_summaries.edge_observations`).
+        Matched quantiles of every edge (:func:`~o3d_seqcc.correction.methods.edge_summaries.edge_observations`).
     n_views : int
     reference : int
         View whose response is the identity.
@@ -229,7 +229,7 @@ def refine_curves(
     support_tail : float, default 0.01
         :attr:`RefineResult.support` leaves out this share of each end of a view's pooled
         observations (a few edges' extreme quantiles are not support; beyond it
-        :func:`o3d_seqcc.luts.extend_curve` takes over).
+        :func:`o3d_seqcc.correction.luts.extend_curve` takes over).
     knot_power : float, default 1.5
         Knot placement exponent: denser knots in the shadows, where gamma-type responses bend
         most (with evenly spaced knots and the black spring, a gamma of 0.67 was 3 levels off
@@ -321,7 +321,7 @@ def linear_start(
     n_views : int
     reference : int
     init : (V, 3, L0) float array, optional
-        Prior curves (e.g. :func:`~o3d_seqcc.correction.seqcc_global.sequential_start`); default the identity.
+        Prior curves (e.g. :func:`~o3d_seqcc.correction.methods.seqcc_global.sequential_start`); default the identity.
     knots : int, default 11
         Knots of each curve, evenly spaced.
     lut_size : int, default 256

@@ -1,8 +1,8 @@
 """Sequential pairwise colour correction, the paper's method (Table 1 #7) and its literal variant.
 
-``"seqcc"`` (the paper's; the default is ``"seqcc-global"``, :mod:`~o3d_seqcc.correction.seqcc_global`)
+``"seqcc"`` (the paper's; the default is ``"seqcc-global"``, :mod:`~o3d_seqcc.correction.methods.seqcc_global`)
     For every edge (target t -> source s) on a path: per-channel JIH of the colours at the
-    pair's mappings (:mod:`o3d_seqcc.jih`) and a CMF fitted on it (:func:`o3d_seqcc.cmf.fit_cmf`,
+    pair's mappings (:mod:`o3d_seqcc.correction.jih`) and a CMF fitted on it (:func:`o3d_seqcc.correction.cmf.fit_cmf`,
     CSVR by default, fitted on the JIH's matched marginal quantiles with a contrast guard, so
     misregistered correspondences do not wash the images out), after an outlier pass
     (:func:`colour_inliers`). Each directed edge is fitted once, however many paths cross it.
@@ -32,7 +32,7 @@ __all__ = ["colour_inliers", "quantile_luts"]
 def quantile_luts(ct: np.ndarray, cs: np.ndarray, *, n_out: int = 256, levels: int = 256) -> np.ndarray:
     """Per-channel quantile-quantile curves: the target's quantiles mapped to the source's.
 
-    The unweighted counterpart of :func:`o3d_seqcc.cmf.quantile_samples` (same levels, evenly
+    The unweighted counterpart of :func:`o3d_seqcc.correction.cmf.quantile_samples` (same levels, evenly
     spaced in ``[QUANTILE_TRIM, 1 - QUANTILE_TRIM]``, the same plotting positions ``(i + 0.5) /
     n``), on sorted columns instead of weighted sorts (~20x faster), with no regression and no
     guards: a numpy-only estimate of each channel's monotone photometric change.
@@ -115,12 +115,12 @@ def _method_seqcc(
     ``n_jobs`` (joblib semantics, threads): edges fitted in parallel; None = the active
     ``joblib.parallel_config`` or 1.
 
-    Options: ``cmf`` (a :data:`o3d_seqcc.cmf.CMF_METHODS` name), ``cmf_options`` (passed to
-    :func:`o3d_seqcc.cmf.fit_cmf`), ``bits`` (JIH bit depth; default 8 for 8-bit input, 10
+    Options: ``cmf`` (a :data:`o3d_seqcc.correction.cmf.CMF_METHODS` name), ``cmf_options`` (passed to
+    :func:`o3d_seqcc.correction.cmf.fit_cmf`), ``bits`` (JIH bit depth; default 8 for 8-bit input, 10
     otherwise), ``jih_blur`` (default 0: Gaussian sigma in pixels applied to both images before
     their colours are sampled at the mappings for the JIH, e.g. about the registration error;
     it averages out the unrelated texture detail misregistration pairs. Off by default: with
-    the default quantile pairing of :func:`o3d_seqcc.cmf.fit_cmf` misregistration no longer
+    the default quantile pairing of :func:`o3d_seqcc.correction.cmf.fit_cmf` misregistration no longer
     flattens the CMF (fountain: CIEDE2000 6.87 without, 6.82 with 2 px), while blurring before a
     non-linear tone curve does not commute with it (synthetic room, CIEDE2000 to ground truth
     1.49 -> 2.56 with 2 px)). The correction itself is applied to the unblurred images.

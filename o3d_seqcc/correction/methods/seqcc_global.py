@@ -6,17 +6,17 @@ carried to all views behind it, and a view is corrected only over the values its
 observed. ``method="seqcc-global"`` (:func:`method_seqcc_global`) refines a sequential
 estimate the way global bundle adjustment follows incremental structure-from-motion:
 
-1. :func:`~o3d_seqcc.correction.edge_summaries.edge_observations`: for **every** edge of the
+1. :func:`~o3d_seqcc.correction.methods.edge_summaries.edge_observations`: for **every** edge of the
    colour-correction graph (not only the path tree) the colours at the pair's mappings, wrong
    correspondences dropped, summarised per channel by their matched quantiles.
 2. :func:`sequential_start`: the sequential estimate along the paper's paths (by default each
    path edge's quantile-quantile curve from step 1; ``init="seqcc"`` uses the full CSVR fit).
-3. :func:`~o3d_seqcc.correction.joint_curves.linear_start` then
-   :func:`~o3d_seqcc.correction.joint_curves.refine_curves`: least squares on the corrected
+3. :func:`~o3d_seqcc.correction.methods.joint_curves.linear_start` then
+   :func:`~o3d_seqcc.correction.methods.joint_curves.refine_curves`: least squares on the corrected
    values over all edges (convex; a little contracted by the noise), then the robust bundle
    adjustment of per-view, per-channel responses over all edges, in the measured values, which
    no common contraction of the curves can lower; the corrections are the responses' inverses.
-4. :func:`~o3d_seqcc.luts.extend_curve`: beyond the values any edge of a view observed, the
+4. :func:`~o3d_seqcc.correction.luts.extend_curve`: beyond the values any edge of a view observed, the
    correction continues as a power law ``f(x) = f(x_b) (x / x_b)^beta`` with ``beta`` its
    log-log slope over the last observed stretch -- the shape of a gamma-type camera response,
    which a change of exposure, white balance and gamma keeps exactly -- instead of a clamp or a
@@ -48,9 +48,9 @@ def sequential_start(
     """The sequential estimate the joint refinement starts from, as (V, 3, L) correction curves.
 
     ``init="quantile"``: along the paper's Dijkstra paths, each edge's quantile-quantile curve,
-    continued beyond the pair's values by :func:`~o3d_seqcc.luts.extend_curve`, composed as
+    continued beyond the pair's values by :func:`~o3d_seqcc.correction.luts.extend_curve`, composed as
     lookup tables (numpy only, no SVR fits); the curves come from ``obs``
-    (:func:`~o3d_seqcc.correction.edge_summaries.edge_observations`, which must hold every path
+    (:func:`~o3d_seqcc.correction.methods.edge_summaries.edge_observations`, which must hold every path
     edge) or, without it, from the colours at the pairs' mappings (wrong correspondences dropped
     as by ``seqcc``). ``init="seqcc"``: the paper's sequential correction (``method="seqcc"``:
     CSVR per path edge); ``"identity"``: no estimate. Views without a path get the identity.
@@ -134,11 +134,11 @@ def method_seqcc_global(
     """``seqcc`` refined jointly over every graph edge, curves extended over the whole range.
 
     Registered as ``method="seqcc-global"`` (the default of :func:`o3d_seqcc.correction.correct`).
-    Steps (module docstring): :func:`~o3d_seqcc.correction.edge_summaries.edge_observations` on
+    Steps (module docstring): :func:`~o3d_seqcc.correction.methods.edge_summaries.edge_observations` on
     every edge of the reference's component; the sequential estimate along the paper's paths
     (:func:`sequential_start`); the least-squares estimate over all edges that starts from it
-    (:func:`~o3d_seqcc.correction.joint_curves.linear_start`); the robust bundle adjustment
-    (:func:`~o3d_seqcc.correction.joint_curves.refine_curves`); then the continuation beyond
+    (:func:`~o3d_seqcc.correction.methods.joint_curves.linear_start`); the robust bundle adjustment
+    (:func:`~o3d_seqcc.correction.methods.joint_curves.refine_curves`); then the continuation beyond
     each view's observed values. Views outside the reference's component keep the identity.
     Measured (``benchmarks/table2.py``): see the README's Measured table.
 
@@ -148,7 +148,7 @@ def method_seqcc_global(
     init : {"quantile", "seqcc", "identity"}, default "quantile"
         Sequential estimate (:func:`sequential_start`).
     knots : int, default 11
-        Knots of each view's response (:func:`~o3d_seqcc.correction.joint_curves.refine_curves`).
+        Knots of each view's response (:func:`~o3d_seqcc.correction.methods.joint_curves.refine_curves`).
     levels : int, default 32
         Quantile levels per edge and channel (>= 4).
     smooth : float, default 1e-3
@@ -166,8 +166,8 @@ def method_seqcc_global(
     outlier_k : float or None, default 3.0
         Wrong correspondences dropped beyond this many robust sigmas (> 0; None keeps all).
     extrapolate : {"power", "line", "none"}, default "power"
-        Beyond each view's observed values: power laws (:func:`o3d_seqcc.luts.extend_curve`),
-        the end slopes (:func:`o3d_seqcc.luts.extend_line`, for comparison) or the inverse
+        Beyond each view's observed values: power laws (:func:`o3d_seqcc.correction.luts.extend_curve`),
+        the end slopes (:func:`o3d_seqcc.correction.luts.extend_line`, for comparison) or the inverse
         response's own flat ends.
     support_tail : float, default 0.01
         Share of each end of a view's pooled observations not counted as observed.
