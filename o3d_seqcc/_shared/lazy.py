@@ -14,7 +14,7 @@ __all__ = ["lazy_exports"]
 
 
 def lazy_exports(
-    package: str, table: Mapping[str, str], *, submodules: Iterable[str] = ()
+    package: str, table: Mapping[str, str], *, submodules: Iterable[str] | Mapping[str, str] = ()
 ) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
     """The ``__getattr__`` / ``__dir__`` pair of a package whose names live in its modules.
 
@@ -25,20 +25,21 @@ def lazy_exports(
     table : mapping of str to str
         Public name -> the module (relative to ``package``, e.g. ``"compute"`` or ``"io.load"``) that
         defines it.
-    submodules : iterable of str, keyword-only
-        Modules reachable as attributes without an explicit import (``o3d_seqcc.pipeline``).
+    submodules : iterable of str, or mapping of str to str, keyword-only
+        Modules reachable as attributes without an explicit import (``o3d_seqcc.pipeline``); a mapping
+        names where each lives (``{"parallel": "_shared.parallel"}``: ``o3d_seqcc.parallel.use``).
 
     Returns
     -------
     getattr, dir : callable
         Assign them to the package's ``__getattr__`` and ``__dir__``.
     """
-    subs = frozenset(submodules)
+    subs = dict(submodules) if isinstance(submodules, Mapping) else {m: m for m in submodules}
     pkg = importlib.import_module(package)
 
     def __getattr__(name: str) -> Any:
         if name in subs:
-            value = importlib.import_module(f".{name}", package)
+            value = importlib.import_module(f".{subs[name]}", package)
         elif name in table:
             value = getattr(importlib.import_module(f".{table[name]}", package), name)
         else:
@@ -47,6 +48,6 @@ def lazy_exports(
         return value
 
     def __dir__() -> list[str]:
-        return sorted(set(vars(pkg)) | set(table) | subs)
+        return sorted(set(vars(pkg)) | set(table) | set(subs))
 
     return __getattr__, __dir__
