@@ -22,8 +22,8 @@ APT_CORE=(libusb-1.0-0 libgomp1 libgl1 libegl1)
 # the rest of the test suite's tools
 APT_FULL=("${APT_CORE[@]}" xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
           libvulkan1 mesa-vulkan-drivers  # Open3D's offscreen renderer (lavapipe)
-          meshlab xdotool imagemagick     # MeshLab opening our output (tests/test_meshlab_app.py)
-          chromium)                       # the HTML report in a browser (tests/test_report*.py)
+          meshlab xdotool imagemagick     # MeshLab opening our output (tests/meshlab/test_meshlab_app.py)
+          chromium)                       # the HTML report in a browser (tests/report/test_report*.py)
 
 START=$SECONDS
 log() { printf '\033[1m[dev.sh %d:%02d]\033[0m %s\n' $(((SECONDS - START) / 60)) $(((SECONDS - START) % 60)) "$*" >&2; }

@@ -26,7 +26,7 @@ report pages holding markup a case injected (unsafe HTML).
 Prints one line per case (group, name, handled yes/no, the message's first line), totals per group
 and overall, and what went wrong by kind (tracebacks, crashes, hangs, damage, files beside the
 output, unsafe HTML, inputs not named). Always exits 0: it is a report, not a test
-(``tests/test_reliability.py`` and ``tests/test_hostile.py`` are the tests). Takes about 15 minutes
+(``tests/io/test_reliability.py`` and ``tests/hostile/test_hostile.py`` are the tests). Takes about 15 minutes
 on a 2-core machine (two cases at a time; the kill, concurrency and signal cases alone).
 
 Not a case, a note: 8 small photos on a 2.2M-face mesh took 118 s and 5.6 GB (heavy but bounded).
