@@ -4,6 +4,7 @@
 #   ./dev.sh demo    install what the demo needs (once) and run the pipeline on the built-in synthetic scene
 #   ./dev.sh test    install everything (once) and run the test suite
 #   ./dev.sh setup   only install everything (with the MeshLab filter plugin, which test needs and demo does not)
+#   ./dev.sh lint    install the Python packages (once) and run ruff (pyproject's [tool.ruff]) over the repository
 #
 # demo installs the system libraries Open3D needs (apt, when root or with sudo) and a virtual
 # environment in .venv with the package and its core dependencies (`pip install -e .`), no more.
@@ -226,5 +227,6 @@ case $cmd in
   setup) setup; setup_meshlab_plugin ;;
   demo) setup_demo; log "running o3d-seqcc demo"; "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
   test) setup; setup_meshlab_plugin; log "running the tests"; with_display "$VENV/bin/python" -m pytest "$@" ;;
-  *) sed -n '2,17p' "$0"; exit 2 ;;
+  lint) setup_python full; log "running ruff"; "$VENV/bin/python" -m ruff check "${@:-.}" ;;
+  *) sed -n '2,16p' "$0"; exit 2 ;;
 esac

@@ -39,9 +39,7 @@ Timings are noisy on a shared 2-core machine: compare rows of one run.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
-import math
 import statistics
 import sys
 import time
@@ -143,7 +141,6 @@ HEADER = (f"{'method':<15} {'cover':>7} {'used':>7} {'atlas':>11} {'pages':>5} {
 
 
 def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes: list, pictures: dict) -> dict:
-    import cv2
 
     from _shelf_bake import bake_shelf
     from o3d_seqcc import load_scene
@@ -413,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  ours / today: bake time {o['bake_s'] / s['bake_s']:.2f}x, coverage {o['coverage'] / s['coverage']:.2f}x, "
               f"GLB {o['glb_bytes'] / s['glb_bytes']:.2f}x, vertices {o['vertices'] / s['vertices']:.2f}x; today's atlas "
               f"{'grew beyond the budget' if s.get('grew') else 'stayed within'} {args.atlas_size or MESHES[key][1]}")
-        print(f"  ours mip bleed p99 L1/L2/L3: " + " / ".join(f"{v['p99']:.3f}" for v in o["mip_bleed"].values())
+        print("  ours mip bleed p99 L1/L2/L3: " + " / ".join(f"{v['p99']:.3f}" for v in o["mip_bleed"].values())
               + "; today's: " + " / ".join(f"{v['p99']:.3f}" for v in s["mip_bleed"].values()))
         print()
     print("(cover: triangle texels / atlas texels; used: texels within 1 texel of a triangle; v out/in: output / input "

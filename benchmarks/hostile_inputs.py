@@ -404,7 +404,7 @@ def _concurrent_overwrite(c: Ctx) -> tuple[bool, str]:
     time.sleep(0.3)
     b = popen("correct", c.S, "--out", c.out, "--overwrite", "--method", "none")
     ea, eb = a.communicate()[1], b.communicate()[1]
-    ok = (not ("Traceback" in ea + eb) and whole(c.out) and clean_beside(c, {"S", c.out.name})
+    ok = ("Traceback" not in ea + eb and whole(c.out) and clean_beside(c, {"S", c.out.name})
           and (0 in (a.returncode, b.returncode)) and all(x in (0, 1, 2) for x in (a.returncode, b.returncode))
           and (a.returncode != 0 or b.returncode != 0 or "wait" in (ea + eb).lower()))
     return ok, f"exits {a.returncode}/{b.returncode}; " + (message(eb) or message(ea))

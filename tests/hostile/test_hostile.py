@@ -31,7 +31,7 @@ import pytest
 import o3d_seqcc as sc
 from o3d_seqcc import InputError
 from o3d_seqcc.cli import main
-from o3d_seqcc.io.output import MANIFEST, output_folder
+from o3d_seqcc.io.output import output_folder
 
 pytestmark = pytest.mark.hostile
 
