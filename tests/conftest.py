@@ -35,3 +35,27 @@ def fountain_scene(fountain_root):
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+# ---- the fast tier -------------------------------------------------------------------------------------------------
+#: The heavy tests, marked ``slow`` here (``file::function``, every parametrization): ``-m "not slow"`` (the fast
+#: tier, ``./dev.sh test -m "not slow"``) leaves them out; the full run (``./dev.sh test``, CI) runs them. Chosen
+#: from ``pytest --durations=0`` of the full run: each takes about 4 s or more on this 2-core machine. A test module
+#: may also mark itself (``pytestmark = pytest.mark.slow``); an entry naming no test of its file stops the run.
+SLOW = """
+""".split()
+TESTS = Path(__file__).resolve().parent
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    slow, modules = set(SLOW), {}
+    for item in items:
+        rel = item.path.relative_to(TESTS).as_posix() if item.path.is_relative_to(TESTS) else str(item.path)
+        modules.setdefault(rel, getattr(item, "module", None))
+        if f"{rel}::{getattr(item, 'originalname', item.name)}" in slow:
+            item.add_marker(pytest.mark.slow)
+    stale = sorted(k for k in slow if k.split("::")[0] in modules
+                   and not callable(getattr(modules[k.split("::")[0]], k.split("::")[1], None)))
+    if stale:
+        raise pytest.UsageError(f"tests/conftest.py SLOW names tests that do not exist: {stale}")
