@@ -43,6 +43,7 @@ Timings are noisy on a shared 2-core machine: compare rows of one run.
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import logging
 import os
@@ -472,6 +473,8 @@ def main(argv: list[str] | None = None) -> int:
     from o3d_seqcc.correction import correct
     from o3d_seqcc.io.files import write_image, write_json
 
+    baseline = Baseline(args.baseline_commit)  # first: a wrong SHA stops before any work
+    atexit.register(baseline.close)  # the worktree goes however the run ends
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene(DATA, mesh=DATA / MESHES["dec"][0])
@@ -482,13 +485,9 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict] = []
     pictures: dict = {}
     ctx = {}
-    baseline = Baseline(args.baseline_commit)
     notes.append(f"today (shelf): the bake of {baseline.commit[:10]}, from a git worktree of that commit")
-    try:
-        for key in [k.strip() for k in args.meshes.split(",") if k.strip()]:
-            ctx[key] = run_mesh(key, args, scene, corrected, out, rows, notes, pictures, baseline)
-    finally:
-        baseline.close()
+    for key in [k.strip() for k in args.meshes.split(",") if k.strip()]:
+        ctx[key] = run_mesh(key, args, scene, corrected, out, rows, notes, pictures, baseline)
     ev = evidence(ctx["dec"], corrected, args, out) if args.evidence and "dec" in ctx else []
     print()
     for key in ctx:
