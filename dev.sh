@@ -4,6 +4,7 @@
 #   ./dev.sh demo    install what the demo needs (once) and run the pipeline on the built-in synthetic scene
 #   ./dev.sh test    install everything (once) and run the test suite
 #   ./dev.sh setup   only install everything (with the MeshLab filter plugin, which test needs and demo does not)
+#   ./dev.sh lint    install the Python packages (once) and run ruff (pyproject's [tool.ruff]) over the repository
 #
 # demo installs the system libraries Open3D needs (apt, when root or with sudo) and a virtual
 # environment in .venv with the package and its core dependencies (`pip install -e .`), no more.
@@ -22,8 +23,8 @@ APT_CORE=(libusb-1.0-0 libgomp1 libgl1 libegl1)
 # the rest of the test suite's tools
 APT_FULL=("${APT_CORE[@]}" xvfb xauth libgl1-mesa-dri libglx-mesa0 libqt5gui5 nodejs npm
           libvulkan1 mesa-vulkan-drivers  # Open3D's offscreen renderer (lavapipe)
-          meshlab xdotool imagemagick     # MeshLab opening our output (tests/test_meshlab_app.py)
-          chromium)                       # the HTML report in a browser (tests/test_report*.py)
+          meshlab xdotool imagemagick     # MeshLab opening our output (tests/meshlab/test_meshlab_app.py)
+          chromium)                       # the HTML report in a browser (tests/report/test_report*.py)
 
 START=$SECONDS
 log() { printf '\033[1m[dev.sh %d:%02d]\033[0m %s\n' $(((SECONDS - START) / 60)) $(((SECONDS - START) % 60)) "$*" >&2; }
@@ -226,5 +227,6 @@ case $cmd in
   setup) setup; setup_meshlab_plugin ;;
   demo) setup_demo; log "running o3d-seqcc demo"; "$VENV/bin/o3d-seqcc" demo --out "${OUT:-out/demo}" --overwrite "$@" ;;
   test) setup; setup_meshlab_plugin; log "running the tests"; with_display "$VENV/bin/python" -m pytest "$@" ;;
-  *) sed -n '2,17p' "$0"; exit 2 ;;
+  lint) setup_python full; log "running ruff"; "$VENV/bin/python" -m ruff check "${@:-.}" ;;
+  *) sed -n '2,16p' "$0"; exit 2 ;;
 esac

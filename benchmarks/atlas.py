@@ -6,8 +6,12 @@ once on the decimated mesh; the photos are the same for both meshes):
 - ``ours (xatlas)``: ``bake_texture`` with the library's defaults (xatlas packing, sampling bake,
   welded unseen faces, 2-pass local leveling) at ``--atlas-size`` (decimated: 2048; 300k: 4096, a
   budget), exported as GLB (Y-up, PNG; also JPEG and WebP for the size);
-- ``today (shelf)``: main 89e7de7's bake (``benchmarks/_shelf_bake.py``: shelf-packed rectangles
-  copied pixel for pixel, the atlas grown 2x while the charts do not fit), same selection;
+- ``today (shelf)``: the bake of ``--baseline-commit`` (default main 89e7de7, before issue 13:
+  shelf-packed rectangles copied pixel for pixel, the atlas grown 2x while the charts do not fit),
+  same mesh, selection, corner projections and photos. That commit is checked out with ``git worktree
+  add`` under a temporary folder (removed at the end) and its own ``bake_texture`` runs in a child
+  Python with only that worktree on ``PYTHONPATH``: the retired code is measured as it was, not kept
+  alive in the repository;
 - ``meshlab``: MeshLab's ``compute_texcoord_parametrization_and_texture_from_registered_rasters``
   (``benchmarks/peers.py``, headless under xvfb-run), texture size = the atlas size;
 - ``open3d``: ``compute_uvatlas`` + ``project_images_to_albedo``.
@@ -31,7 +35,7 @@ for the 70 % coverage target.
 Usage::
 
     python benchmarks/atlas.py [--out /tmp/o3d_seqcc_atlas] [--meshes dec,300k] [--repeats 3]
-        [--no-meshlab] [--no-open3d] [--peers-300k] [--evidence] [--evidence-brute]
+        [--no-meshlab] [--no-open3d] [--peers-300k] [--evidence] [--evidence-brute] [--baseline-commit 89e7de7]
 
 Timings are noisy on a shared 2-core machine: compare rows of one run.
 """
@@ -39,11 +43,14 @@ Timings are noisy on a shared 2-core machine: compare rows of one run.
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import logging
-import math
+import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -54,6 +61,83 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "datasets" / "fountain_small"
 MESHES = {"dec": ("scene/mesh_decimated_uv_blender.ply", 2048), "300k": ("scene/tsdf_mesh.ply", 4096)}
 VIEW = 16
+#: main before issue 13: the shelf-packed bake that ``today (shelf)`` measures
+BASELINE_COMMIT = "89e7de7"
+
+# the child that runs the baseline commit's bake_texture on arrays (argv: input .npz, output .npz, worktree)
+_BASELINE_CHILD = r"""
+import json, sys, time
+from pathlib import Path
+from types import SimpleNamespace
+import numpy as np
+import o3d_seqcc
+from o3d_seqcc.texturing import bake_texture
+
+src, dst, tree = sys.argv[1:4]
+if not Path(o3d_seqcc.__file__).resolve().is_relative_to(Path(tree).resolve()):
+    sys.exit(f"imported {o3d_seqcc.__file__}, not the baseline worktree {tree}")
+d = np.load(src)
+labels, fuv = d["labels"], d["fuv"]
+
+
+class Vis:  # what that commit's bake reads of a visibility: sizes and the selected views' corner projections
+    n_views, n_faces = int(d["n_views"]), len(labels)
+
+    def face_uv(self, selection):
+        assert np.array_equal(selection, labels)
+        return fuv
+
+
+mesh = SimpleNamespace(vertices=d["vertices"], faces=d["faces"],
+                       vertex_normals=d["normals"] if "normals" in d.files else None)
+images = [d[f"image_{i}"] for i in range(int(d["n_views"]))]
+t = time.perf_counter()
+tm = bake_texture(mesh, images, Vis(), labels, atlas_size=int(d["atlas_size"]), adjacency=d["adjacency"])
+seconds = time.perf_counter() - t
+np.savez(dst, seconds=seconds, stats=json.dumps(tm.stats, default=str), **{
+    k: getattr(tm, k) for k in ("vertices", "faces", "uv", "texture", "normals", "face_view", "vertex_index", "face_chart")})
+"""
+
+
+class Baseline:
+    """``commit`` checked out by ``git worktree add`` in a temporary folder; :meth:`bake` runs its bake_texture."""
+
+    def __init__(self, commit: str) -> None:
+        sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", f"{commit}^{{commit}}"],
+                             capture_output=True, text=True)
+        if sha.returncode:
+            raise SystemExit(f"--baseline-commit {commit}: not a commit of {REPO}: {sha.stderr.strip()}")
+        self.commit = sha.stdout.strip()
+        self.tmp = Path(tempfile.mkdtemp(prefix="o3d_seqcc_baseline_"))
+        self.tree = self.tmp / self.commit[:10]
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "--quiet", str(self.tree), self.commit],
+                       check=True)
+        self.env = {**os.environ, "PYTHONPATH": str(self.tree)}
+        print(f"baseline: {self.commit[:10]} checked out in {self.tree}", flush=True)
+
+    def bake(self, mesh, images, vis, labels, *, adjacency, atlas_size: int):
+        """That commit's ``bake_texture`` on the same arrays: (TexturedMesh, seconds of the bake alone)."""
+        from o3d_seqcc.texturing import TexturedMesh
+
+        src, dst = self.tmp / "in.npz", self.tmp / "out.npz"
+        normals = getattr(mesh, "vertex_normals", None)
+        np.savez(src, vertices=mesh.vertices, faces=mesh.faces, labels=labels, fuv=vis.face_uv(labels),
+                 adjacency=adjacency, n_views=len(images), atlas_size=atlas_size,
+                 **({} if normals is None else {"normals": normals}), **{f"image_{i}": im for i, im in enumerate(images)})
+        r = subprocess.run([sys.executable, "-c", _BASELINE_CHILD, str(src), str(dst), str(self.tree)], env=self.env,
+                           cwd=self.tree, capture_output=True, text=True)  # cwd: `-c` puts it first on sys.path
+        if r.returncode:
+            raise SystemExit(f"the baseline bake ({self.commit[:10]}) failed:\n{r.stderr[-3000:]}")
+        with np.load(dst) as d:
+            arrays = {k: d[k] for k in d.files if k not in ("seconds", "stats")}
+            seconds, stats = float(d["seconds"]), json.loads(str(d["stats"]))
+        return TexturedMesh(**arrays, stats=stats), seconds
+
+    def close(self) -> None:
+        subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(self.tree)], check=False)
+        import shutil
+
+        shutil.rmtree(self.tmp, ignore_errors=True)
 
 logger = logging.getLogger("benchmarks.atlas")
 
@@ -142,10 +226,8 @@ HEADER = (f"{'method':<15} {'cover':>7} {'used':>7} {'atlas':>11} {'pages':>5} {
           f"{'seams':>7} {'>5':>7} {'(n)':>4} {'view seams/>5':>15} {'sharp':>6} {'bake s':>6}")
 
 
-def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes: list, pictures: dict) -> dict:
-    import cv2
-
-    from _shelf_bake import bake_shelf
+def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes: list, pictures: dict,
+             baseline: Baseline) -> dict:
     from o3d_seqcc import load_scene
     from o3d_seqcc.io.export import export_glb
     from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
@@ -173,14 +255,15 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
     settings = TextureSettings(atlas_size=size)
     for r in range(args.repeats):  # alternate: the same load for both
         for name in ("shelf", "ours") if r % 2 else ("ours", "shelf"):
-            t = time.perf_counter()
             if name == "ours":
+                t = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     tm = bake_texture(mesh, corrected, vis, labels, settings=settings, adjacency=adj)
-            else:
-                shelf = bake_shelf(mesh, corrected, vis, labels, adjacency=adj, atlas_size=size)
-            times[name].append(time.perf_counter() - t)
+                times[name].append(time.perf_counter() - t)
+            else:  # timed in the child around its bake_texture call alone (not its start-up or the arrays' I/O)
+                shelf, seconds = baseline.bake(mesh, corrected, vis, labels, adjacency=adj, atlas_size=size)
+                times[name].append(seconds)
     med = {k: statistics.median(v) for k, v in times.items()}
     print(f"bake time, median of {args.repeats} alternating runs: ours {med['ours']:.2f} s, today (shelf) "
           f"{med['shelf']:.2f} s, ratio {med['ours'] / med['shelf']:.2f} (runs: ours "
@@ -377,6 +460,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--yup-mesh", default="dec", help="mesh of the Y-up picture")
     ap.add_argument("--evidence", action="store_true", help="coverage against padding / merging / placement")
     ap.add_argument("--evidence-brute", action="store_true", help="with --evidence: xatlas brute-force placement (slow)")
+    ap.add_argument("--baseline-commit", default=BASELINE_COMMIT, metavar="SHA",
+                    help=f"the commit whose bake is the 'today (shelf)' row (default {BASELINE_COMMIT}, main before "
+                         "issue 13), run from a temporary git worktree")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -387,6 +473,8 @@ def main(argv: list[str] | None = None) -> int:
     from o3d_seqcc.correction import correct
     from o3d_seqcc.io.files import write_image, write_json
 
+    baseline = Baseline(args.baseline_commit)  # first: a wrong SHA stops before any work
+    atexit.register(baseline.close)  # the worktree goes however the run ends
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene(DATA, mesh=DATA / MESHES["dec"][0])
@@ -397,8 +485,9 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict] = []
     pictures: dict = {}
     ctx = {}
+    notes.append(f"today (shelf): the bake of {baseline.commit[:10]}, from a git worktree of that commit")
     for key in [k.strip() for k in args.meshes.split(",") if k.strip()]:
-        ctx[key] = run_mesh(key, args, scene, corrected, out, rows, notes, pictures)
+        ctx[key] = run_mesh(key, args, scene, corrected, out, rows, notes, pictures, baseline)
     ev = evidence(ctx["dec"], corrected, args, out) if args.evidence and "dec" in ctx else []
     print()
     for key in ctx:
@@ -413,7 +502,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  ours / today: bake time {o['bake_s'] / s['bake_s']:.2f}x, coverage {o['coverage'] / s['coverage']:.2f}x, "
               f"GLB {o['glb_bytes'] / s['glb_bytes']:.2f}x, vertices {o['vertices'] / s['vertices']:.2f}x; today's atlas "
               f"{'grew beyond the budget' if s.get('grew') else 'stayed within'} {args.atlas_size or MESHES[key][1]}")
-        print(f"  ours mip bleed p99 L1/L2/L3: " + " / ".join(f"{v['p99']:.3f}" for v in o["mip_bleed"].values())
+        print("  ours mip bleed p99 L1/L2/L3: " + " / ".join(f"{v['p99']:.3f}" for v in o["mip_bleed"].values())
               + "; today's: " + " / ".join(f"{v['p99']:.3f}" for v in s["mip_bleed"].values()))
         print()
     print("(cover: triangle texels / atlas texels; used: texels within 1 texel of a triangle; v out/in: output / input "

@@ -38,7 +38,6 @@ counted in each) + selection + bake + GLB export.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time

@@ -35,3 +35,44 @@ def fountain_scene(fountain_root):
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+# ---- the fast tier -------------------------------------------------------------------------------------------------
+#: The heavy tests, marked ``slow`` here (``file`` for a whole module, ``file::function`` for every parametrization): ``-m "not slow"`` (the fast
+#: tier, ``./dev.sh test -m "not slow"``) leaves them out; the full run (``./dev.sh test``, CI) runs them. Chosen
+#: from ``pytest --durations=0`` of the full run: each takes about 4 s or more on this 2-core machine. A test module
+#: may also mark itself (``pytestmark = pytest.mark.slow``); an entry naming no test of its file stops the run.
+SLOW = """
+integration/test_cli_demo.py
+integration/test_dask.py
+integration/test_examples.py
+integration/test_lean.py
+integration/test_pipeline.py
+integration/test_readme.py
+meshlab/test_meshlab_app.py
+meshlab/test_meshlab_plugin.py
+meshlab/test_meshlab_pymeshlab.py
+report/test_report_viewer.py
+report/test_viewer_bundle.py
+mappings/test_mappings.py::test_fountain_counts_and_depth_agreement
+test_open3d_api.py::test_fountain_through_open3d_readers_equals_the_command_line
+test_scene.py::test_fountain_mesh_projects_onto_depth_map
+texturing/test_atlas.py::test_fountain_glb_opens_right_way_up
+texturing/test_texturing.py::test_fountain_selection_and_bake
+visibility/test_camera_checks.py::test_fountain_passes
+""".split()
+TESTS = Path(__file__).resolve().parent
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    slow, modules = set(SLOW), {}
+    for item in items:
+        rel = item.path.relative_to(TESTS).as_posix() if item.path.is_relative_to(TESTS) else str(item.path)
+        modules.setdefault(rel, getattr(item, "module", None))
+        if rel in slow or f"{rel}::{getattr(item, 'originalname', item.name)}" in slow:
+            item.add_marker(pytest.mark.slow)
+    stale = sorted(k for k in slow if not (TESTS / k.split("::")[0]).is_file() or (
+        "::" in k and k.split("::")[0] in modules and not callable(getattr(modules[k.split("::")[0]], k.split("::")[1], None))))
+    if stale:
+        raise pytest.UsageError(f"tests/conftest.py SLOW names tests that do not exist: {stale}")

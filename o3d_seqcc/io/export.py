@@ -29,7 +29,7 @@ indices), one material per page (``baseColorTexture`` = the embedded image, ``me
 ``roughnessFactor`` 1, optionally ``KHR_materials_unlit``), a sampler with linear mip-mapped
 filtering and clamp-to-edge wrapping; every bufferView starts on a 4-byte boundary and both
 chunks are padded as the specification requires (JSON with spaces, BIN with zeros). It passes
-the Khronos glTF-Validator without errors or warnings (see ``tests/test_export.py``).
+the Khronos glTF-Validator without errors or warnings (see ``tests/io/test_export.py``).
 """
 
 from __future__ import annotations

@@ -234,7 +234,6 @@ def test_bake_reproduces_source_colours(rng, method):
     assert tm.uv.min() >= 0 and tm.uv.max() <= 1
     np.testing.assert_array_equal(tm.face_view, lab)
     # every face's centroid: atlas colour == colour of its selected image at the centroid's projection
-    S = tm.atlas_size
     c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     cen = mesh.vertices[mesh.faces].mean(axis=1)
@@ -298,7 +297,6 @@ def test_unseen_faces_get_fallback_colour(rng):
     lab = select_views(vis, method="largest-area")
     tm = bake_texture(mesh, images, vis, lab, atlas_size=256, **RAW)
     assert tm.stats["unseen_faces"] == 2 and (tm.face_view[[0, -1]] == -1).all()
-    S = tm.atlas_size
     for f, want in ((0, (200, 40, 10)), (len(mesh.faces) - 1, FALLBACK_GREY)):
         x, y = tm.texel_xy()[tm.faces[f]].mean(axis=0).round().astype(int)
         np.testing.assert_array_equal(tm.texture[y, x], want)
@@ -373,7 +371,6 @@ def test_fountain_selection_and_bake(fountain_scene):
     images = [v.load_image() for v in fountain_scene.views]
     tm = bake_texture(mesh, images, vis, mrf, adjacency=adj, **RAW)
     assert tm.atlas_size == 2048 and tm.pages == 1 and tm.stats["texels_per_pixel"] >= 1.0
-    S = tm.atlas_size
     c_uv = tm.texel_xy()[tm.faces[seen]].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     cen = mesh.vertices[mesh.faces[seen]].mean(axis=1)
@@ -445,7 +442,6 @@ def test_leveling_removes_known_seam_offset_and_keeps_detail(rng, split):
     l0, l1 = _laplacian_var_in_faces(plain), _laplacian_var_in_faces(lev)
     assert abs(l1 / l0 - 1.0) < 0.05, (l0, l1)
     # the offset is split between the two charts and is nearly constant (+-10 levels)
-    S = lev.atlas_size
     diff = lev.texture.astype(np.float64) - plain.texture.astype(np.float64)
     c_uv = lev.texel_xy()[lev.faces].mean(axis=1)
     d = bilinear(diff, c_uv[:, 0], c_uv[:, 1]).mean(axis=1)
@@ -565,7 +561,6 @@ def test_local_leveling_removes_known_seam_and_keeps_detail(rng, split):
     far = (band + 3) * 2.4 / 100.0
     l0, l1 = _laplacian_var_away_from_seam(plain, far), _laplacian_var_away_from_seam(loc, far)
     assert abs(l1 / l0 - 1.0) < 0.05, (l0, l1)
-    S = loc.atlas_size
     c_uv = loc.texel_xy()[loc.faces].mean(axis=1)
     diff = loc.texture.astype(np.float64) - plain.texture.astype(np.float64)
     d = bilinear(diff, c_uv[:, 0], c_uv[:, 1]).mean(axis=1)

@@ -8,7 +8,6 @@ import cv2
 import numpy as np
 import pytest
 
-import o3d_seqcc.correction.methods.global_methods as baselines
 from o3d_seqcc.correction.methods.global_methods import (
     affine_lut,
     gain_compensation_gains,

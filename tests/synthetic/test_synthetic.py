@@ -182,7 +182,7 @@ def test_ring_slots_put_view_0_in_the_middle():
 
 def test_gt_colour_is_view_independent(syn):
     """The same surface point has the same ground-truth colour in two views."""
-    v0, v1 = syn.scene.views[0], syn.scene.views[1]
+    v0 = syn.scene.views[0]
     pts1 = syn.load_points(1).reshape(-1, 3).astype(np.float64)
     face1 = syn.load_face_ids(1).ravel()
     gt0, gt1 = syn.load_gt(0).astype(float), syn.load_gt(1).reshape(-1, 3).astype(float)

@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -21,7 +19,7 @@ import o3d_seqcc as sc
 from o3d_seqcc import InputError, load_scene
 from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.geometry.distortion import Distortion
-from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_dtype, img_as_float, sample_colors
+from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_float, sample_colors
 from o3d_seqcc.io.files import read_image, write_image
 from o3d_seqcc.io.meshlab import save_mlp
 from o3d_seqcc.evaluation.metrics import image_delta_e

@@ -15,9 +15,8 @@ import json
 import numpy as np
 import pytest
 
-from o3d_seqcc.errors import InputError, O3dSeqccWarning
+from o3d_seqcc.errors import InputError
 from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
-from o3d_seqcc.scene import Mesh
 from o3d_seqcc.texturing import bake_texture, select_views
 from o3d_seqcc.texturing.bake import rasterize_faces
 from o3d_seqcc.texturing.packing import pack_charts

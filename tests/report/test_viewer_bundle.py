@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-VIEWER = Path(__file__).resolve().parents[1] / "viewer"
+VIEWER = Path(__file__).resolve().parents[2] / "viewer"
 
 
 @pytest.mark.skipif(shutil.which("npm") is None, reason="npm is not installed (./dev.sh setup installs it)")

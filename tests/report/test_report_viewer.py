@@ -6,7 +6,7 @@ our own ray caster renders from the same camera; the texture buttons, orbit and 
 the picture; nothing may be fetched but the page itself and its inline data. With
 ``O3D_SEQCC_SCREENSHOT_DIR`` set, the viewer's and the close-ups' sections are also written there as
 screenshots (docs/report_viewer.png and docs/report_correction.png come from
-``O3D_SEQCC_SCREENSHOT_DIR=docs python -m pytest tests/test_report_viewer.py``).
+``O3D_SEQCC_SCREENSHOT_DIR=docs python -m pytest tests/report/test_report_viewer.py``).
 """
 
 from __future__ import annotations

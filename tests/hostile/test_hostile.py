@@ -31,11 +31,11 @@ import pytest
 import o3d_seqcc as sc
 from o3d_seqcc import InputError
 from o3d_seqcc.cli import main
-from o3d_seqcc.io.output import MANIFEST, output_folder
+from o3d_seqcc.io.output import output_folder
 
 pytestmark = pytest.mark.hostile
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
 RUN = ["--t-npm", "10", "--atlas-size", "512", "--no-seams", "--selection-view", "none"]
 

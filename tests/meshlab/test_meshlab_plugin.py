@@ -184,7 +184,7 @@ def test_the_same_plugin_built_for_pymeshlab_runs_in_pymeshlab(room, tmp_path):
     import pymeshlab
 
     lib = Path(pymeshlab.__file__).parent / "lib"
-    plugin_src = Path(__file__).resolve().parents[1] / "meshlab_filters" / "plugin"
+    plugin_src = Path(__file__).resolve().parents[2] / "meshlab_filters" / "plugin"
     exe = shutil.which("o3d-seqcc") or str(Path(sys.executable).parent / "o3d-seqcc")
     cfg = subprocess.run(["cmake", "-S", str(plugin_src), "-B", str(tmp_path / "b"), f"-DMESHLAB_SRC={MESHLAB_2025}/src",
                           "-DMESHLAB_SCALAR=double", f"-DMESHLAB_LIB_DIR={lib}", f"-DO3D_SEQCC_PYTHON={sys.executable}",
