@@ -73,7 +73,11 @@ def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     grey = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    return cv2.magnitude(gx, gy) / np.float32(8.0)
+    # numpy, not cv2.magnitude: OpenCV's SIMD rows fuse the multiply-add and its scalar row tails do not, and its
+    # threads split the rows differently from call to call: the last bit of a few texels changed between runs
+    mag = np.multiply(gx, gx)
+    mag += gy * gy
+    return np.sqrt(mag, out=mag) / np.float32(8.0)
 
 
 def _triangle_means(tri: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
