@@ -78,7 +78,7 @@ _LAZY: dict[str, str] = {
 _SUBMODULES: dict[str, str] = {
     **{m: m for m in ("correction", "datasets", "demo", "evaluation", "geometry", "imaging", "io", "mappings",
                       "open3d_api", "pipeline", "report", "scene", "synthetic", "texturing", "visibility")},
-    "parallel": "_shared.parallel",  # o3d_seqcc.parallel.use(client): the executor of a block of calls
+    "parallel": "_shared.parallel",  # o3d_seqcc._shared.parallel.use(client): the executor of a block of calls
 }
 
 __all__ = ["InputError", "__version__", *_LAZY]

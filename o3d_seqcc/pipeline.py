@@ -45,7 +45,7 @@ from .mappings.compute import DEFAULT_MODE, MODES, Mappings, compute_mappings
 from .geometry.meshops import face_adjacency
 from .evaluation.metrics import before_after
 from .geometry.orientation import up_axis_transform
-from ._shared.parallel import use as use_executor
+from ._shared.parallel import LocalExecutor, current as current_executor, use as use_executor
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder import write_run_folder
@@ -144,6 +144,8 @@ class RunResult:
     source: str = ""
     images_from: str = "scene"
     originals: list | None = None
+    #: Table 2 started on a background thread by :func:`run` (:class:`_BackgroundTable2`), used by :meth:`save`
+    _table2: Any = field(default=None, repr=False, compare=False)
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
                export: dict[str, Any] | None = None, metrics: dict | None = None,
@@ -264,12 +266,60 @@ class RunResult:
         warm_up()
         if not table2:
             return None, None
-        (photos, corrected), mpp = images, metrics_sample(self.mappings)
-        metrics = before_after(photos, corrected, self.mappings, self.correction.paths, max_per_pair=mpp)
+        bg = self._table2
+        if bg is not None and bg.matches(self):
+            metrics = bg.result()
+        else:
+            metrics = _table2(images, self.mappings, self.correction.paths)
+        photos, corrected = images
         mesh = self.visibility.mesh
         steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
                  for k, imgs in (("photos", photos), ("corrected", corrected))}
         return metrics, steps
+
+
+def _table2(images: tuple, maps: Mappings, paths: dict) -> dict:
+    """Table 2 of a run's report (:func:`~o3d_seqcc.evaluation.metrics.before_after`) on ``(photos, corrected)``."""
+    photos, corrected = images
+    return before_after(photos, corrected, maps, paths, max_per_pair=metrics_sample(maps))
+
+
+class _BackgroundTable2:
+    """Table 2 of :func:`run`'s report, computed on one background thread while the texturing works.
+
+    It depends on the correction alone (the photos, the corrected images, the mappings and the
+    paths), and the selection and the bake leave a core idle much of the time: started right
+    after the correction, it is ready when :meth:`RunResult.save` writes the report instead of
+    being computed there, ahead of the page. The same function on the same inputs: the same
+    numbers as computing it in ``save``. matplotlib (the report's figures) is imported there too.
+    """
+
+    def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        from ._shared.parallel import carried
+
+        self._key = (originals, res, maps)
+        # the photos through the run's cache, the corrections applied on access: caching them here, next to the
+        # texturing's arrays, would raise the run's peak memory (save() caches them for the page, as before)
+        images = (originals, res.images)
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-table2")
+
+        def work() -> dict:
+            warm_up()
+            return _table2(images, maps, res.paths)
+
+        # the thread ends after its one task; the interpreter's exit waits for it (no native code cut off)
+        self._future = pool.submit(carried(work, "background: table 2"))
+        pool.shutdown(wait=False)
+
+    def matches(self, result: "RunResult") -> bool:
+        """Whether ``result`` holds the correction this was started for (not another one put in by ``replace``)."""
+        originals, res, maps = self._key
+        return result.originals is originals and result.correction is res and result.mappings is maps
+
+    def result(self) -> dict:
+        return self._future.result()
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
@@ -421,6 +471,9 @@ def run(
         with _stage("correction", timings):
             res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
                           seed=s.seed)
+        # the report's Table 2 needs the correction alone: on a spare thread while the texturing runs (local only:
+        # a Dask client may be closed before save())
+        bg = _BackgroundTable2(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
         labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
         sm0 = None
         if compare_original:
@@ -430,7 +483,7 @@ def run(
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
-                     command="run", source=source, images_from="corrected", originals=originals)
+                     command="run", source=source, images_from="corrected", originals=originals, _table2=bg)
 
 
 @dataclass(frozen=True, eq=False)

@@ -27,7 +27,7 @@ def lazy_exports(
         defines it.
     submodules : iterable of str, or mapping of str to str, keyword-only
         Modules reachable as attributes without an explicit import (``o3d_seqcc.pipeline``); a mapping
-        names where each lives (``{"parallel": "_shared.parallel"}``: ``o3d_seqcc.parallel.use``).
+        names where each lives (``{"parallel": "_shared.parallel"}``: ``o3d_seqcc._shared.parallel.use``).
 
     Returns
     -------

@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     from .._shared.interrupts import Terminated, interruptible
 
     try:
-        with interruptible():  # SIGTERM / SIGHUP clean up like Ctrl-C
+        with interruptible(), _open3d_without_dash():  # SIGTERM / SIGHUP clean up like Ctrl-C
             return _main(argv)
     except Terminated as e:
         print(f"o3d-seqcc: terminated ({e.name})", file=sys.stderr)
@@ -239,6 +239,55 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("o3d-seqcc: interrupted", file=sys.stderr)
         return 130
+
+
+class _DashForward:
+    """Stands for ``dash``'s ``html`` / ``dcc`` / ``Dash`` in Open3D's ``draw_plotly`` module: the real one is
+    imported when first used (``open3d.visualization.draw_plotly_server`` still works)."""
+
+    def __init__(self, module: str, attr: str | None = None) -> None:
+        self._where = (module, attr)
+
+    def _target(self):
+        import importlib
+
+        if getattr(sys.modules.get("dash"), "_o3d_seqcc_stub", False):
+            del sys.modules["dash"]
+        module, attr = self._where
+        m = importlib.import_module(module)
+        return m if attr is None else getattr(m, attr)
+
+    def __getattr__(self, name: str):
+        return getattr(self._target(), name)
+
+    def __call__(self, *args, **kwargs):
+        return self._target()(*args, **kwargs)
+
+
+@contextmanager
+def _open3d_without_dash() -> Iterator[None]:
+    """While a command runs, ``import open3d`` does not import ``dash``.
+
+    Open3D's ``visualization`` imports Plotly's ``dash`` web framework at start-up (for
+    ``draw_plotly_server``, which no command calls): about 0.6 s of a quiet machine's 2 s import of
+    open3d, 2-6 s on a loaded one (issue 21). A stand-in module holds the three names Open3D takes
+    from it, each importing the real one when used, and leaves ``sys.modules`` when the command
+    ends. Nothing changes when open3d or dash is already imported.
+    """
+    import types
+
+    if "open3d" in sys.modules or "dash" in sys.modules:
+        yield
+        return
+    stub = types.ModuleType("dash", "stand-in for dash while open3d is imported by o3d-seqcc (see cli._open3d_without_dash)")
+    stub._o3d_seqcc_stub = True
+    stub.html, stub.dcc, stub.Dash = _DashForward("dash.html"), _DashForward("dash.dcc"), _DashForward("dash", "Dash")
+    sys.modules["dash"] = stub
+    try:
+        yield
+    finally:
+        if sys.modules.get("dash") is stub:
+            del sys.modules["dash"]
 
 
 def _environment_problem() -> str | None:

@@ -150,6 +150,18 @@ def _outlier_k(c) -> float | None:
     return None if p is None else c.settings.get("options", {}).get("outlier_k", p.default)
 
 
+def _thinned_pair(mappings, t: int, s: int, k: int):
+    """``mappings.pair(t, s)`` at :func:`~o3d_seqcc.evaluation.metrics.thin_indices` ``(n, k)`` of its mappings: only those built
+    (:func:`~o3d_seqcc.mappings.pairs.thinned`: the same values as building the whole pair and taking them)."""
+    from ..mappings.pairs import thinned
+
+    lo, hi = (t, s) if t < s else (s, t)
+    if (lo, hi) not in mappings.pairs:
+        return mappings.pair(t, s)  # no mappings: the empty pair
+    _, pm = thinned(mappings.pairs, (lo, hi), lambda n: thin_indices(n, k))
+    return pm if t < s else pm.swapped()
+
+
 def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
     """(t, s) -> (inlier JIH, outlier JIH or None), from the photos' colours at the pair's mappings."""
     from ..correction.methods.seqcc import colour_inliers, quantile_luts
@@ -158,9 +170,8 @@ def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
     k = _outlier_k(inp.correction)
     out = {}
     for t, s in edges:
-        pm = inp.mappings.pair(t, s)
-        idx = thin_indices(pm.n, JIH_MAX_MAPPINGS)
-        idx = slice(None) if idx is None else idx
+        pm = _thinned_pair(inp.mappings, t, s, JIH_MAX_MAPPINGS)
+        idx = slice(None)
         ct = sample_colors(inp.photos[t], pm.uv_a[idx]) / dtype_scale(inp.photos[t].dtype)
         cs = sample_colors(inp.photos[s], pm.uv_b[idx]) / dtype_scale(inp.photos[s].dtype)
         if k is not None and len(ct):

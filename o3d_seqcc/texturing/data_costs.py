@@ -73,7 +73,11 @@ def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     grey = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    return cv2.magnitude(gx, gy) / np.float32(8.0)
+    # numpy, not cv2.magnitude: OpenCV's SIMD rows fuse the multiply-add and its scalar row tails do not, and its
+    # threads split the rows differently from call to call: the last bit of a few texels changed between runs
+    mag = np.multiply(gx, gx)
+    mag += gy * gy
+    return np.sqrt(mag, out=mag) / np.float32(8.0)
 
 
 def _triangle_means(tri: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,24 +129,31 @@ def face_view_statistics(visibility: Any, images: Sequence[np.ndarray], indptr: 
     colour : (nnz, 3) float32 or None
         Mean RGB in [0, 1].
     """
+    from .._shared.parallel import LocalExecutor
+
     nnz = len(faces)
     out_g = np.zeros(nnz) if gmi else None
     out_c = np.zeros((nnz, 3), dtype=np.float32) if colour else None
     mesh_faces = np.asarray(visibility.mesh.faces)
-    for v in range(len(indptr) - 1):
+
+    def one(v: int) -> None:
+        # each view writes its own slice of the outputs: the same numbers for any number of threads
         a, b = int(indptr[v]), int(indptr[v + 1])
-        if a == b:
-            continue
         img = img_as_uint8(images[v], where=f"image of view {v}").astype(np.float32) / np.float32(255.0)
         fs = np.asarray(faces[a:b], dtype=np.int64)
         tri = visibility.vertex_uv(v, mesh_faces[fs].reshape(-1)).reshape(-1, 3, 2).astype(np.float64)
         parts = ([gradient_magnitude(img)[..., None]] if gmi else []) + ([img[..., :3]] if colour else [])
+        del img
         mean, _ = _triangle_means(tri, np.concatenate(parts, axis=2) if len(parts) > 1 else parts[0])
         if gmi:
             out_g[a:b] = mean[:, 0] * np.asarray(area[a:b], dtype=np.float64)
         if colour:
             out_c[a:b] = mean[:, 1 if gmi else 0:]
-        del img
+
+    # one task per view with incidences, on local threads (OpenCV's filters and numpy's cumulative sums and
+    # bincounts release the GIL): the images are read by the tasks, at most one per thread at a time
+    views = [v for v in range(len(indptr) - 1) if indptr[v + 1] > indptr[v]]
+    LocalExecutor().map(one, views, desc="data costs", unit="view")
     return out_g, out_c
 
 

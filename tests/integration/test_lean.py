@@ -212,3 +212,89 @@ def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
         banded = bake.push_pull_fill(img, mask)
         assert np.array_equal(whole[mask], img[mask]) and not np.array_equal(whole, img)
         assert np.array_equal(banded, whole), (H, W, band)
+
+
+def test_background_table2_is_the_table2_save_computes(tmp_path):
+    """run() starts the report's Table 2 on a thread right after the correction; save() takes it only for the
+    correction it was started for, and it is the numbers the report would compute itself."""
+    import dataclasses
+
+    from o3d_seqcc.pipeline import _table2
+    from o3d_seqcc.report import cached_images
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=5, width=160, height=120, cell_size=0.15)
+    res = sc.pipeline.run(tmp_path / "room", t_npm=50)
+    bg = res._table2
+    assert bg is not None and bg.matches(res)
+    direct = _table2(cached_images(res.originals, res.images), res.mappings, res.correction.paths)
+    assert bg.result() == direct and direct["before"] != direct["after"]
+    assert not bg.matches(dataclasses.replace(res, mappings=sc.compute_mappings(res.scene, visibility=res.visibility)))
+    assert bg.matches(dataclasses.replace(res, source="elsewhere"))  # what the command line's replace() keeps
+    res.save(tmp_path / "out")
+    import json
+
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["metrics"] == json.loads(json.dumps(direct))
+
+
+def test_data_costs_same_for_any_threads(tmp_path):
+    """face_view_statistics runs one task per view on threads: the same GMI and colours for 1 and 2 threads."""
+    from joblib import parallel_config
+
+    from o3d_seqcc.imaging.sequences import scene_photos
+    from o3d_seqcc.texturing.data_costs import face_view_statistics
+    from o3d_seqcc.visibility import compute_visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=5, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    vis = compute_visibility(scene)
+    indptr, faces, area = vis.usable_entries()[:3]
+    out = []
+    for jobs in (1, 2):
+        with parallel_config(n_jobs=jobs):
+            out.append(face_view_statistics(vis, scene_photos(scene.views), indptr, faces, area, colour=True))
+    (g1, c1), (g2, c2) = out
+    assert len(g1) == len(faces) > 100 and (g1 > 0).mean() > 0.5
+    assert np.array_equal(g1, g2) and np.array_equal(c1, c2)
+
+
+def test_report_jih_mappings_are_the_full_pairs_thinned(tmp_path):
+    """The report's JIHs build only the mappings they draw: the full pair's at thin_indices, either orientation."""
+    from o3d_seqcc.mappings.compute import compute_mappings
+    from o3d_seqcc.evaluation.metrics import thin_indices
+    from o3d_seqcc.report.page import _thinned_pair
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    m = compute_mappings(sc.load_scene(tmp_path / "room"))
+    checked = 0
+    for a, b in m.pairs:
+        for t, s in ((a, b), (b, a)):
+            full = m.pair(t, s)
+            for k in (50, 10**9):
+                idx = thin_indices(full.n, k)
+                want = full if idx is None else full.take(idx)
+                got = _thinned_pair(m, t, s, k)
+                assert (got.a, got.b) == (t, s) and np.array_equal(got.uv_a, want.uv_a)
+                assert np.array_equal(got.uv_b, want.uv_b) and np.array_equal(got.face_ids, want.face_ids)
+                checked += idx is not None
+    assert checked > 0
+
+
+def test_command_line_imports_open3d_without_dash():
+    """A command's `import open3d` skips dash (Open3D's draw_plotly_server only), which still works after."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from o3d_seqcc.cli import _open3d_without_dash\n"
+        "with _open3d_without_dash():\n"
+        "    import open3d\n"
+        "    assert 'dash.html' not in sys.modules\n"
+        "assert 'dash' not in sys.modules, 'the stand-in left behind'\n"
+        "dp = sys.modules['open3d.visualization.draw_plotly']\n"
+        "import dash\n"
+        "assert dp.html.Div is dash.html.Div and dp.dcc.Graph is dash.dcc.Graph and dp.Dash._target() is dash.Dash\n"
+        "print('ok')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
