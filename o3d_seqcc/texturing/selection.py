@@ -254,7 +254,7 @@ def _select_mrf(
     e = _entries(visibility, cos=data_term in ("area-cos", "log-area-cos"))
     n_views, n_faces = e.n_views, e.n_faces
     if adjacency is None:
-        m = mesh if mesh is not None else getattr(visibility, "mesh", None)
+        m = mesh if mesh is not None else visibility.mesh
         if m is None:
             raise InputError("mrf selection needs the mesh adjacency: pass adjacency= or mesh=")
         adjacency = face_adjacency(m.faces, m.vertices)
