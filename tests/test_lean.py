@@ -127,3 +127,97 @@ def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
     assert used == []
     assert (tmp_path / "out" / "report.html").is_file() and (tmp_path / "cli" / "report.html").is_file()
     monkeypatch.undo()
+
+
+
+def _digest(folder) -> dict:
+    """sha1 of every output file; report.json without its timings, report.html without its timings table."""
+    import hashlib
+    import json
+    import re
+
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if not (k.startswith("timings") or k == "time_s" or k == "files")}
+        return [strip(v) for v in x] if isinstance(x, list) else x
+
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if not p.is_file() or p.name == ".o3d_seqcc.json":
+            continue
+        data = p.read_bytes()
+        if p.name == "report.html":
+            data = re.sub(rb"<!-- timings -->.*?<!-- /timings -->", b"", data, flags=re.S)
+        if p.name == "report.json":
+            data = json.dumps(strip(json.loads(data)), sort_keys=True).encode()
+        out[str(p.relative_to(folder))] = hashlib.sha1(data).hexdigest()
+    return out
+
+
+def test_same_bytes_for_any_jobs(tmp_path):
+    """`o3d-seqcc run -j 1` and `-j 2` (threads in every stage, the export beside the report) write the same files."""
+    from o3d_seqcc.cli import main
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
+    digests = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        assert main(["-q", "-j", jobs, "run", str(tmp_path / "room"), "--out", str(out), "--t-npm", "50",
+                     "--save-images"]) == 0
+        digests.append(_digest(out))
+    assert {"mesh.glb", "mesh.obj", "mesh.png", "report.html", "report.json", "selection.png"} <= set(digests[0])
+    assert digests[0] == digests[1]
+
+
+def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
+    """A pair's picked mappings built alone (the correction's 8000, Table 2's 200 of a pair) are bit for bit
+    the full build's at those indices, in every mapping mode; the count comes without building."""
+    from o3d_seqcc.mappings.compute import compute_mappings
+    from o3d_seqcc.mappings.pairs import thinned
+    from o3d_seqcc.visibility.compute import compute_visibility
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    vis = compute_visibility(scene)
+    rng = np.random.default_rng(3)
+    for mode in ("surface", "vertices", "dense"):
+        m = compute_mappings(scene, visibility=vis, mode=mode)
+        src = m.pairs.source
+        levels = 0
+        for key in m.pairs:
+            full = src.build(*key)
+            levels += len(np.unique(src._plan(*key)[1]))
+            assert src.size(*key) == full.n > 0
+            picks = [np.sort(rng.choice(full.n, min(full.n, 97), replace=False)), np.arange(full.n),
+                     np.zeros(0, np.int64), np.array([0, full.n - 1])]
+            for idx in picks:
+                n, part = thinned(m.pairs, key, lambda n, idx=idx: idx)
+                want = full.take(idx)
+                assert n == full.n and part.n == len(idx)
+                for name in ("uv_a", "uv_b", "face_ids", "weights"):
+                    x, y = getattr(part, name), getattr(want, name)
+                    assert (x is None) == (y is None), (mode, name)
+                    assert x is None or (x.dtype == y.dtype and np.array_equal(x, y)), (mode, key, name)
+            assert thinned(m.pairs, key, lambda n: None)[1].n == full.n
+        assert mode == "vertices" or levels > len(m.pairs)  # faces of several levels in a pair: groups crossed
+
+
+def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
+    """The gutter fill of an even-sided page pulls and pushes its full-resolution level in row bands (no
+    float copy of the page): the same bytes as the whole-page pyramid, for bands that do or do not divide it."""
+    import cv2
+
+    from o3d_seqcc.texturing import bake
+
+    rng = np.random.default_rng(5)
+    for H, W, band in ((512, 384, 64), (640, 256, 96), (514, 258, 128)):
+        img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+        blobs = cv2.resize(rng.random((H // 16 + 1, W // 16 + 1)).astype(np.float32), (W, H),
+                           interpolation=cv2.INTER_NEAREST)
+        mask = (blobs > 0.55) & (rng.random((H, W)) > 0.05)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", 1 << 20)  # one band: the whole-page path
+        whole = bake.push_pull_fill(img, mask)
+        monkeypatch.setattr(bake, "FILL_BAND_ROWS", band)
+        banded = bake.push_pull_fill(img, mask)
+        assert np.array_equal(whole[mask], img[mask]) and not np.array_equal(whole, img)
+        assert np.array_equal(banded, whole), (H, W, band)
