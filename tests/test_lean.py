@@ -127,7 +127,7 @@ def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
     assert used == []
     assert (tmp_path / "out" / "report.html").is_file() and (tmp_path / "cli" / "report.html").is_file()
     monkeypatch.undo()
-
+    assert res.visibility.to_dense().usable.shape == (6, len(res.selection))  # the dense views still exist for tests
 
 
 def _digest(folder) -> dict:
