@@ -214,6 +214,7 @@ def child(scene: str, backend: str, out: str) -> dict:
     import logging
 
     import o3d_seqcc as sc
+    from o3d_seqcc._shared.parallel import use as use_executor
     from o3d_seqcc._shared.progress import on_stage
 
     logging.getLogger("o3d_seqcc").setLevel(logging.ERROR)
@@ -230,7 +231,7 @@ def child(scene: str, backend: str, out: str) -> dict:
     with _Sampler(watch_children=backend == "cluster") as smp, on_stage(smp.on_stage):
         t0 = time.perf_counter()
         res = sc.pipeline.run(scene, client=client)
-        with sc.parallel.use(client):
+        with use_executor(client):
             res.save(out, overwrite=True)
         fig["wall_s"] = time.perf_counter() - t0
     fig["stages_s"] = {k: round(res.timings.get(k, 0.0), 3) for k in STAGES}

@@ -56,7 +56,7 @@ def main() -> int:
           f"mesh with {len(mesh.triangles)} triangles")
 
     corrected, report = o3d_seqcc.correct_images(mesh, images, cameras, depths=depths, return_report=True)
-    print(f"corrected toward view {report['reference']}: mean CIEDE2000 between views "
+    print(f"corrected toward view {report['correction']['reference']}: mean CIEDE2000 between views "
           f"{report['metrics']['before']['ciede2000']['mean']:.2f} -> {report['metrics']['after']['ciede2000']['mean']:.2f}")
 
     textured = o3d_seqcc.texture_mesh(mesh, corrected, cameras, depths=depths, correct=False)

@@ -47,6 +47,7 @@ from typing import Any, Callable, TextIO
 
 import numpy as np
 
+from o3d_seqcc._shared.registry import Registry, UnknownNameError
 from o3d_seqcc.errors import InputError, require
 
 __all__ = ["FilterParameter", "MeshLabFilter", "apply", "filter_list", "filter_parameter_text",
@@ -217,7 +218,7 @@ def _output_parameters(default_dir: str, save_defaults: dict, save_docs: dict, w
 
 
 @functools.cache
-def _registry() -> dict[str, MeshLabFilter]:
+def _registry() -> Registry[MeshLabFilter]:
     from o3d_seqcc import pipeline
     from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
     from o3d_seqcc.correction.graph import WEIGHTS
@@ -289,7 +290,7 @@ def _registry() -> dict[str, MeshLabFilter]:
         ]),
         run=meshset.texture_from_rasters,
     )
-    return {f.name: f for f in (correct, texture)}
+    return Registry("MeshLab filter", {"seqcc_color_correct_rasters": correct, "seqcc_texture_from_rasters": texture})
 
 
 # ---- public functions ---------------------------------------------------------------------------------------------
@@ -302,11 +303,10 @@ def filter_list() -> list[str]:
 
 def get_filter(filter_name: str) -> MeshLabFilter:
     """The filter called ``filter_name``; an unknown name raises InputError listing the valid ones."""
-    reg = _registry()
-    if filter_name not in reg:
-        raise InputError(f"unknown filter {filter_name!r}; valid: {', '.join(sorted(reg))} "
-                         "(MeshLab's own filters are methods of the MeshSet: ms.apply_filter(name, ...))")
-    return reg[filter_name]
+    try:
+        return _registry()[filter_name]
+    except UnknownNameError as e:
+        raise InputError(f"{e} (MeshLab's own filters are methods of the MeshSet: ms.apply_filter(name, ...))") from None
 
 
 def filter_parameter_text(filter_name: str) -> str:

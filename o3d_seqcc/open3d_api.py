@@ -277,8 +277,10 @@ def correct_images(
     depth_scale : float, default 1000.0
         Units per metre of integer depth images.
     return_report : bool, default False
-        Also return the correction report (graph edges, paths, unreachable views, per-pair
-        PSNR / CIEDE2000 before and after, per-view lookup tables, timings).
+        Also return the correction report, ``correct``'s report.json (:mod:`o3d_seqcc.report.schema`:
+        ``report["correction"]`` holds the reference, graph edges, paths, unreachable views and
+        per-view lookup tables; ``report["metrics"]`` the per-pair PSNR / CIEDE2000 before and
+        after; ``report["timings_s"]``).
 
     Returns
     -------

@@ -33,7 +33,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ._shared.arguments import check_images_argument, check_type
-from .correction import DEFAULT_METHOD, CorrectionResult, IdentityTransform, LutTransform, check_method, correct
+from .correction import DEFAULT_METHOD, CorrectionResult, check_method, correct
 from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
@@ -51,6 +51,7 @@ from .visibility.refine import coverage
 from .run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
+from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
 from .evaluation.seams import SeamReport, seam_metric, selection_seams
 from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
@@ -71,8 +72,7 @@ def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> Text
     check_type("settings", settings, TextureSettings)
     s = settings or TextureSettings()
     s = s.updated(**options) if options else s
-    if s.selection not in SELECTION_METHODS:
-        raise InputError(f"unknown selection method {s.selection!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
+    SELECTION_METHODS.check(s.selection)
     return s
 
 
@@ -150,45 +150,25 @@ class RunResult:
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
                export: dict[str, Any] | None = None, metrics: dict | None = None,
                selection_seams: dict | None = None) -> dict[str, Any]:
-        """The ``report.json`` content (JSON types).
+        """The ``report.json`` content (JSON types; the keys of :mod:`o3d_seqcc.report.schema`, as every command's).
 
         ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.evaluation.metrics.before_after`);
         ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`.
         """
         s = self.settings
         names = self.scene.names
-        rep: dict[str, Any] = {"command": self.command, "scene": self.source, **scene_paths(self.scene),
-                               "images": self.images_from}
-        if self.correction is not None:
-            res = self.correction
-            rep["correction"] = {
-                "method": res.method,
-                "reference": names[res.reference],
-                "t_npm": res.t_npm,
-                "mappings": None if self.mappings is None else self.mappings.mode,
-                "settings": res.settings,
-                "unreachable": [names[i] for i in res.unreachable],
-                "paths": {names[k]: [names[i] for i in p] for k, p in res.paths.items()},
-                "n_graph_edges": len(res.graph_edges),
-                "timings_s": {k: round(float(v), 4) for k, v in res.timings.items()},
-            }
-        if metrics is not None:
-            rep["metrics"] = metrics
-        rep["texture_settings"] = asdict(s)
-        rep["selection"] = {"method": s.selection, "seed": s.seed, **self.selection_stats,
-                            **({"picture_view": picture_view} if picture_view else {})}
-        rep["atlas"] = {k: v for k, v in self.textured.stats.items() if not k.startswith("time_")}
-        if export is not None:
-            rep["export"] = export
-        rep["seams"] = None if self.seams is None else self.seams.to_dict()
-        rep["files"] = dict(files or {})
-        if self.seams_original is not None:
-            rep["seams_original_images"] = self.seams_original.to_dict()
-        if selection_seams is not None:
-            rep["selection_seams"] = {k: v.summary() for k, v in selection_seams.items()}
-        rep["visibility_stats"] = self.visibility.stats
-        rep["timings_s"] = {k: round(v, 4) for k, v in self.timings.items()}
-        return rep
+        c = None if self.correction is None else correction_section(
+            self.correction, names, None if self.mappings is None else self.mappings.mode)
+        return document(
+            self.command, scene=self.source, **scene_paths(self.scene), images=self.images_from, views=list(names),
+            correction=c, metrics=metrics, texture_settings=asdict(s),
+            selection={"method": s.selection, "seed": s.seed, **self.selection_stats,
+                       **({"picture_view": picture_view} if picture_view else {})},
+            atlas={k: v for k, v in self.textured.stats.items() if not k.startswith("time_")}, export=export,
+            seams=None if self.seams is None else self.seams.to_dict(), files=files,
+            seams_original_images=None if self.seams_original is None else self.seams_original.to_dict(),
+            selection_seams=None if selection_seams is None else {k: v.summary() for k, v in selection_seams.items()},
+            visibility_stats=self.visibility.stats, timings_s=self.timings)
 
     def save(
         self,
@@ -498,9 +478,10 @@ class CorrectionRun:
     mappings : Mappings
     originals : list of (H, W, 3) arrays
     report : dict
-        The ``report.json`` content: graph edges, paths, unreachable views, per-pair metrics
-        before / after with the contrast ratios (unless ``metrics=False``), per-view lookup
-        tables, timings.
+        The ``report.json`` content (:mod:`o3d_seqcc.report.schema`, as ``run``'s): under
+        ``correction`` the graph edges, paths, unreachable views and per-view lookup tables;
+        ``metrics``, the per-pair metrics before / after with the contrast ratios (None with
+        ``metrics=False``); ``timings_s``.
     """
 
     scene: Scene
@@ -522,15 +503,18 @@ class CorrectionRun:
                 _stage("export"):
             paths = write_images(stage / "images", self.scene.views, self.result.images)
             rep = dict(self.report)
-            rep["timings"] = {**rep["timings"], "write_images": round(time.perf_counter() - t, 4)}
+            rep["timings_s"] = {**rep["timings_s"], "write_images": round(time.perf_counter() - t, 4)}
+            rep["files"] = {"images": str(Path(out) / "images"), "scene_json": str(Path(out) / "scene.json")}
             scene = with_mesh_file(self.scene, stage / "mesh.ply")  # a mesh in memory is written beside them
             # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
             save_scene(scene.replace_images(paths), stage / "scene.json")
-            meshlab_project(scene, stage, mesh=None, images=paths)
+            if meshlab_project(scene, stage, mesh=None, images=paths) is not None:
+                rep["files"]["meshlab_project"] = str(Path(out) / "project.mlp")
             if report:
                 t = time.perf_counter()
+                rep["files"]["report_html"] = str(Path(out) / REPORT_FILE)
                 write_report(self, stage / REPORT_FILE, report=rep)
-                rep["timings"]["report"] = round(time.perf_counter() - t, 4)
+                rep["timings_s"]["report"] = round(time.perf_counter() - t, 4)
             write_json(stage / "report.json", rep)
         return Path(out)
 
@@ -584,25 +568,14 @@ def correct_scene(
             res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
                           seed=seed, graph_weight=graph_weight)
     res.timings["mappings"] = t_map
-    names = sc.names
-    report: dict[str, Any] = {
-        "command": "correct", "scene": str(scene) if not isinstance(scene, Scene) else "", **scene_paths(sc),
-        "seed": seed, "method": res.method, "reference": names[res.reference], "reference_index": res.reference, "t_npm": t_npm,
-        "t_npm_effective": res.t_npm, "mappings": mappings, "views": names,
-        "graph_edges": [{**e, "a_name": names[e["a"]], "b_name": names[e["b"]]} for e in res.graph_edges],
-        "paths": {names[v]: [names[x] for x in p] for v, p in sorted(res.paths.items())},
-        "unreachable": [names[v] for v in res.unreachable],
-    }
     t = time.perf_counter()
+    table2 = None
     if metrics:
         with _stage("metrics"):
-            report["metrics"] = before_after(originals, res.images, maps, res.paths, per_pair=True)
+            table2 = before_after(originals, res.images, maps, res.paths, per_pair=True)
     t_metrics = time.perf_counter() - t
-    if any(isinstance(tr, LutTransform) for tr in res.transforms):
-        luts = {names[v]: (np.round(tr.lut, 6).tolist() if isinstance(tr, LutTransform) else "identity")
-                for v, tr in enumerate(res.transforms) if isinstance(tr, (LutTransform, IdentityTransform))}
-        report["lookup_tables"] = {"note": "per view: 3 rows (R, G, B) of L values in [0, 1] over L evenly spaced "
-                                   "inputs in [0, 1], or 'identity' (reference, unreachable views)", "tables": luts}
-    report["timings"] = {**{k: round(float(v), 4) for k, v in res.timings.items()}, "metrics": round(t_metrics, 4)}
-    report["graph_weight"] = graph_weight
+    report = document("correct", scene=str(scene) if not isinstance(scene, Scene) else "", **scene_paths(sc),
+                      images="scene", views=list(sc.names),
+                      correction=correction_section(res, sc.names, mappings, lookup_tables=True), metrics=table2,
+                      timings_s={"mappings": t_map, "correction": res.timings.get("total", 0.0), "metrics": t_metrics})
     return CorrectionRun(scene=sc, result=res, mappings=maps, originals=originals, report=report)

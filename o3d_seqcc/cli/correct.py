@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     r, names = job.result, job.scene.names
     print(f"corrected {len(names)} views with {r.method} toward {names[r.reference]} "
           f"({len(r.graph_edges)} graph edges, {len(r.unreachable)} unreachable) -> {out}")
-    if "metrics" in job.report:
+    if job.report.get("metrics"):
         b, a = job.report["metrics"]["before"], job.report["metrics"]["after"]
         print(f"mean PSNR {b['psnr']['mean']:.2f} -> {a['psnr']['mean']:.2f} dB, "
               f"mean CIEDE2000 {b['ciede2000']['mean']:.2f} -> {a['ciede2000']['mean']:.2f}")

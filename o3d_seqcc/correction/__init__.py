@@ -40,10 +40,9 @@ from .graph import (
 )
 from ..imaging.sequences import FloatImages, ImageSequence, image_dtypes
 from ..scene import resolve_view
-from .methods import global_methods, pairwise, seqcc, seqcc_global  # noqa: F401  (register their methods)
+from .methods import METHODS, available_methods, register_method
 from .base import (
     DEFAULT_METHOD,
-    METHODS,
     CorrectedImages,
     CorrectionContext,
     CorrectionResult,
@@ -52,9 +51,6 @@ from .base import (
     LutTransform,
     Transform,
     apply_transform,
-    available_methods,
-    check_options,
-    register_method,
 )
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "FunctionTransform",
@@ -67,8 +63,7 @@ logger = logging.getLogger(__name__)
 def check_method(method: str, *, t_npm: int | str = "auto") -> None:
     """Raise ``InputError`` for an unknown ``method`` (listing the valid names) or a ``t_npm`` that is neither
     ``"auto"`` nor a positive integer."""
-    if method not in METHODS:
-        raise InputError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
+    METHODS.check(method)
     check_t_npm(t_npm)
 
 
@@ -147,20 +142,15 @@ def correct(
 
     Raises
     ------
-    ValueError
-        Unknown method (lists the valid ones).
-    TypeError
-        Unknown option.
     InputError
-        Unknown reference (lists the valid names), no edge left at ``t_npm`` (says the largest
+        Unknown method or option (lists the valid ones; an unknown option's error is also a
+        ``TypeError``), unknown reference (lists the valid names), no edge left at ``t_npm`` (says the largest
         pair count), a reference without edges, images not matching the scene, neither a scene
         nor images and mappings.
     """
-    if method not in METHODS:
-        raise ValueError(f"unknown correction method {method!r}; valid: {', '.join(available_methods())}")
     check_method(method, t_npm=t_npm)
     fn = METHODS[method]
-    check_options(fn, method, options)
+    METHODS.check_options(method, options)
     if scene is None:
         if images is None or mappings is None:
             raise InputError("correct() needs a scene, or both images= and mappings=")
@@ -202,7 +192,7 @@ def correct(
     t_eff, t_how = resolve_t_npm(t_npm, mappings, image_sizes=sizes)
     unit = t_npm_units(getattr(mappings, "mode", "vertices"))
     graph = build_graph(counts, n, t_npm=t_eff, weight=graph_weight)
-    needs_graph = getattr(fn, "needs_graph", True)
+    needs_graph = METHODS.info(method).get("needs_graph", True)
     if needs_graph and graph.number_of_edges() == 0:
         best = max(counts.items(), key=lambda kv: kv[1], default=None)
         if best is None or best[1] == 0:

@@ -1,16 +1,14 @@
-"""The correction framework: method registry, colour transforms, the context a method sees.
+"""The correction framework: colour transforms, the context a method sees.
 
 A correction method is ``fn(ctx: CorrectionContext, **options) -> list[Transform]`` (one
-transform per view) registered under a name with :func:`register_method`; the method modules
-(:mod:`~o3d_seqcc.correction.methods.seqcc`, :mod:`~o3d_seqcc.correction.methods.seqcc_global`,
-:mod:`~o3d_seqcc.correction.methods.pairwise`, :mod:`~o3d_seqcc.correction.methods.global_methods`) import this module and register themselves, and
-:mod:`o3d_seqcc.correction` imports all of them explicitly. Views without a path to the
+transform per view); the method modules (:mod:`~o3d_seqcc.correction.methods`) import this module,
+and their table :data:`~o3d_seqcc.correction.methods.METHODS` names each one (written out there,
+extended with :func:`~o3d_seqcc.correction.register_method`). Views without a path to the
 reference keep an :class:`IdentityTransform`.
 """
 
 from __future__ import annotations
 
-import inspect
 import logging
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Sequence
@@ -26,7 +24,6 @@ from .._shared.parallel import current as current_executor
 __all__ = [
     "DEFAULT_METHOD",
     "COLOUR_CACHE_BYTES",
-    "METHODS",
     "CorrectedImages",
     "CorrectionContext",
     "CorrectionResult",
@@ -35,61 +32,19 @@ __all__ = [
     "LutTransform",
     "Transform",
     "apply_transform",
-    "available_methods",
-    "check_options",
     "fit_context",
     "lut_per_path",
     "path_steps",
-    "register_method",
     "sequential",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: name -> ``fn(ctx, **options) -> list[Transform]``
-METHODS: dict[str, Callable] = {}
 #: method of :func:`o3d_seqcc.correction.correct` (and every entry point) when none is given: the
 #: measured best (README, ``benchmarks/table2.py``); ``"seqcc"`` is the paper's
 DEFAULT_METHOD = "seqcc-global"
 #: byte budget of a context's cache of the colours sampled at each pair's mappings
 COLOUR_CACHE_BYTES = 64 * 2**20
-
-
-def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callable], Callable]:
-    """Decorator registering a correction method under ``name``.
-
-    Parameters
-    ----------
-    name : str
-        Name used with ``correct(..., method=name)``.
-    needs_graph : bool, default True
-        When True, :func:`correct` insists on a usable graph (at least one edge, a reference
-        with an edge) and raises :class:`InputError` otherwise.
-    """
-
-    def deco(fn: Callable) -> Callable:
-        fn.needs_graph = needs_graph  # type: ignore[attr-defined]
-        METHODS[name] = fn
-        return fn
-
-    return deco
-
-
-def available_methods() -> list[str]:
-    """Sorted names of the registered correction methods."""
-    return sorted(METHODS)
-
-
-def check_options(fn: Callable, method: str, options: dict) -> None:
-    """Raise ``TypeError`` naming the valid options when ``options`` holds a name ``fn`` does not take."""
-    params = inspect.signature(fn).parameters
-    if any(p.kind == inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return
-    allowed = sorted(n for n, p in params.items() if p.kind == inspect.Parameter.KEYWORD_ONLY)
-    bad = sorted(set(options) - set(allowed))
-    if bad:
-        raise TypeError(f"correct(method={method!r}) got unknown option(s) {bad}; valid: {allowed}")
-
 
 
 def _check_float_image(img: np.ndarray) -> np.ndarray:

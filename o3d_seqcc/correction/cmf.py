@@ -96,13 +96,13 @@ symmetric by construction.
 
 from __future__ import annotations
 
-import inspect
 import logging
 from typing import Callable
 
 import numpy as np
 
 from ..errors import InputError
+from .._shared.registry import Registry
 from .jih import column_samples, weighted_samples
 from .luts import apply_lut, compose_luts, interp_extrapolate  # noqa: F401  (part of this module's API)
 
@@ -125,15 +125,6 @@ QUANTILE_TRIM = 0.002
 #: weighted quantile of the target values below which the black point takes over
 BLACK_POINT_QUANTILE = 0.005
 
-#: name -> ``fn(x, y, w, grid, **options) -> (curve, linear_or_None)`` on the grid
-CMF_METHODS: dict[str, Callable] = {}
-
-_COMMON = (
-    "guard", "symmetric", "clamp", "contrast_guard", "black_point", "pairing", "saturation", "aggregate", "max_points", "min_count",
-    "sparse_count", "min_span",
-)
-
-
 def register_cmf(name: str) -> Callable[[Callable], Callable]:
     """Decorator registering a CMF fitter ``fn(x, y, w, grid, **options) -> (curve, line)``.
 
@@ -142,11 +133,7 @@ def register_cmf(name: str) -> Callable[[Callable], Callable]:
     used by the sparse-data guard (or None to use weighted least squares).
     """
 
-    def deco(fn: Callable) -> Callable:
-        CMF_METHODS[name] = fn
-        return fn
-
-    return deco
+    return CMF_METHODS.register(name)
 
 
 def _wls_line(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[float, float]:
@@ -163,14 +150,12 @@ def _wquantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
     return float(x[o][min(np.searchsorted(cw, q * cw[-1]), len(x) - 1)])
 
 
-@register_cmf("linear")
 def _fit_linear(x, y, w, grid):
     a, b = _wls_line(x, y, w)
     line = a * grid + b
     return line, line
 
 
-@register_cmf("polynomial")
 def _fit_polynomial(x, y, w, grid, *, degree: int = 3):
     degree = int(degree)
     if degree < 1:
@@ -182,7 +167,6 @@ def _fit_polynomial(x, y, w, grid, *, degree: int = 3):
     return np.vander(grid, degree + 1) @ coef, None
 
 
-@register_cmf("isotonic")
 def _fit_isotonic(x, y, w, grid):
     from sklearn.isotonic import IsotonicRegression
 
@@ -190,7 +174,6 @@ def _fit_isotonic(x, y, w, grid):
     return iso.predict(grid), None
 
 
-@register_cmf("csvr")
 def _fit_csvr(
     x,
     y,
@@ -252,14 +235,14 @@ def _fit_csvr(
     return curve, line
 
 
-def _check_options(fn: Callable, method: str, options: dict) -> None:
-    params = inspect.signature(fn).parameters
-    allowed = [n for n, p in params.items() if p.kind == inspect.Parameter.KEYWORD_ONLY]
-    bad = sorted(set(options) - set(allowed))
-    if bad:
-        raise TypeError(
-            f"fit_cmf(method={method!r}) got unknown option(s) {bad}; valid: {sorted(allowed) + list(_COMMON)}"
-        )
+#: name -> ``fn(x, y, w, grid, **options) -> (curve, linear_or_None)`` on the grid (written out; :func:`register_cmf`
+#: adds more)
+CMF_METHODS: Registry[Callable] = Registry("CMF method", {
+    "linear": _fit_linear,
+    "polynomial": _fit_polynomial,
+    "isotonic": _fit_isotonic,
+    "csvr": _fit_csvr,
+})
 
 
 def fit_cmf(
@@ -343,21 +326,19 @@ def fit_cmf(
 
     Raises
     ------
+    InputError
+        Unknown method or option (lists the valid ones; the option error is also a ``TypeError``).
     ValueError
-        Unknown method, pairing or aggregate (lists the valid ones).
-    TypeError
-        Unknown option.
+        Unknown pairing or aggregate (lists the valid ones).
     InputError
         x, y, weights of different lengths, non-finite values, negative weights.
     """
-    if method not in CMF_METHODS:
-        raise ValueError(f"unknown CMF method {method!r}; valid: {', '.join(sorted(CMF_METHODS))}")
+    CMF_METHODS.check(method)
     if pairing not in ("joint", "quantile"):
         raise ValueError(f"pairing must be 'joint' or 'quantile', got {pairing!r}")
     if symmetric not in (True, False):
         raise ValueError(f"symmetric must be True or False, got {symmetric!r}")
-    fn = CMF_METHODS[method]
-    _check_options(fn, method, options)
+    CMF_METHODS.check_options(method, options)
     n_out = int(n_out)
     if n_out < 2:
         raise ValueError(f"n_out must be >= 2, got {n_out}")

@@ -501,10 +501,7 @@ def write_selection_picture(scene, visibility, labels: np.ndarray, path, view: s
     (pathlib.Path, str)
         The path and the view's name.
     """
-    if hasattr(visibility, "usable_counts"):
-        counts = visibility.usable_counts()
-    else:
-        counts = np.asarray(visibility.usable).sum(axis=1)
+    counts = visibility.usable_counts()
     k = int(np.argmax(counts)) if view is None else scene.index(view)
     img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views))
     write_image(path, img)

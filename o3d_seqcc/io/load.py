@@ -17,6 +17,7 @@ import numpy as np
 
 from ..visibility.camera_checks import FLIP, check_cameras
 from ..errors import InputError, warn
+from .._shared.registry import Registry
 from ..scene import Scene, View
 from . import colmap, meshlab, meshroom, openmvs, rgbd_folder, scene_json
 from .files import find_file
@@ -61,8 +62,9 @@ def _detect_mlp(path: Path) -> Path | None:
     return None if path.is_dir() else find_file(path, name="", suffix=".mlp")
 
 
-#: The scene formats, in detection order.
-SCENE_FORMATS: dict[str, SceneFormat] = {
+#: The scene formats, in detection order (written out: a :class:`~o3d_seqcc._shared.registry.Registry` of
+#: :class:`SceneFormat`; ``SCENE_FORMATS.register(name, SceneFormat(...))`` adds one, detected last).
+SCENE_FORMATS: Registry[SceneFormat] = Registry("scene format", {
     f.name: f
     for f in (
         SceneFormat("scene.json", "a scene.json manifest or its folder", scene_json.detect, scene_json.load,
@@ -75,7 +77,7 @@ SCENE_FORMATS: dict[str, SceneFormat] = {
                     "world-to-camera"),
         SceneFormat("openmvs", "an OpenMVS interface file (scene.mvs)", openmvs.detect, openmvs.load),
     )
-}
+})
 
 
 def detect_format(path: str | os.PathLike, format: str = "auto") -> tuple[SceneFormat, Path]:
@@ -98,9 +100,10 @@ def detect_format(path: str | os.PathLike, format: str = "auto") -> tuple[SceneF
                 + "; ".join(f"{f.description}" for f in SCENE_FORMATS.values())
             )
         return found
-    if format not in SCENE_FORMATS:
-        raise InputError(f"unknown scene format {format!r}; valid: 'auto', {', '.join(map(repr, SCENE_FORMATS))}")
-    fmt = SCENE_FORMATS[format]
+    try:
+        fmt = SCENE_FORMATS[format]
+    except InputError as e:
+        raise InputError(f"{e}, or 'auto' (detected from the path)") from None
     hit = fmt.detect(p)
     if hit is None:
         raise InputError(f"{p} is not {fmt.description}")

@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..mappings.compute import Mappings
 from ..mappings.pairs import LazyPairs, PairMapping, PairSource
 from ..scene import Mesh
-from ..visibility.compute import UsableFaces
+from ..visibility.compute import Visibility
 from .files import atomic_write_bytes, to_jsonable
 
 __all__ = ["load_mappings", "save_mappings"]
@@ -101,23 +101,6 @@ def save_mappings(mappings: Mappings, path: str | os.PathLike, *, format: str = 
     return atomic_write_bytes(path, buf.getvalue())
 
 
-class _StoredVisibility(UsableFaces):
-    """The parts of a Visibility that pair building needs (compact mappings files)."""
-
-    def __init__(self, uv, depth, usable, vertices, faces) -> None:
-        self.uv = uv
-        self.depth = depth
-        self.usable = usable
-        self.mesh = Mesh(vertices=vertices, faces=faces, vertex_normals=np.zeros_like(vertices))
-
-    def usable_faces(self, v: int) -> np.ndarray:
-        return np.flatnonzero(self.usable[v])
-
-    def vertex_projection(self, v: int, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
-        return np.asarray(self.uv[v][ids], np.float32), np.asarray(self.depth[v][ids], np.float32)
-
-
 def load_mappings(path: str | os.PathLike) -> Mappings:
     """Read mappings written by :func:`save_mappings` (``visibility`` is None).
 
@@ -153,7 +136,9 @@ def load_mappings(path: str | os.PathLike) -> Mappings:
         if layout == "compact":
             F = int(z["n_faces"])
             usable = np.unpackbits(z["usable"], axis=1, count=F).astype(bool)
-            vis = _StoredVisibility(z["uv"], z["depth"], usable, z["vertices"], z["faces"])
+            vertices = z["vertices"]  # the parts of a Visibility that pair building needs: one real Visibility
+            mesh = Mesh(vertices=vertices, faces=z["faces"], vertex_normals=np.zeros_like(vertices))
+            vis = Visibility.from_dense(mesh, usable, uv=z["uv"], depth=z["depth"], view_names=tuple(names))
             level = z["level"].astype(np.int64) if "level" in files else None
             face_mask = np.unpackbits(z["face_mask"], count=F).astype(bool) if "face_mask" in files else None
             spacing = float(z["sample_spacing"]) if "sample_spacing" in files else 3.0

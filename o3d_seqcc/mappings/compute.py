@@ -269,11 +269,9 @@ class Mappings:
 def _max_usable_area(vis) -> np.ndarray:
     """(F,) float32: every face's largest projected area over the views where it is usable (0 if none)."""
     out = np.zeros(vis.n_faces, dtype=np.float32)
-    if hasattr(vis, "usable_entries"):
-        _, faces, area, _ = vis.usable_entries()
-        np.maximum.at(out, faces, area)
-        return out
-    return np.where(vis.usable, vis.area, 0.0).max(axis=0).astype(np.float32)
+    _, faces, area, _ = vis.usable_entries()
+    np.maximum.at(out, faces, area)
+    return out
 
 
 def compute_mappings(

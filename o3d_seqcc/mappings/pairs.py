@@ -352,15 +352,10 @@ class PairSource:
 
     def usable_area(self, v: int) -> np.ndarray:
         """(k,) float64 projected areas (px^2) of :meth:`usable_faces` in view ``v``."""
-        if hasattr(self.vis, "usable_area"):
-            a = np.asarray(self.vis.usable_area(v), dtype=np.float64)
-            if self.face_mask is not None:
-                a = a[self.face_mask[self.vis.usable_faces(v)]]
-            return a
-        ids = self.usable_faces(v)
-        tri = np.asarray(self.vis.mesh.faces)[ids]
-        uv = self.vis.vertex_projection(v, tri.reshape(-1))[0].reshape(-1, 3, 2).astype(np.float64)
-        return _tri_area(uv)
+        a = np.asarray(self.vis.usable_area(v), dtype=np.float64)
+        if self.face_mask is not None:
+            a = a[self.face_mask[self.vis.usable_faces(v)]]
+        return a
 
     def usable(self) -> np.ndarray:
         """(V, F) bool usable faces within the face mask (dense: small scenes only)."""

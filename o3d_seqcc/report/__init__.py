@@ -23,14 +23,19 @@ from an output folder. Sections, each only when the command produced its data:
 - renders of the textured mesh from two views beside the photos (Figures 12-13);
 - seam metric, timings and the run's settings.
 
-At run time everything comes from memory. :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
+At run time everything comes from memory: the page is drawn from the result objects the command
+returns (:class:`~o3d_seqcc.report.page.PageInputs`: the images, the correction with its per-edge
+lookup tables, the mappings, the selection, the textured mesh, the visibility's usable counts),
+and no stage runs again (``tests/test_report_schema.py`` makes every stage raise while a run is
+saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
 matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
 and measures the selection seams' steps in a thread beside the export; the page then draws the
 figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
 the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
-:func:`regenerate_report` reloads the scene, recomputes the visibility, mappings and correction
-with the settings ``report.json`` recorded (the per-edge CMFs are not saved) and reads the
-selection, the textured mesh and the numbers from the folder.
+:func:`regenerate_report` (a folder, not a result) reloads the scene, recomputes only what the
+folder does not hold (visibility, mappings and correction, with the settings ``report.json``
+recorded: the per-edge CMFs are not saved) and reads the selection, the textured mesh and the
+numbers from the folder.
 """
 
 from __future__ import annotations
@@ -222,7 +227,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
     correction = maps = corrected = None
     if f["method"]:
         s = f["settings"]
-        ref = rep.get("reference") or rep["correction"]["reference"]
+        ref = rep["correction"]["reference"]
         maps = compute_mappings(sc, visibility=vis, mode=f["mappings"] or "vertices")  # older reports: the paper's
         seed = s.get("seed", (rep.get("selection") or {}).get("seed", 0))
         t_npm = s.get("t_npm", f["t_npm"])
@@ -261,11 +266,16 @@ def regenerate_report(
 ) -> Path:
     """Write the HTML report of an output folder of ``run``, ``correct`` or ``texture`` again.
 
-    Reads ``report.json`` (numbers, settings, the scene's path), ``selection.npy`` and the
-    textured mesh (``mesh.glb`` / ``.obj`` / ``.ply``) from the folder, reloads the scene and
-    recomputes with the library what the folder does not hold: visibility, mappings and the
-    correction (with the recorded method, reference and settings; deterministic, so the same
-    as the run's with the same o3d_seqcc). Fountain (33 views, 16k faces): about 6 s of CPU.
+    Reads ``report.json`` (numbers, settings, the scene's path; any schema of
+    :mod:`o3d_seqcc.report.schema`, older folders included), ``selection.npy`` and the textured
+    mesh (``mesh.glb`` / ``.obj`` / ``.ply``) from the folder, reloads the scene and recomputes
+    with the library only what the folder does not hold: the visibility (the split mesh the
+    selection refers to, the usable faces per view), the mappings and the correction (the
+    per-edge curves and colours the figures draw are not saved; recomputed with the recorded
+    method, reference and settings: deterministic, so the same as the run's with the same
+    o3d_seqcc), and Table 2 only for an older ``run`` folder without it. A report written by
+    ``run`` / ``correct`` / ``texture`` itself recomputes nothing (it draws from the result in
+    memory). Fountain (33 views, 16k faces): about 6 s of CPU.
 
     Parameters
     ----------

@@ -78,18 +78,14 @@ def _name(inp: PageInputs, v: int) -> str:
 
 # ----------------------------------------------------------------------------------------- facts
 def facts(rep: dict) -> dict[str, Any]:
-    """The fields the page needs, from a run / texture report.json or a correct report.json."""
-    if "correction" in rep or rep.get("command") in ("run", "texture"):
-        c = rep.get("correction") or {}
-        settings = c.get("settings") or {}
-        return {"command": rep.get("command", "run"), "method": c.get("method"),
-                "t_npm": settings.get("t_npm", c.get("t_npm")), "t_npm_effective": c.get("t_npm"),
-                "mappings": c.get("mappings"), "settings": settings, "timings": rep.get("timings_s", {}),
-                "correction_timings": c.get("timings_s", {}), "metrics": rep.get("metrics")}
-    return {"command": rep.get("command", "correct"), "method": rep.get("method"), "t_npm": rep.get("t_npm"),
-            "t_npm_effective": rep.get("t_npm_effective", rep.get("t_npm")),
-            "mappings": rep.get("mappings"), "settings": {k: rep[k] for k in ("seed", "graph_weight") if k in rep},
-            "timings": rep.get("timings", {}), "correction_timings": {}, "metrics": rep.get("metrics")}
+    """The fields the page needs, from a report.json of :mod:`o3d_seqcc.report.schema` (any command)."""
+    c = rep.get("correction") or {}
+    settings = c.get("settings") or {}
+    command = rep.get("command", "run")
+    return {"command": command, "method": c.get("method"), "t_npm": settings.get("t_npm", c.get("t_npm")),
+            "t_npm_effective": c.get("t_npm"), "mappings": c.get("mappings"), "settings": settings,
+            "timings": rep.get("timings_s") or {}, "correction_timings": c.get("timings_s") or {},
+            "metrics": rep.get("metrics")}
 
 
 def t_npm_text(f: dict) -> str:
@@ -450,7 +446,7 @@ def _settings(inp: PageInputs, f: dict) -> dict:
     s: dict[str, Any] = {"command": f["command"], "scene": where, "mesh": rep.get("mesh") or "(in memory)",
                          "views": len(inp.scene.views)}
     if f["method"]:
-        s["correction"] = {"method": f["method"], "reference": rep.get("reference") or rep["correction"].get("reference"),
+        s["correction"] = {"method": f["method"], "reference": rep["correction"].get("reference"),
                            "t_npm": f["t_npm"], "t_npm_effective": f["t_npm_effective"], "mappings": f["mappings"],
                            **{k: v for k, v in f["settings"].items() if k != "t_npm"}}
     for key in ("texture_settings", "selection", "atlas"):

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import InputError, warn
 from ..io.files import open_regular, read_json
+from .schema import upgrade
 
 __all__ = ["page_bytes", "read_report_json", "read_selection", "validate_report"]
 
@@ -61,10 +62,13 @@ _KINDS = {
 _STATS = ("mean", "weighted_mean", "std")
 #: (dotted path with * for any key, kind): every field the page or the reader uses
 RULES: tuple[tuple[str, str], ...] = (
-    ("command", "str"), ("scene", "str"), ("scene_path", "str"), ("mesh", "str"), ("images", "str"),
+    ("schema", "str"), ("command", "str"), ("scene", "str"), ("scene_path", "str?"), ("mesh", "str?"), ("images", "str"),
+    ("scene_options", "dict"), ("views", "list"), ("views.*", "str"),
+    # a correct report.json of schema 1 (before report.schema): its correction at the top level
     ("reference", "str"), ("method", "str?"), ("mappings", "str?"), ("graph_weight", "str"), ("t_npm", "npm"),
     ("seed", "int"),
     ("correction", "dict?"), ("correction.method", "str"), ("correction.reference", "str"),
+    ("correction.reference_index", "int?"), ("correction.graph_edges", "list"),
     ("correction.t_npm", "int"), ("correction.mappings", "str?"), ("correction.settings", "dict"),
     ("correction.settings.t_npm", "npm"), ("correction.settings.seed", "int"),
     ("correction.settings.interpolation", "str"), ("correction.settings.graph_weight", "str"),
@@ -77,14 +81,14 @@ RULES: tuple[tuple[str, str], ...] = (
     ("metrics.before.max_per_pair", "int?"), ("metrics.after.max_per_pair", "int?"),
     ("metrics.contrast.*", "dict?"), ("metrics.contrast.*.mean", "num?"), ("metrics.contrast.*.min", "num?"),
     ("timings_s", "dict"), ("timings_s.*", "num"), ("timings", "dict"), ("timings.*", "num"),
-    ("texture_settings", "dict"), ("selection", "dict"), ("selection.picture_view", "str"),
+    ("texture_settings", "dict?"), ("selection", "dict?"), ("selection.picture_view", "str"),
     ("selection.seed", "int"), ("selection.method", "str"),
-    ("atlas", "dict"), ("atlas.atlas_size", "int"), ("atlas.pages", "int"), ("atlas.texels_per_pixel", "num?"),
+    ("atlas", "dict?"), ("atlas.atlas_size", "int"), ("atlas.pages", "int"), ("atlas.texels_per_pixel", "num?"),
     ("atlas.coverage", "num?"),
     ("seams", "dict?"), ("seams.*", "num?"), ("seams_original_images", "dict?"), ("seams_original_images.*", "num?"),
-    ("export", "dict"), ("export.orientation", "dict"), ("export.orientation.rotation", "3x3?"),
+    ("export", "dict?"), ("export.orientation", "dict"), ("export.orientation.rotation", "3x3?"),
     ("export.orientation.applies_to", "list"), ("export.orientation.applies_to.*", "str"),
-    ("visibility_stats", "dict"), ("files", "dict"),
+    ("selection_seams", "dict?"), ("visibility_stats", "dict?"), ("files", "dict"),
 )
 #: fields that must be there when their parent is (what the page indexes without a default)
 REQUIRED: tuple[tuple[str, tuple[str, ...]], ...] = (
@@ -154,7 +158,10 @@ def _shown(value: Any) -> str:
 
 
 def read_report_json(run_dir: str | os.PathLike) -> dict:
-    """``run_dir/report.json``, read (regular file, UTF-8, no duplicate keys) and validated.
+    """``run_dir/report.json``, read (regular file, UTF-8, no duplicate keys), validated and in the current schema.
+
+    A report of an older o3d_seqcc is checked as written (the messages name its fields) and returned
+    through :func:`~o3d_seqcc.report.schema.upgrade` (its keys moved where the schema has them).
 
     Raises
     ------
@@ -174,7 +181,7 @@ def read_report_json(run_dir: str | os.PathLike) -> dict:
         rep = read_json(rj, "report.json")
     except InputError as e:
         raise InputError(f"{e}; run the command again to rewrite the folder") from None
-    return validate_report(rep, rj)
+    return upgrade(validate_report(rep, rj))
 
 
 def read_selection(path: str | os.PathLike, n_faces: int, n_views: int) -> np.ndarray | None:

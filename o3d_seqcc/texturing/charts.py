@@ -215,23 +215,18 @@ def _absorb_unseen(chart: np.ndarray, chart_view: np.ndarray, labels: np.ndarray
 
 def _usable_at(visibility: VisibilityLike, views: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pointwise ``usable[views, faces]`` (bool) and ``area[views, faces]`` (float64, 0 where not usable), looked
-    up in the sparse per-view records (ascending face ids) when the visibility has them: no (V, F) array."""
+    up in each view's usable face ids (ascending) and areas: no (V, F) array."""
     views, faces = np.asarray(views, np.int64).reshape(-1), np.asarray(faces, np.int64).reshape(-1)
-    records = getattr(visibility, "records", None)
-    if records is None:
-        return (np.asarray(visibility.usable[views, faces], dtype=bool),
-                np.asarray(visibility.area[views, faces], dtype=np.float64))
     ok, area = np.zeros(len(faces), bool), np.zeros(len(faces), np.float64)
     order = np.argsort(views, kind="stable")
-    bounds = np.searchsorted(views[order], np.arange(len(records) + 1))
+    bounds = np.searchsorted(views[order], np.arange(visibility.n_views + 1))
     for v in np.flatnonzero(np.diff(bounds)):
-        idx, r = order[bounds[v]:bounds[v + 1]], records[v]
-        keep = r.flags == 0
-        ids = r.faces[keep]
+        idx = order[bounds[v]:bounds[v + 1]]
+        ids, a = visibility.usable_faces(int(v)), visibility.usable_area(int(v))
         if len(ids):
             pos = np.minimum(np.searchsorted(ids, faces[idx]), len(ids) - 1)
             ok[idx] = hit = ids[pos] == faces[idx]
-            area[idx] = np.where(hit, r.area[keep][pos], 0.0)
+            area[idx] = np.where(hit, a[pos], 0.0)
     return ok, area
 
 

@@ -344,8 +344,32 @@ class ScoredVisibility:
     def usable_counts(self) -> np.ndarray:
         return np.diff(self.indptr)
 
+    def usable_faces(self, v: int) -> np.ndarray:
+        return self.faces[self.indptr[v]:self.indptr[v + 1]].astype(np.int64)
+
+    def usable_area(self, v: int) -> np.ndarray:
+        return np.asarray(self.area[self.indptr[v]:self.indptr[v + 1]], np.float32)
+
+    def vertex_projection(self, v: int, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.visibility.vertex_projection(v, vertex_ids)
+
     def face_uv(self, selection: np.ndarray) -> np.ndarray:
         return self.visibility.face_uv(selection)
+
+    def to_dense(self, *, projections: bool = True):
+        """The kept incidences as dense arrays (``valid = usable``; tests and figures only)."""
+        from ..visibility.dense import DenseVisibility
+
+        V, F = self.n_views, self.n_faces
+        view = np.repeat(np.arange(V), np.diff(self.indptr))
+        usable = np.zeros((V, F), bool)
+        usable[view, self.faces] = True
+        area, cos = np.zeros((V, F), np.float32), np.zeros((V, F), np.float32)
+        area[view, self.faces], cos[view, self.faces] = self.area, self.cos_angle
+        base = self.visibility.to_dense(projections=projections)
+        no = np.zeros((V, F), bool)
+        return DenseVisibility(valid=usable, occluded=no, depth_inconsistent=no, oblique=no, usable=usable, area=area,
+                               cos_angle=cos, uv=base.uv, depth=base.depth)
 
 
 def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, data_term: str = "gmi",
@@ -386,15 +410,7 @@ def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, da
     if need and len(images) != visibility.n_views:
         raise InputError(f"{len(images)} images given for {visibility.n_views} views")
     t = time.perf_counter()
-    if hasattr(visibility, "usable_entries"):
-        indptr, faces, area, cos = visibility.usable_entries()
-    else:  # dense usable / area / cos_angle (V, F) arrays
-        usable = np.asarray(visibility.usable, dtype=bool)
-        v_, f_ = np.nonzero(usable)
-        indptr = np.concatenate([[0], np.cumsum(usable.sum(axis=1))]).astype(np.int64)
-        faces = f_.astype(np.int32)
-        area = np.asarray(visibility.area, dtype=np.float32)[v_, f_]
-        cos = np.asarray(visibility.cos_angle, dtype=np.float32)[v_, f_]
+    indptr, faces, area, cos = visibility.usable_entries()
     area64 = np.nan_to_num(np.asarray(area, dtype=np.float64), nan=0.0)
     gmi, colour = (face_view_statistics(visibility, images, indptr, faces, area64, gmi=data_term == "gmi",
                                         colour=outlier_removal != "none") if need else (None, None))

@@ -22,6 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import InputError
+from .._shared.registry import Registry
 from ..geometry.meshops import face_adjacency
 from .settings import MRF_SMOOTHNESS, TextureSettings, VisibilityLike
 
@@ -74,18 +75,12 @@ def selection_stats(labels: np.ndarray, adjacency: np.ndarray, n_views: int | No
 # --------------------------------------------------------------------------------------------
 
 SelectionFn = Callable[..., np.ndarray]
-#: name -> ``fn(visibility, *, seed, **options) -> (F,) int64``
-SELECTION_METHODS: dict[str, SelectionFn] = {}
 
 
 def register_selection(name: str) -> Callable[[SelectionFn], SelectionFn]:
-    """Decorator adding a selection method to :data:`SELECTION_METHODS`."""
-
-    def deco(fn: SelectionFn) -> SelectionFn:
-        SELECTION_METHODS[name] = fn
-        return fn
-
-    return deco
+    """Decorator adding a selection method ``fn(visibility, *, seed, **options) -> (F,) int64`` to
+    :data:`SELECTION_METHODS`."""
+    return SELECTION_METHODS.register(name)
 
 
 @dataclass(frozen=True)
@@ -105,24 +100,14 @@ class _Entries:
 
 
 def _entries(visibility: VisibilityLike, *, cos: bool = False) -> _Entries:
-    """The usable incidences of a :class:`~o3d_seqcc.visibility.Visibility` (sparse records) or of
-    any object with dense ``usable`` (V, F), ``area`` and ``cos_angle`` arrays."""
-    if hasattr(visibility, "usable_entries"):
-        indptr, faces, area, cos_angle = visibility.usable_entries()
-        return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
-                        cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces),
-                        getattr(visibility, "entry_quality", None))
-    usable = np.asarray(visibility.usable, dtype=bool)
-    if usable.ndim != 2:
-        raise InputError(f"visibility.usable must be (V, F) bool, got shape {usable.shape}")
-    v, f = np.nonzero(usable)
-    indptr = np.concatenate([[0], np.cumsum(usable.sum(axis=1))]).astype(np.int64)
-    area = np.asarray(visibility.area, dtype=np.float64)[v, f]
-    cos_angle = np.asarray(visibility.cos_angle, dtype=np.float64)[v, f] if cos else None
-    return _Entries(indptr, f.astype(np.int64), area, cos_angle, usable.shape[0], usable.shape[1])
+    """The usable incidences of a visibility (:class:`~o3d_seqcc.visibility.Visibility`'s sparse records, or the
+    scored ones of :class:`~o3d_seqcc.texturing.data_costs.ScoredVisibility` with their quality)."""
+    indptr, faces, area, cos_angle = visibility.usable_entries()
+    return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
+                    cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces),
+                    getattr(visibility, "entry_quality", None))
 
 
-@register_selection("random")
 def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
     """Uniformly random usable view per face (paper 3.8), reproducible for a given seed."""
     e = _entries(visibility)
@@ -138,7 +123,6 @@ def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
     return lab
 
 
-@register_selection("largest-area")
 def _select_largest_area(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
     """Usable view with the largest projected face area (paper 3.8); ``seed`` is unused."""
     return _largest(_entries(visibility))
@@ -221,7 +205,6 @@ def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray, mark: np.ndarra
     return out
 
 
-@register_selection("mrf")
 def _select_mrf(
     visibility: VisibilityLike,
     *,
@@ -271,7 +254,7 @@ def _select_mrf(
     e = _entries(visibility, cos=data_term in ("area-cos", "log-area-cos"))
     n_views, n_faces = e.n_views, e.n_faces
     if adjacency is None:
-        m = mesh if mesh is not None else getattr(visibility, "mesh", None)
+        m = mesh if mesh is not None else visibility.mesh
         if m is None:
             raise InputError("mrf selection needs the mesh adjacency: pass adjacency= or mesh=")
         adjacency = face_adjacency(m.faces, m.vertices)
@@ -368,6 +351,14 @@ def _select_mrf(
     return labels
 
 
+#: name -> ``fn(visibility, *, seed, **options) -> (F,) int64`` (written out; :func:`register_selection` adds more)
+SELECTION_METHODS: Registry[SelectionFn] = Registry("selection method", {
+    "random": _select_random,
+    "largest-area": _select_largest_area,
+    "mrf": _select_mrf,
+})
+
+
 def select_views(
     visibility: VisibilityLike,
     *,
@@ -406,7 +397,7 @@ def select_views(
         given, else ``"none"``.
     **options
         Method options (``"mrf"``: ``smoothness``, ``max_data_cost``, ``n_sweeps``,
-        ``adjacency``, ``mesh``); unknown ones raise ``TypeError``.
+        ``adjacency``, ``mesh``); unknown ones raise :class:`~o3d_seqcc.errors.InputError` (a ``TypeError``).
 
     Returns
     -------
@@ -416,22 +407,19 @@ def select_views(
 
     Raises
     ------
-    ValueError
-        Unknown method, data term or outlier removal (the message lists the valid ones).
     InputError
-        No face is usable in any view (wrong cameras or mesh, or filters too strict); ``"gmi"``
+        Unknown method or option (the message lists the valid ones; an unknown option's is also a
+        ``TypeError``); no face is usable in any view (wrong cameras or mesh, or filters too strict); ``"gmi"``
         or outlier removal without ``images``.
     """
     from .data_costs import score_visibility
 
-    if method not in SELECTION_METHODS:
-        raise ValueError(f"unknown selection method {method!r}; valid: {', '.join(sorted(SELECTION_METHODS))}")
+    SELECTION_METHODS.check_options(method, options)  # an unknown method or option: InputError with the valid names
     term = (TextureSettings.data_term if images is not None else "area") if data_term is None else data_term
     term = {"log-area": "area", "log-area-cos": "area-cos"}.get(term, term)
     if outlier_removal is None:
         outlier_removal = TextureSettings.outlier_removal if images is not None else "none"
-    n_usable = (int(visibility.usable_counts().sum()) if hasattr(visibility, "usable_counts")
-                else len(_entries(visibility).faces))
+    n_usable = int(visibility.usable_counts().sum())
     if visibility.n_faces == 0 or not n_usable:
         raise InputError(
             f"no face of the mesh is usable in any of the {visibility.n_views} views (outside every image, occluded, "

@@ -8,11 +8,12 @@ The defaults here are the defaults of every entry point: :func:`o3d_seqcc.textur
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
+from ..visibility.dense import VisibilityLike  # noqa: F401  (the stages' one visibility protocol, re-exported)
 
 __all__ = ["DATA_TERMS", "FALLBACKS", "LEVELING_SMOOTHNESS", "MAX_ATLAS_SIZE", "MRF_SMOOTHNESS", "OUTLIER_REMOVALS",
            "OVERFLOWS", "TextureSettings", "VisibilityLike", "parse_atlas_size", "parse_texels_per_pixel"]
@@ -29,18 +30,6 @@ DATA_TERMS = ("area", "area-cos", "gmi")
 OUTLIER_REMOVALS = ("none", "median", "gauss-clamping", "gauss-damping")
 #: what to do when the charts do not fit the atlas at the asked density
 OVERFLOWS = ("scale", "pages")
-
-
-class VisibilityLike(Protocol):  # pragma: no cover - typing only
-    """What the texturing stages read of a :class:`~o3d_seqcc.visibility.Visibility`."""
-
-    usable: np.ndarray
-    area: np.ndarray
-    cos_angle: np.ndarray
-    n_views: int
-    n_faces: int
-
-    def face_uv(self, selection: np.ndarray) -> np.ndarray: ...
 
 
 #: largest atlas side accepted (the texture size limit of current GPUs and engines)

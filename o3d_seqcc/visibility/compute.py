@@ -34,9 +34,10 @@ Storage is sparse: :class:`Visibility` keeps one small :class:`~o3d_seqcc.visibi
 per view (the ids of the faces valid in it, a filter bit per face, projected areas, angles),
 computed by one task per view (:mod:`o3d_seqcc.visibility.per_view`; local threads or a Dask
 cluster, :mod:`o3d_seqcc._shared.parallel`). Vertex projections are recomputed from the cameras when
-asked for (:meth:`Visibility.vertex_uv`). The dense (V, F) and (V, N) arrays of earlier versions
-(``valid``, ``usable``, ``area``, ``uv``, ...) are still there as properties, built on first
-access and cached: fine for small scenes and tests, never used by the pipeline's hot paths.
+asked for (:meth:`Visibility.vertex_uv`). Every stage reads it through one protocol,
+:class:`~o3d_seqcc.visibility.dense.VisibilityLike` (the sparse methods); the dense (V, F) and
+(V, N) arrays (``valid``, ``usable``, ``area``, ``uv``, ...) are for tests and figures only:
+:meth:`Visibility.to_dense` (:mod:`o3d_seqcc.visibility.dense`), never built by ``run``.
 """
 
 
@@ -60,13 +61,16 @@ from .._shared.parallel import current as current_executor
 from ..scene import Mesh, load_mesh
 from .refine import refine_visibility
 from .stray import drop_faces, stray_faces
-from .per_view import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, summarize_records, view_record
+from .dense import DenseViews, DenseVisibility, UsableFaces, VisibilityLike
+from .per_view import ViewRecord, VisibilityJob, summarize_records, view_record
 
 __all__ = [
     "FILTERS",
+    "DenseVisibility",
     "UsableFaces",
     "ViewRecord",
     "Visibility",
+    "VisibilityLike",
     "compute_visibility",
     "depth_from_point_cloud",
     "project_points",
@@ -86,28 +90,8 @@ FACE_UV_STEPS = 256
 CACHE_BYTES = 128 * 2**20
 
 
-class UsableFaces:
-    """Shape of a (V, F) ``usable`` face mask: what every per-view visibility record exposes."""
-
-    usable: np.ndarray
-
-    @property
-    def n_views(self) -> int:
-        return int(self.usable.shape[0])
-
-    @property
-    def n_faces(self) -> int:
-        return int(self.usable.shape[1])
-
-
-def _record(faces: np.ndarray, area: np.ndarray, cos: np.ndarray, name: str = "") -> ViewRecord:
-    k = len(faces)
-    return ViewRecord(faces=np.asarray(faces, np.int32), flags=np.zeros(k, np.uint8), area=np.asarray(area, np.float32),
-                      cos_angle=np.asarray(cos, np.float32), info={"name": name})
-
-
 @dataclass(frozen=True, eq=False)
-class Visibility(UsableFaces):
+class Visibility(DenseViews):
     """Per-view visibility of the mesh faces, one sparse record per view.
 
     Attributes
@@ -133,11 +117,12 @@ class Visibility(UsableFaces):
         The face of the input mesh each face of ``mesh`` is part of, when faces were split
         (``split_faces``); None when ``mesh`` is the input mesh.
 
-    Dense views, built on first access and cached (memory V x F; for small scenes and tests):
-    ``valid``, ``occluded``, ``depth_inconsistent``, ``oblique``, ``usable`` (V, F) bool;
-    ``area``, ``cos_angle`` (V, F) float32 (0 where not valid); ``uv`` (V, N, 2) float32 pixel
-    coordinates of every vertex (NaN at or behind the camera plane) and ``depth`` (V, N)
-    float32 camera z. All are read-only.
+    The stages read it through :class:`~o3d_seqcc.visibility.dense.VisibilityLike` (the sparse
+    methods below). Dense views for tests and figures (:class:`~o3d_seqcc.visibility.dense.DenseViews`,
+    memory V x F): :meth:`to_dense`, and the same arrays as cached read-only properties ``valid``,
+    ``occluded``, ``depth_inconsistent``, ``oblique``, ``usable`` (V, F) bool, ``area``,
+    ``cos_angle`` (V, F) float32 (0 where not valid), ``uv`` (V, N, 2) float32 and ``depth``
+    (V, N) float32; :meth:`from_dense` builds a visibility from such arrays.
     """
 
     mesh: Mesh
@@ -149,47 +134,6 @@ class Visibility(UsableFaces):
     uv_table: tuple | None = None
     image_sizes: tuple | None = None
     parent_faces: np.ndarray | None = None
-
-    @classmethod
-    def from_arrays(
-        cls, mesh: Mesh, uv: np.ndarray, usable: np.ndarray, *, area: np.ndarray | None = None,
-        cos_angle: np.ndarray | None = None, depth: np.ndarray | None = None, view_names: tuple[str, ...] = (),
-    ) -> "Visibility":
-        """A visibility from your own per-view arrays (no filter run: ``valid = usable``).
-
-        Parameters
-        ----------
-        mesh : Mesh
-        uv : (V, N, 2) float
-            Pixel coordinates of every vertex in every view.
-        usable : (V, F) bool
-        area, cos_angle : (V, F) float, optional
-            Projected face areas (px^2; default: computed from ``uv``) and cosines (default 1).
-        depth : (V, N) float, optional
-            Camera z of every vertex (default 1).
-        view_names : tuple of str
-        """
-        uv = np.asarray(uv, dtype=np.float32)
-        usable = np.asarray(usable, dtype=bool)
-        V, F = usable.shape
-        faces = np.asarray(mesh.faces)
-        if uv.shape != (V, len(mesh.vertices), 2) or F != len(faces):
-            raise InputError(f"uv must be ({V}, {len(mesh.vertices)}, 2) and usable ({V}, {len(faces)}), got "
-                             f"{uv.shape} and {usable.shape}")
-        if area is None:
-            p = uv[:, faces].astype(np.float64)
-            e1, e2 = p[:, :, 1] - p[:, :, 0], p[:, :, 2] - p[:, :, 0]
-            area = 0.5 * np.abs(e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0])
-        area = np.broadcast_to(np.asarray(area, dtype=np.float32), (V, F))
-        cos = np.ones((V, F), np.float32) if cos_angle is None else np.broadcast_to(np.asarray(cos_angle, np.float32),
-                                                                                    (V, F))
-        names = tuple(view_names)
-        records = []
-        for v in range(V):
-            ids = np.flatnonzero(usable[v])
-            records.append(_record(ids, area[v, ids], cos[v, ids], names[v] if v < len(names) else str(v)))
-        z = np.ones(uv.shape[:2], np.float32) if depth is None else np.asarray(depth, np.float32)
-        return cls(mesh=mesh, records=tuple(records), stats={}, view_names=names, uv_table=(uv, z))
 
     # ---- shape ---------------------------------------------------------------------------
 
@@ -265,6 +209,9 @@ class Visibility(UsableFaces):
         ids = np.asarray(vertex_ids, dtype=np.int64).reshape(-1)
         if self.uv_table is not None:
             return self.uv_table[0][v][ids], self.uv_table[1][v][ids]
+        if self.cameras is None:
+            raise InputError("this visibility holds no vertex projections (Visibility.from_dense without uv=): it "
+                             "serves the view selection only")
         n = self._XT.shape[1]
         if 12 * n * self.n_views <= CACHE_BYTES:  # every view's whole projection fits the cache: keep them
             uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
@@ -320,84 +267,9 @@ class Visibility(UsableFaces):
             out[fs] = self.vertex_uv(int(v), faces[fs].reshape(-1)).reshape(-1, 3, 2)
         return np.round(out * FACE_UV_STEPS) / FACE_UV_STEPS
 
-    def stage_masks(self) -> dict[str, np.ndarray]:
-        """Cumulative (V, F) masks as in the paper's Figure 3.
-
-        Keys ``"valid"``, ``"+occlusion"``, ``"+depth"``, ``"+oblique"`` (= ``usable``).
-        """
-        return {"valid": self.valid, "+occlusion": self._dense_mask(lambda f: (f & OCCLUDED) == 0),
-                "+depth": self._dense_mask(lambda f: (f & (OCCLUDED | DEPTH)) == 0), "+oblique": self.usable}
-
-    # ---- dense views (on demand, cached) -------------------------------------------------
-
-    def _dense_mask(self, keep) -> np.ndarray:
-        M = np.zeros((self.n_views, self.n_faces), dtype=bool)
-        for v, r in enumerate(self.records):
-            M[v, r.faces[keep(r.flags)]] = True
-        M.setflags(write=False)
-        return M
-
-    def _dense_values(self, name: str) -> np.ndarray:
-        M = np.zeros((self.n_views, self.n_faces), dtype=np.float32)
-        for v, r in enumerate(self.records):
-            M[v, r.faces] = getattr(r, name)
-        M.setflags(write=False)
-        return M
-
     @cached_property
     def _XT(self) -> np.ndarray:
         return np.ascontiguousarray(np.asarray(self.mesh.vertices, dtype=np.float64).T)
-
-    @cached_property
-    def valid(self) -> np.ndarray:
-        return self._dense_mask(lambda f: np.ones(len(f), bool))
-
-    @cached_property
-    def occluded(self) -> np.ndarray:
-        return self._dense_mask(lambda f: (f & OCCLUDED) != 0)
-
-    @cached_property
-    def depth_inconsistent(self) -> np.ndarray:
-        return self._dense_mask(lambda f: (f & DEPTH) != 0)
-
-    @cached_property
-    def oblique(self) -> np.ndarray:
-        return self._dense_mask(lambda f: (f & OBLIQUE) != 0)
-
-    @cached_property
-    def usable(self) -> np.ndarray:
-        return self._dense_mask(lambda f: f == 0)
-
-    @cached_property
-    def area(self) -> np.ndarray:
-        return self._dense_values("area")
-
-    @cached_property
-    def cos_angle(self) -> np.ndarray:
-        return self._dense_values("cos_angle")
-
-    def _dense_projection(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.uv_table is not None:
-            return self.uv_table
-        N = len(self.mesh.vertices)
-        uv = np.empty((self.n_views, N, 2), np.float32)
-        z = np.empty((self.n_views, N), np.float32)
-        allv = np.arange(N)
-        for v in range(self.n_views):
-            uv[v], z[v] = self.vertex_projection(v, allv)
-        return uv, z
-
-    @cached_property
-    def uv(self) -> np.ndarray:
-        out = np.array(self._dense_projection()[0])
-        out.setflags(write=False)
-        return out
-
-    @cached_property
-    def depth(self) -> np.ndarray:
-        out = np.array(self._dense_projection()[1])
-        out.setflags(write=False)
-        return out
 
     @property
     def nbytes(self) -> int:

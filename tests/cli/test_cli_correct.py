@@ -30,18 +30,21 @@ def test_correct_writes_images_scene_report_and_chains(synth, tmp_path):
         assert v.depth == orig.depth  # depth maps still point at the originals
         assert read_image(v.image).dtype == np.uint8
     rep = json.loads((out / "report.json").read_text())
-    assert rep["method"] == "seqcc-global" and rep["reference"] in scene.names  # the default
-    assert rep["graph_edges"] and {"a", "b", "n", "weight"} <= set(rep["graph_edges"][0])
-    assert set(rep["paths"]) | set(rep["unreachable"]) == set(scene.names)
+    c = rep["correction"]  # report.schema: the correction where run's report has it
+    assert rep["schema"] == "o3d_seqcc.report/2" and rep["command"] == "correct"
+    assert c["method"] == "seqcc-global" and c["reference"] in scene.names  # the default
+    assert c["graph_edges"] and {"a", "b", "n", "weight"} <= set(c["graph_edges"][0])
+    assert set(c["paths"]) | set(c["unreachable"]) == set(scene.names)
     assert rep["metrics"]["after"]["ciede2000"]["mean"] < rep["metrics"]["before"]["ciede2000"]["mean"]
-    assert len(rep["lookup_tables"]["tables"]) == len(scene.names)
-    assert "fit" in rep["timings"]
+    assert len(c["lookup_tables"]["tables"]) == len(scene.names)
+    assert "fit" in c["timings_s"] and {"mappings", "correction", "metrics", "write_images", "report"} <= set(rep["timings_s"])
+    assert rep["files"]["scene_json"] == str(out / "scene.json")
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary leftovers
     # refuses a non-empty OUT, replaces it with --overwrite
     assert main(["correct", str(scene_json), "--out", str(out), "--method", "none"]) == 2
-    assert json.loads((out / "report.json").read_text())["method"] == "seqcc-global"
+    assert json.loads((out / "report.json").read_text())["correction"]["method"] == "seqcc-global"
     assert main(["correct", str(scene_json), "--out", str(out), "--method", "none", "--overwrite"]) == 0
-    assert json.loads((out / "report.json").read_text())["method"] == "none"
+    assert json.loads((out / "report.json").read_text())["correction"]["method"] == "none"
     # chains: the corrected scene is a valid input of the next command
     assert main(["info", str(out / "scene.json")]) == 0
 
@@ -59,7 +62,7 @@ def test_correct_sixteen_bit_and_bad_reference(synth, tmp_path, capsys):
     assert main(["correct", str(s16), "--out", str(out), "--no-metrics"]) == 0
     img = read_image(out / "images" / f"{scene.names[1]}.png")
     assert img.dtype == np.uint16
-    assert "metrics" not in json.loads((out / "report.json").read_text())
+    assert json.loads((out / "report.json").read_text())["metrics"] is None
     assert main(["correct", str(s16), "--out", str(tmp_path / "x"), "--reference", "nope"]) == 2
     err = capsys.readouterr().err
     assert "nope" in err and scene.names[0] in err

@@ -98,27 +98,36 @@ DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area",
 
 
 def test_default_run_builds_no_views_by_faces_array(tmp_path, monkeypatch):
-    """`o3d-seqcc run`'s path (pipeline.run + save, report included) reads the sparse per-view records only:
-    every dense (V, F) property of Visibility raises inside the run."""
+    """`o3d-seqcc run`'s whole path (the command: load, pipeline.run, the export, selection.png, Table 2 and the
+    report) reads the sparse per-view records only: every dense (V, F) view of a visibility raises inside it
+    (the properties, :meth:`to_dense` of Visibility and of the selection's ScoredVisibility, DenseVisibility)."""
+    from o3d_seqcc.cli import main
+    from o3d_seqcc.texturing.data_costs import ScoredVisibility
     from o3d_seqcc.visibility.compute import Visibility
+    from o3d_seqcc.visibility.dense import DenseVisibility
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=6, width=160, height=120, cell_size=0.15)
     used = []
 
     def forbidden(name):
-        def get(self):
+        def get(self, *a, **k):
             used.append(name)
             raise AssertionError(f"dense Visibility.{name} read on the default path")
-        return property(get)
+        return get
 
-    for name in (*DENSE, "stage_masks"):
+    for name in DENSE:
+        monkeypatch.setattr(Visibility, name, property(forbidden(name)))
+    for name in ("stage_masks", "to_dense", "_dense_mask", "_dense_values", "_dense_projection"):
         monkeypatch.setattr(Visibility, name, forbidden(name))
+    monkeypatch.setattr(ScoredVisibility, "to_dense", forbidden("ScoredVisibility.to_dense"))
+    monkeypatch.setattr(DenseVisibility, "__init__", forbidden("DenseVisibility"))
     res = sc.pipeline.run(tmp_path / "room", t_npm=50)
     res.save(tmp_path / "out")
+    assert main(["-q", "run", str(tmp_path / "room"), "--out", str(tmp_path / "cli"), "--t-npm", "50"]) == 0
     assert used == []
-    assert (tmp_path / "out" / "report.html").is_file()
+    assert (tmp_path / "out" / "report.html").is_file() and (tmp_path / "cli" / "report.html").is_file()
     monkeypatch.undo()
-    assert res.visibility.usable.shape == (6, len(res.selection))  # the dense views still exist for tests
+    assert res.visibility.to_dense().usable.shape == (6, len(res.selection))  # the dense views still exist for tests
 
 
 def _digest(folder) -> dict:

@@ -204,7 +204,7 @@ def test_loader_table_checks(tmp_path, colmap_model):
     with pytest.raises(InputError) as e:
         load_scene(tmp_path / "empty")
     assert all(f.description in str(e.value) for f in SCENE_FORMATS.values())
-    with pytest.raises(InputError, match="unknown scene format 'ply'; valid: 'auto', 'scene.json'"):
+    with pytest.raises(InputError, match="unknown scene format 'ply'; valid: colmap, meshlab, meshroom, openmvs, rgbd-folder, scene.json, or 'auto'"):
         load_scene(root / "sparse_txt", format="ply", mesh=mesh)
     with pytest.raises(InputError, match="is not a MeshLab project"):
         load_scene(root / "sparse_txt", format="meshlab", mesh=mesh)

@@ -166,7 +166,7 @@ def test_parameter_list_is_the_library_defaults(capsys):
 
 def test_apply_rejects_bad_calls(tmp_path):
     ms = pymeshlab.MeshSet()
-    with pytest.raises(InputError, match="unknown filter 'seqcc_colour'.*valid: seqcc_color_correct_rasters"):
+    with pytest.raises(InputError, match="unknown MeshLab filter 'seqcc_colour'.*valid: seqcc_color_correct_rasters"):
         mf.apply(ms, "seqcc_colour")
     with pytest.raises(TypeError, match=r"unknown parameter\(s\) \['t_npm'\]; valid: reference, method, tnpm"):
         mf.apply(ms, "seqcc_color_correct_rasters", t_npm=50)

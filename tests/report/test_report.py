@@ -226,7 +226,9 @@ def test_table2_is_what_correct_gives_with_the_command_the_report_names(run_dir,
     argv[argv.index("OUT")] = str(tmp_path / "c")
     assert main(["-q", *argv]) == 0
     ran, full = (json.loads((d / "report.json").read_text()) for d in (run_dir, tmp_path / "c"))
-    assert full["reference"] == ran["correction"]["reference"] and full["paths"] == ran["correction"]["paths"]
+    assert full["correction"]["reference"] == ran["correction"]["reference"]
+    assert full["correction"]["paths"] == ran["correction"]["paths"]
+    assert list(full) == list(ran) and full["schema"] == ran["schema"]  # one report.json schema for both commands
     # the same correction scored on the same mappings (a small scene: all of them): the same table
     assert "gives this very table" in sec["table2"]
     page_c = _sections((tmp_path / "c" / "report.html").read_text(encoding="utf-8"))["table2"]

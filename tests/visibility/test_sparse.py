@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pickle
-from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -19,7 +18,7 @@ from o3d_seqcc.mappings.pairs import shared_counts
 from o3d_seqcc.texturing import select_views
 from o3d_seqcc.visibility import compute as visibility
 from o3d_seqcc.visibility.per_view import CHUNK_FACES, VisibilityJob
-from o3d_seqcc.visibility.compute import FACE_UV_STEPS, compute_visibility
+from o3d_seqcc.visibility.compute import FACE_UV_STEPS, Visibility, compute_visibility
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +91,8 @@ def test_records_are_sparse_and_match_their_dense_views(wide_scene, cache, monke
 
 def test_selection_from_records_equals_selection_from_dense_arrays(wide_scene):
     vis = compute_visibility(wide_scene)
-    dense = SimpleNamespace(usable=np.array(vis.usable), area=np.array(vis.area), cos_angle=np.array(vis.cos_angle),
-                            n_views=vis.n_views, n_faces=vis.n_faces, mesh=vis.mesh)
+    d = vis.to_dense(projections=False)
+    dense = Visibility.from_dense(vis.mesh, np.array(d.usable), area=np.array(d.area), cos_angle=np.array(d.cos_angle))
     adj = face_adjacency(vis.mesh.faces, vis.mesh.vertices)
     for method, opts in (("largest-area", {}), ("random", {}), ("mrf", {"adjacency": adj}),
                          ("mrf", {"adjacency": adj, "data_term": "log-area-cos", "smoothness": 1.5})):

@@ -39,7 +39,7 @@ from __future__ import annotations
 import logging
 import numpy as np
 
-from ..base import IdentityTransform, LutTransform, register_method
+from ..base import IdentityTransform, LutTransform
 from ...errors import InputError
 
 __all__ = [
@@ -156,7 +156,6 @@ def gain_compensation_gains(
     return gains
 
 
-@register_method("gain-compensation")
 def gain_compensation(
     ctx,
     *,
@@ -325,7 +324,6 @@ def histogram_matching_params(
     return gains, offsets, gammas
 
 
-@register_method("histogram-matching")
 def histogram_matching(
     ctx,
     *,

@@ -17,18 +17,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..cmf import fit_cmf
-from ..base import CorrectionContext, IdentityTransform, lut_per_path, register_method, sequential
+from ..base import CorrectionContext, IdentityTransform, lut_per_path, sequential
 
 __all__ = ["lab_reinhard_to_rgb", "rgb_to_lab_reinhard", "root_polynomial_features"]
 
 
-@register_method("none", needs_graph=False)
 def _method_none(ctx: CorrectionContext) -> list:
     return [IdentityTransform() for _ in ctx.images]
 
 
 
-@register_method("vandermonde")
 def _method_vandermonde(ctx: CorrectionContext, *, degree: int = 3) -> list:
     """Per-channel polynomial CMF (Vandermonde least squares, De Marchi), composed along paths."""
 
@@ -65,7 +63,6 @@ def lab_reinhard_to_rgb(lab: np.ndarray) -> np.ndarray:
     return (10.0 ** (np.asarray(lab, dtype=np.float64) @ _LAB2LMS.T)) @ _LMS2RGB.T
 
 
-@register_method("reinhard")
 def _method_reinhard(ctx: CorrectionContext) -> list:
     """Reinhard et al. (2001) mean/std transfer in l-alpha-beta, per path edge, sequentially."""
 
@@ -91,7 +88,6 @@ def root_polynomial_features(rgb: np.ndarray) -> np.ndarray:
     return np.stack([r, g, b, np.sqrt(r * g), np.sqrt(g * b), np.sqrt(r * b)], axis=1)
 
 
-@register_method("root-polynomial")
 def _method_root_polynomial(ctx: CorrectionContext) -> list:
     """Finlayson et al. (2015) degree-2 root-polynomial regression per path edge, sequentially."""
 

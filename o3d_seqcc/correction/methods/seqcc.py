@@ -24,7 +24,7 @@ import numpy as np
 from ..cmf import QUANTILE_TRIM, fit_cmf
 from ..luts import apply_lut
 from ..jih import jih_samples, joint_histogram
-from ..base import CorrectionContext, fit_context, lut_per_path, register_method
+from ..base import CorrectionContext, fit_context, lut_per_path
 
 __all__ = ["colour_inliers", "quantile_luts"]
 
@@ -99,7 +99,6 @@ def colour_inliers(ct: np.ndarray, cs: np.ndarray, lut: np.ndarray, *, k: float 
     return np.sqrt((z**2).sum(1)) <= k * np.sqrt(3.0)
 
 
-@register_method("seqcc")
 def _method_seqcc(
     ctx: CorrectionContext,
     *,
@@ -184,7 +183,6 @@ def _options_of(fn: Callable, **defaults) -> Callable[[Callable], Callable]:
     return deco
 
 
-@register_method("seqcc-joint")
 @_options_of(_method_seqcc, outlier_k=None)
 def _method_seqcc_joint(ctx: CorrectionContext, *, cmf_options: dict | None = None, **options) -> list:
     """``seqcc`` with the paper's literal CMF input: regression on the JIH's joint observations.

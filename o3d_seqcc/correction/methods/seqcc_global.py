@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..luts import extend_curve, extend_line
-from ..base import CorrectionContext, IdentityTransform, LutTransform, lut_per_path, register_method
+from ..base import CorrectionContext, IdentityTransform, LutTransform, lut_per_path
 from .edge_summaries import EdgeObservations, edge_observations, edge_quantiles
 from .joint_curves import linear_start, refine_curves
 from .seqcc import _method_seqcc, colour_inliers, quantile_luts
@@ -113,7 +113,6 @@ def sequential_start(
     return start
 
 
-@register_method("seqcc-global")
 def method_seqcc_global(
     ctx: CorrectionContext,
     *,
