@@ -46,7 +46,8 @@ from ..errors import InputError
 from ..imageops import img_as_uint8
 from ..meshops import face_adjacency, vertex_normals, weld_vertices
 from ..progress import steps
-from .bake import barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, sample_image
+from .bake import (barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, release_free_memory,
+                   sample_image)
 from .charts import build_charts
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
@@ -57,6 +58,9 @@ from .textured_mesh import TexturedMesh
 __all__ = ["bake_texture", "push_pull_fill"]
 
 logger = logging.getLogger(__name__)
+
+#: texels per step where a per-texel expression would otherwise make (n, 3, 3) temporaries
+_TEXEL_CHUNK = 1 << 22
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
@@ -172,6 +176,8 @@ def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
     corner_mean = np.full((F, 3, 3), np.nan)
     corner_point = np.full((F, 3, 3), np.nan)
     t_order, t_views, t_bounds = _groups(labels[face])
+    if len(face) < 2**31:
+        t_order = t_order.astype(np.int32)  # held through the whole pass: half the bytes
     fuv32 = fuv.astype(np.float32)
     f_order, f_views, f_bounds = _groups(labels)
     t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
@@ -192,8 +198,12 @@ def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
         if int(v) in t_pos:
             a, b = t_pos[int(v)]
             ts = t_order[a:b]
-            src = _interp(bary[ts], fuv32[face[ts]])
+            src = np.empty((len(ts), 2), dtype=np.float32)
+            for c in range(0, len(ts), _TEXEL_CHUNK):  # (chunk, 3, 2) corners at a time
+                tc = ts[c:c + _TEXEL_CHUNK]
+                src[c:c + len(tc)] = _interp(bary[tc], fuv32[face[tc]])
             col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
+            del src
         del img
     return col, corner_mean, corner_point
 
@@ -219,23 +229,31 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_pack = time.perf_counter()
     step("rasterize")
     seen = labels >= 0
-    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    # per texel: int32 canvas index and face (compact) where the canvas allows, float32 barycentrics
+    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
+                                         compact=True)
     eidx, eface = edge_texels(ctxy, cs.faces, tidx, H, S)  # slivers own the texels under their edges
-    o = np.argsort(np.r_[tidx, eidx], kind="stable")
-    cidx, cface = np.r_[tidx, eidx][o], np.r_[tface, eface][o]
+    # covered texels ascending: the edge texels (none of them covered) merged into the face texels
+    pos = np.searchsorted(tidx, eidx)
+    cidx, cface = np.insert(tidx, pos, eidx), np.insert(tface, pos, eface)
+    del pos
     gidx, gface = gutter_texels(cidx, cface, H, S, reach=float(s.padding) + 1.0 if s.padding > 0 else 0.0)
+    del cidx, cface
     xidx = np.r_[eidx, gidx]
     xface = np.r_[eface, gface]
     gy, gx = np.divmod(xidx, S)
-    idx = np.r_[tidx, xidx]
-    face = np.r_[tface, xface]
+    idx = np.concatenate([tidx, xidx.astype(tidx.dtype)])
+    face = np.concatenate([tface, xface.astype(tface.dtype)])
     n_face = len(tidx)  # texels inside faces first, then under thin faces' edges and in gutters
+    del tidx, tface
     bary = np.concatenate([tbary, barycentric(ctxy, cs.faces, xface, gx.astype(np.float64),
                                               gy.astype(np.float64)).astype(np.float32)])
-    del tidx, tface, tbary, gx, gy, eidx, eface, cidx, cface, xidx, xface
+    del tbary, gx, gy, eidx, eface, gidx, gface, xidx, xface
+    release_free_memory()
     t_raster = time.perf_counter()
     step("sample")
     col, corner_mean, corner_point = _per_view_pass(views_images, labels, fuv, face, bary, pk.texels_per_pixel)
+    release_free_memory()
     t_sample = time.perf_counter()
     step("seam leveling")
     lev_stats = corner_off = None
@@ -257,11 +275,16 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
     if corner_off is not None or n_unseen:
         bary[n_face:] = _clip_bary(bary[n_face:])  # gutter texels: the nearest point of the face
-        col += _interp(bary, add[face])
+        for a in range(0, len(col), _TEXEL_CHUNK):  # (chunk, 3, 3) corner values at a time, not (n, 3, 3)
+            b = a + _TEXEL_CHUNK
+            col[a:b] += _interp(bary[a:b], add[face[a:b]])
     del bary, add
     canvas = np.zeros((H * S, 3), dtype=np.uint8)
-    canvas[idx] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+    np.rint(col, out=col)
+    np.clip(col, 0, 255, out=col)
+    canvas[idx] = col.astype(np.uint8)
     del col
+    release_free_memory()
     written = np.zeros(H * S, dtype=bool)
     written[idx] = True
     t_level = time.perf_counter()
@@ -272,9 +295,9 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(s.padding))
     elif s.local_leveling:
         region = np.full(H * S, -1, dtype=np.int32)
-        rc = cs.face_chart[face]
-        region[idx] = np.where(rc < cs.n_image, rc, -1)  # image charts (with absorbed faces), not the fallback region
-        del rc
+        for a in range(0, len(idx), _TEXEL_CHUNK):
+            rc = cs.face_chart[face[a:a + _TEXEL_CHUNK]]
+            region[idx[a:a + _TEXEL_CHUNK]] = np.where(rc < cs.n_image, rc, -1)  # image charts, not the fallback region
         tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
                                                adjacency, wf, band=int(s.local_band))
         del region
@@ -284,10 +307,14 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_local = time.perf_counter()
     step("gutters")
     n_texels = len(idx)
-    del canvas, idx, face  # the atlas-sized index arrays (16 bytes per written texel) are done
+    del canvas, idx, face  # the atlas-sized index arrays (8 or 16 bytes per written texel) are done
+    release_free_memory()
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
-        tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
+        if P == 1:  # (the same pixels as the concatenation of one page, without its copy)
+            tex = push_pull_fill(tex, w2)
+        else:
+            tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
     t_end = time.perf_counter()
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])

@@ -358,23 +358,37 @@ def local_seam_leveling(
     # the extension front and the smoothing do not depend on the values: their factors serve every pass
     bc = cv2.BORDER_CONSTANT
     # (held sparse: each factor is 0, or 1 for ``keep``, off the few texels a step reaches, where it changes nothing)
-    K = seed
+    # (the planes of the front are reused in place: four float planes besides ``dom`` and ``seed``, not eight)
+    K = seed.copy()
+    c, upd, tmp = np.empty_like(seed), np.empty_like(seed), np.empty_like(seed)
     grow = []
     for _ in range((int(band) + 1) // 2):  # two texels per step
-        c = cv2.boxFilter(K, -1, (5, 5), normalize=False, borderType=bc)
-        upd = cv2.multiply(cv2.subtract(dom, K), cv2.threshold(c, 1e-3, 1.0, cv2.THRESH_BINARY)[1])
+        cv2.boxFilter(K, -1, (5, 5), dst=c, normalize=False, borderType=bc)
+        cv2.subtract(dom, K, dst=upd)
+        cv2.threshold(c, 1e-3, 1.0, cv2.THRESH_BINARY, dst=tmp)
+        cv2.multiply(upd, tmp, dst=upd)
         ring = np.flatnonzero(upd)
-        grow.append((ring, cv2.divide(upd, cv2.max(c, 1e-3)).reshape(-1)[ring]))  # upd is 0 where c is
-        K = cv2.add(K, upd)
-    del dom, c, upd
+        cv2.max(c, 1e-3, dst=c)
+        cv2.divide(upd, c, dst=tmp)
+        grow.append((ring, tmp.reshape(-1)[ring]))  # upd is 0 where c is
+        cv2.add(K, upd, dst=K)
+    del dom, c, upd, tmp
     free = cv2.subtract(K, seed)  # extended, non-seed texels (0 or 1): keep = 1 - free, smooth = free / box(K)
     ext = np.flatnonzero(free)
     keep = (np.float32(1.0) - free.reshape(-1)[ext]).astype(np.float32)
     smooth = cv2.divide(free, cv2.max(cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc), 1e-3)).reshape(-1)[ext]
+    del free
     dist = cv2.distanceTransform((seed == 0).astype(np.uint8), cv2.DIST_L2, 3)
-    tt = np.clip(1.0 - (dist - 1.0) / float(band), 0.0, 1.0)
-    del free, seed
-    fall = (tt * tt * (3.0 - 2.0 * tt) * K).astype(np.float32)  # P holds value x known, K in {0, 1}
+    del seed
+    # tt = clip(1 - (dist - 1) / band, 0, 1) and fall = tt * tt * (3 - 2 tt) * K, the same operations in place
+    dist -= 1.0
+    dist /= float(band)
+    tt = np.subtract(1.0, dist, out=dist)
+    np.clip(tt, 0.0, 1.0, out=tt)
+    fall = tt * tt
+    fall *= 3.0 - 2.0 * tt
+    fall *= K  # P holds value x known, K in {0, 1}
+    fall = fall.astype(np.float32, copy=False)
     del dist, tt, K  # of the atlas-sized float planes only the factors of the passes stay
     touched = fall > 0
     fall_t = fall[touched][:, None]
