@@ -61,6 +61,8 @@ logger = logging.getLogger(__name__)
 
 #: texels per step where a per-texel expression would otherwise make (n, 3, 3) temporaries
 _TEXEL_CHUNK = 1 << 22
+#: texels grouped by view and sampled per block of the bake's pass over the views (:func:`_per_view_pass`)
+_SAMPLE_TEXELS = 1 << 24
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
@@ -170,41 +172,59 @@ def bake_texture(
 
 
 def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
-    """One pass over the views: texel colours of every face from its view, and its corners' colours."""
+    """Passes over the views: texel colours of every face from its view, and its corners' colours.
+
+    The texels are taken :data:`_SAMPLE_TEXELS` at a time (their grouping by view, 14 bytes per
+    texel, is made for one block, not for the whole atlas); the first block's pass also reads
+    every view's corner colours, later blocks read only the views they sample. Every texel's
+    colour is computed on its own, so the blocks change no value.
+    """
     F = len(labels)
-    col = np.zeros((len(face), 3), dtype=np.float32)
+    n = len(face)
+    col = np.zeros((n, 3), dtype=np.float32)
     corner_mean = np.full((F, 3, 3), np.nan)
     corner_point = np.full((F, 3, 3), np.nan)
-    t_order, t_views, t_bounds = _groups(labels[face])
-    if len(face) < 2**31:
-        t_order = t_order.astype(np.int32)  # held through the whole pass: half the bytes
     fuv32 = fuv.astype(np.float32)
     f_order, f_views, f_bounds = _groups(labels)
-    t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
-    for i, v in enumerate(f_views):
-        if v < 0:
-            continue
-        img = img_as_uint8(views_images[v], where=f"image of view {v}")
-        fs = f_order[f_bounds[i]:f_bounds[i + 1]]
-        p = fuv[fs]
-        h, w = img.shape[:2]
-        out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
-        if out.any():
-            bad = fs[out.any(axis=1)]
-            raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which they "
-                             "project outside the image: select only usable views (select_views does)")
-        m, pt = corner_colors(img, p.reshape(-1, 2))
-        corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
-        if int(v) in t_pos:
-            a, b = t_pos[int(v)]
-            ts = t_order[a:b]
-            src = np.empty((len(ts), 2), dtype=np.float32)
-            for c in range(0, len(ts), _TEXEL_CHUNK):  # (chunk, 3, 2) corners at a time
-                tc = ts[c:c + _TEXEL_CHUNK]
-                src[c:c + len(tc)] = _interp(bary[tc], fuv32[face[tc]])
-            col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
-            del src
-        del img
+    key = labels.astype(np.int16 if labels.max(initial=0) < 2**15 else np.int32)
+    for start in range(0, max(n, 1), _SAMPLE_TEXELS):
+        stop = min(n, start + _SAMPLE_TEXELS)
+        keys = key[face[start:stop]]
+        t_order = np.argsort(keys, kind="stable")  # the texels of the block grouped by view, in order
+        ks = keys[t_order]
+        del keys
+        cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, dtype=np.int64)
+        t_views, t_bounds = ks[cut], np.r_[cut, len(ks)]
+        del ks, cut
+        t_order = (t_order + start).astype(np.int32 if n < 2**31 else np.int64)
+        t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
+        first = start == 0
+        for i, v in enumerate(f_views):
+            if v < 0 or not (first or int(v) in t_pos):
+                continue
+            img = img_as_uint8(views_images[v], where=f"image of view {v}")
+            if first:
+                fs = f_order[f_bounds[i]:f_bounds[i + 1]]
+                p = fuv[fs]
+                h, w = img.shape[:2]
+                out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
+                if out.any():
+                    bad = fs[out.any(axis=1)]
+                    raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which "
+                                     "they project outside the image: select only usable views (select_views does)")
+                m, pt = corner_colors(img, p.reshape(-1, 2))
+                corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
+            if int(v) in t_pos:
+                a, b = t_pos[int(v)]
+                ts = t_order[a:b]
+                src = np.empty((len(ts), 2), dtype=np.float32)
+                for c in range(0, len(ts), _TEXEL_CHUNK):  # (chunk, 3, 2) corners at a time
+                    tc = ts[c:c + _TEXEL_CHUNK]
+                    src[c:c + len(tc)] = _interp(bary[tc], fuv32[face[tc]])
+                col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
+                del src
+            del img
+        del t_order
     return col, corner_mean, corner_point
 
 
