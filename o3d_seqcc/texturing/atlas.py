@@ -46,7 +46,8 @@ from ..errors import InputError
 from ..imaging.arrays import img_as_uint8
 from ..geometry.meshops import face_adjacency, vertex_normals, weld_vertices
 from .._shared.progress import steps
-from .bake import barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, sample_image
+from .bake import (barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, release_free_memory,
+                   sample_image)
 from .charts import build_charts
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
@@ -57,6 +58,11 @@ from .textured_mesh import TexturedMesh
 __all__ = ["bake_texture", "push_pull_fill"]
 
 logger = logging.getLogger(__name__)
+
+#: texels per step where a per-texel expression would otherwise make (n, 3, 3) temporaries
+_TEXEL_CHUNK = 1 << 22
+#: texels grouped by view and sampled per block of the bake's pass over the views (:func:`_per_view_pass`)
+_SAMPLE_TEXELS = 1 << 24
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
@@ -166,35 +172,59 @@ def bake_texture(
 
 
 def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
-    """One pass over the views: texel colours of every face from its view, and its corners' colours."""
+    """Passes over the views: texel colours of every face from its view, and its corners' colours.
+
+    The texels are taken :data:`_SAMPLE_TEXELS` at a time (their grouping by view, 14 bytes per
+    texel, is made for one block, not for the whole atlas); the first block's pass also reads
+    every view's corner colours, later blocks read only the views they sample. Every texel's
+    colour is computed on its own, so the blocks change no value.
+    """
     F = len(labels)
-    col = np.zeros((len(face), 3), dtype=np.float32)
+    n = len(face)
+    col = np.zeros((n, 3), dtype=np.float32)
     corner_mean = np.full((F, 3, 3), np.nan)
     corner_point = np.full((F, 3, 3), np.nan)
-    t_order, t_views, t_bounds = _groups(labels[face])
     fuv32 = fuv.astype(np.float32)
     f_order, f_views, f_bounds = _groups(labels)
-    t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
-    for i, v in enumerate(f_views):
-        if v < 0:
-            continue
-        img = img_as_uint8(views_images[v], where=f"image of view {v}")
-        fs = f_order[f_bounds[i]:f_bounds[i + 1]]
-        p = fuv[fs]
-        h, w = img.shape[:2]
-        out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
-        if out.any():
-            bad = fs[out.any(axis=1)]
-            raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which they "
-                             "project outside the image: select only usable views (select_views does)")
-        m, pt = corner_colors(img, p.reshape(-1, 2))
-        corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
-        if int(v) in t_pos:
-            a, b = t_pos[int(v)]
-            ts = t_order[a:b]
-            src = _interp(bary[ts], fuv32[face[ts]])
-            col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
-        del img
+    key = labels.astype(np.int16 if labels.max(initial=0) < 2**15 else np.int32)
+    for start in range(0, max(n, 1), _SAMPLE_TEXELS):
+        stop = min(n, start + _SAMPLE_TEXELS)
+        keys = key[face[start:stop]]
+        t_order = np.argsort(keys, kind="stable")  # the texels of the block grouped by view, in order
+        ks = keys[t_order]
+        del keys
+        cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, dtype=np.int64)
+        t_views, t_bounds = ks[cut], np.r_[cut, len(ks)]
+        del ks, cut
+        t_order = (t_order + start).astype(np.int32 if n < 2**31 else np.int64)
+        t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
+        first = start == 0
+        for i, v in enumerate(f_views):
+            if v < 0 or not (first or int(v) in t_pos):
+                continue
+            img = img_as_uint8(views_images[v], where=f"image of view {v}")
+            if first:
+                fs = f_order[f_bounds[i]:f_bounds[i + 1]]
+                p = fuv[fs]
+                h, w = img.shape[:2]
+                out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
+                if out.any():
+                    bad = fs[out.any(axis=1)]
+                    raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which "
+                                     "they project outside the image: select only usable views (select_views does)")
+                m, pt = corner_colors(img, p.reshape(-1, 2))
+                corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
+            if int(v) in t_pos:
+                a, b = t_pos[int(v)]
+                ts = t_order[a:b]
+                src = np.empty((len(ts), 2), dtype=np.float32)
+                for c in range(0, len(ts), _TEXEL_CHUNK):  # (chunk, 3, 2) corners at a time
+                    tc = ts[c:c + _TEXEL_CHUNK]
+                    src[c:c + len(tc)] = _interp(bary[tc], fuv32[face[tc]])
+                col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
+                del src
+            del img
+        del t_order
     return col, corner_mean, corner_point
 
 
@@ -219,23 +249,31 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_pack = time.perf_counter()
     step("rasterize")
     seen = labels >= 0
-    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    # per texel: int32 canvas index and face (compact) where the canvas allows, float32 barycentrics
+    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
+                                         compact=True)
     eidx, eface = edge_texels(ctxy, cs.faces, tidx, H, S)  # slivers own the texels under their edges
-    o = np.argsort(np.r_[tidx, eidx], kind="stable")
-    cidx, cface = np.r_[tidx, eidx][o], np.r_[tface, eface][o]
+    # covered texels ascending: the edge texels (none of them covered) merged into the face texels
+    pos = np.searchsorted(tidx, eidx)
+    cidx, cface = np.insert(tidx, pos, eidx), np.insert(tface, pos, eface)
+    del pos
     gidx, gface = gutter_texels(cidx, cface, H, S, reach=float(s.padding) + 1.0 if s.padding > 0 else 0.0)
+    del cidx, cface
     xidx = np.r_[eidx, gidx]
     xface = np.r_[eface, gface]
     gy, gx = np.divmod(xidx, S)
-    idx = np.r_[tidx, xidx]
-    face = np.r_[tface, xface]
+    idx = np.concatenate([tidx, xidx.astype(tidx.dtype)])
+    face = np.concatenate([tface, xface.astype(tface.dtype)])
     n_face = len(tidx)  # texels inside faces first, then under thin faces' edges and in gutters
+    del tidx, tface
     bary = np.concatenate([tbary, barycentric(ctxy, cs.faces, xface, gx.astype(np.float64),
                                               gy.astype(np.float64)).astype(np.float32)])
-    del tidx, tface, tbary, gx, gy, eidx, eface, cidx, cface, xidx, xface
+    del tbary, gx, gy, eidx, eface, gidx, gface, xidx, xface
+    release_free_memory()
     t_raster = time.perf_counter()
     step("sample")
     col, corner_mean, corner_point = _per_view_pass(views_images, labels, fuv, face, bary, pk.texels_per_pixel)
+    release_free_memory()
     t_sample = time.perf_counter()
     step("seam leveling")
     lev_stats = corner_off = None
@@ -257,11 +295,16 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
     if corner_off is not None or n_unseen:
         bary[n_face:] = _clip_bary(bary[n_face:])  # gutter texels: the nearest point of the face
-        col += _interp(bary, add[face])
+        for a in range(0, len(col), _TEXEL_CHUNK):  # (chunk, 3, 3) corner values at a time, not (n, 3, 3)
+            b = a + _TEXEL_CHUNK
+            col[a:b] += _interp(bary[a:b], add[face[a:b]])
     del bary, add
     canvas = np.zeros((H * S, 3), dtype=np.uint8)
-    canvas[idx] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+    np.rint(col, out=col)
+    np.clip(col, 0, 255, out=col)
+    canvas[idx] = col.astype(np.uint8)
     del col
+    release_free_memory()
     written = np.zeros(H * S, dtype=bool)
     written[idx] = True
     t_level = time.perf_counter()
@@ -272,9 +315,9 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(s.padding))
     elif s.local_leveling:
         region = np.full(H * S, -1, dtype=np.int32)
-        rc = cs.face_chart[face]
-        region[idx] = np.where(rc < cs.n_image, rc, -1)  # image charts (with absorbed faces), not the fallback region
-        del rc
+        for a in range(0, len(idx), _TEXEL_CHUNK):
+            rc = cs.face_chart[face[a:a + _TEXEL_CHUNK]]
+            region[idx[a:a + _TEXEL_CHUNK]] = np.where(rc < cs.n_image, rc, -1)  # image charts, not the fallback region
         tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
                                                adjacency, wf, band=int(s.local_band))
         del region
@@ -284,10 +327,14 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_local = time.perf_counter()
     step("gutters")
     n_texels = len(idx)
-    del canvas, idx, face  # the atlas-sized index arrays (16 bytes per written texel) are done
+    del canvas, idx, face  # the atlas-sized index arrays (8 or 16 bytes per written texel) are done
+    release_free_memory()
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
-        tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
+        if P == 1:  # (the same pixels as the concatenation of one page, without its copy)
+            tex = push_pull_fill(tex, w2)
+        else:
+            tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
     t_end = time.perf_counter()
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "row_spans",
-           "sample_image"]
+__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "release_free_memory",
+           "row_spans", "sample_image"]
 
 
 def _area2(p: np.ndarray) -> np.ndarray:
@@ -118,11 +118,37 @@ def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000)
         start = end
 
 
+def release_free_memory() -> None:
+    """Give the C heap's free pages back to the system (glibc ``malloc_trim``; nothing elsewhere).
+
+    Arrays below glibc's dynamic mmap threshold (up to 32 MB: the bake's per-chunk arrays) live
+    in the heap, and once freed their pages stay counted in the process's RSS until trimmed:
+    called where the bake drops many such arrays before making atlas-sized ones.
+    """
+    import ctypes
+    import ctypes.util
+
+    global _LIBC
+    if _LIBC is None:
+        name = ctypes.util.find_library("c")
+        lib = ctypes.CDLL(name) if name else False
+        _LIBC = lib if lib is not False and hasattr(lib, "malloc_trim") else False
+    if _LIBC:
+        _LIBC.malloc_trim(0)
+
+
+_LIBC = None
+
+
 def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int, *,
-                    order: np.ndarray | None = None, chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    order: np.ndarray | None = None, chunk: int = 2_000_000,
+                    compact: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texels whose centre lies in a UV triangle, with their face and barycentric coordinates.
 
-    Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles.
+    Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles. Memory: the
+    chunks keep only their faces (int32) and barycentric coordinates; the texel a chunk entry
+    lands on goes straight into one canvas-sized int32 "last entry wins" map, so the peak is
+    about 16 bytes per entry plus the outputs and 4 bytes per canvas texel.
 
     Parameters
     ----------
@@ -135,22 +161,28 @@ def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
         Drawing order: where triangles overlap, the face drawn last keeps the texel.
     chunk : int
         Texels (estimated from bounding boxes) handled per vectorised step.
+    compact : bool
+        Return ``idx`` and ``face`` as int32 (when the canvas has fewer than 2**31 texels):
+        the same values, half the bytes.
 
     Returns
     -------
-    idx : (n,) int64
+    idx : (n,) int64 (int32 with ``compact``)
         Flat canvas indices (``y * width + x``), ascending, one per covered texel.
-    face : (n,) int64
+    face : (n,) int64 (int32 with ``compact``)
         Its face.
     bary : (n, 3) float32
         Its barycentric coordinates in the face (in [0, 1] up to rounding).
     """
+    small = compact and height * width < 2**31 and len(faces) < 2**31
+    itype = np.int32 if small else np.int64
     fo = np.arange(len(faces)) if order is None else np.asarray(order, dtype=np.int64)
-    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3), dtype=np.float32))
+    empty = (np.zeros(0, dtype=itype), np.zeros(0, dtype=itype), np.zeros((0, 3), dtype=np.float32))
     if len(fo) == 0:
         return empty
     p = np.asarray(txy, dtype=np.float64)[np.asarray(faces)[fo]]
-    parts = []
+    fparts, bparts, offsets = [], [], [0]
+    winner = np.full(height * width, -1, dtype=np.int32)  # the last entry of a texel (the face drawn last) wins
     for k, y, xs, n, a, r in row_spans(p, height, width, chunk=chunk):
         t = np.repeat(np.arange(len(k)), n)  # one entry per texel
         x = xs[t] + (np.arange(len(t)) - np.repeat(np.cumsum(n) - n, n))
@@ -158,17 +190,31 @@ def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
         l0 = a[t, 0] * xf + r[t, 0]
         l1 = a[t, 1] * xf + r[t, 1]
         bary = np.stack([l0, l1, 1.0 - l0 - l1], axis=1).astype(np.float32)
-        parts.append((y[t].astype(np.int64) * width + x, fo[k[t]], bary))
-    if not parts:
+        del xf, l0, l1
+        o = offsets[-1]
+        if o + len(t) >= 2**31 and winner.dtype == np.int32:
+            winner = winner.astype(np.int64)
+        winner[y[t].astype(np.int64) * width + x] = np.arange(o, o + len(t), dtype=winner.dtype)
+        fparts.append(fo[k[t]].astype(np.int32 if len(faces) < 2**31 else np.int64))
+        bparts.append(bary)
+        offsets.append(o + len(t))
+        del t, x, bary
+    if offsets[-1] == 0:
         return empty
-    idx = np.concatenate([q[0] for q in parts])
-    winner = np.full(height * width, -1, dtype=np.int64)
-    winner[idx] = np.arange(len(idx))  # the last entry of a texel (the face drawn last) wins
     cov = np.flatnonzero(winner >= 0)
     w = winner[cov]
     del winner
-    face = np.concatenate([q[1] for q in parts])[w]
-    bary = np.concatenate([q[2] for q in parts])[w]
+    cov = cov.astype(itype, copy=False)
+    face = np.empty(len(cov), dtype=itype)
+    bary = np.empty((len(cov), 3), dtype=np.float32)
+    for i in range(len(fparts)):  # one chunk at a time: no concatenation of all the entries
+        sel = np.flatnonzero((w >= offsets[i]) & (w < offsets[i + 1]))
+        loc = w[sel] - offsets[i]
+        face[sel] = fparts[i][loc]
+        bary[sel] = bparts[i][loc]
+        fparts[i] = bparts[i] = None
+        del sel, loc
+    release_free_memory()
     return cov, face, bary
 
 
@@ -238,9 +284,14 @@ def gutter_texels(idx: np.ndarray, face: np.ndarray, height: int, width: int,
     free[idx] = 0
     dist, lab = cv2.distanceTransformWithLabels(free.reshape(height, width), cv2.DIST_L2, 5,
                                                 labelType=cv2.DIST_LABEL_PIXEL)
-    gidx = np.flatnonzero(((dist <= reach + 1e-3) & (free.reshape(height, width) > 0)).reshape(-1))
+    near = dist <= reach + 1e-3
+    del dist
+    near &= free.reshape(height, width) > 0
+    del free
+    gidx = np.flatnonzero(near.reshape(-1))
+    del near
     # labels enumerate the zero (covered) pixels in raster order, i.e. the ascending idx
-    return gidx, np.asarray(face, dtype=np.int64)[lab.reshape(-1)[gidx] - 1]
+    return gidx, np.asarray(face)[lab.reshape(-1)[gidx] - 1].astype(np.int64)
 
 
 def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:
@@ -272,19 +323,30 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, *, density: fl
         y = (y + 0.5) * (nh / h) - 0.5
     n = len(x)
     cols = 4096
-    rows = max(1, -(-n // cols))
-    mx = np.zeros(rows * cols, np.float32)
-    my = np.zeros(rows * cols, np.float32)
-    mx[:n], my[:n] = x, y
-    mx, my = mx.reshape(rows, cols), my.reshape(rows, cols)
-    out = _remap(img, mx, my, cv2.INTER_LANCZOS4).reshape(-1, 3)[:n].astype(np.float32)
     # the 2 x 2 neighbourhood's range: min / max filters (anchored at the top-left pixel) read at the floor
     k = np.ones((2, 2), np.uint8)
-    fx, fy = np.floor(mx), np.floor(my)
-    lo = _remap(cv2.erode(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE), fx, fy, cv2.INTER_NEAREST)
-    hi = _remap(cv2.dilate(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE), fx, fy, cv2.INTER_NEAREST)
-    np.clip(out, lo.reshape(-1, 3)[:n].astype(np.float32), hi.reshape(-1, 3)[:n].astype(np.float32), out=out)
+    lo_img = cv2.erode(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
+    hi_img = cv2.dilate(img, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
+    out = np.empty((n, 3), dtype=np.float32)
+    step = SAMPLE_CHUNK
+    for a in range(0, max(n, 1), step):  # every point on its own: chunks only bound the temporaries
+        m = min(n, a + step) - a
+        rows = max(1, -(-m // cols))
+        mx = np.zeros(rows * cols, np.float32)
+        my = np.zeros(rows * cols, np.float32)
+        mx[:m], my[:m] = x[a:a + m], y[a:a + m]
+        mx, my = mx.reshape(rows, cols), my.reshape(rows, cols)
+        o = out[a:a + m]
+        o[:] = _remap(img, mx, my, cv2.INTER_LANCZOS4).reshape(-1, 3)[:m]
+        fx, fy = np.floor(mx), np.floor(my)
+        lo = _remap(lo_img, fx, fy, cv2.INTER_NEAREST).reshape(-1, 3)[:m].astype(np.float32)
+        hi = _remap(hi_img, fx, fy, cv2.INTER_NEAREST).reshape(-1, 3)[:m].astype(np.float32)
+        np.clip(o, lo, hi, out=o)
     return out
+
+
+#: points sampled per step by :func:`sample_image` (a multiple of its 4096-point map rows)
+SAMPLE_CHUNK = 1 << 21
 
 
 #: rows of a full-resolution page handled at a time by :func:`push_pull_fill` (even)
@@ -320,11 +382,16 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     B = FILL_BAND_ROWS
     banded = H % 2 == 0 and W % 2 == 0 and H > B
     if banded:  # level 1 from bands of the full-resolution colour x coverage
-        m = np.concatenate([cv2.resize(mask[r:r + B].astype(np.float32), (W // 2, min(B, H - r) // 2),
-                                       interpolation=cv2.INTER_AREA) for r in range(0, H, B)])
-        c = np.concatenate([cv2.resize(img[r:r + B].astype(np.float32) * mask[r:r + B, :, None].astype(np.float32),
-                                       (W // 2, min(B, H - r) // 2), interpolation=cv2.INTER_AREA)
-                            for r in range(0, H, B)])
+        m = np.empty((H // 2, W // 2), dtype=np.float32)
+        c = np.empty((H // 2, W // 2, 3), dtype=np.float32)
+        for r in range(0, H, B):  # written band by band into the level (no list of bands to concatenate)
+            hb = min(B, H - r) // 2
+            mb = mask[r:r + B].astype(np.float32)
+            m[r // 2:r // 2 + hb] = cv2.resize(mb, (W // 2, hb), interpolation=cv2.INTER_AREA)
+            cb = img[r:r + B].astype(np.float32)
+            cb *= mb[..., None]
+            c[r // 2:r // 2 + hb] = cv2.resize(cb, (W // 2, hb), interpolation=cv2.INTER_AREA)
+            del mb, cb
         levels = [(c, m)]
     else:
         m = mask.astype(np.float32)

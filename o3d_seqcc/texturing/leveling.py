@@ -269,6 +269,14 @@ def _seam_edge_corners(wf: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, n
     return cp, cq
 
 
+def _reciprocal(box: np.ndarray) -> np.ndarray:
+    """(n,) float32 ``1 / max(box, 1e-3)`` of small integer box sums, as ``cv2.divide`` gives it on float32 planes."""
+    import cv2
+
+    b = np.ascontiguousarray(box, dtype=np.float32).reshape(-1, 1)
+    return cv2.divide(np.ones_like(b), cv2.max(b, 1e-3)).reshape(-1)
+
+
 def local_seam_leveling(
     tex: np.ndarray, region: np.ndarray, txy: np.ndarray, new_faces: np.ndarray, face_chart: np.ndarray,
     labels: np.ndarray, adjacency: np.ndarray, wf: np.ndarray, *, band: int, smooth_iters: int = 1,
@@ -349,32 +357,45 @@ def local_seam_leveling(
     edge[:, 1:] |= reg[:, 1:] != reg[:, :-1]
     edge[:, :-1] |= reg[:, :-1] != reg[:, 1:]
     edge = cv2.dilate(edge, np.ones((3, 3), np.uint8))
-    dom = ((reg >= 0) & (edge == 0)).astype(np.float32)
+    # the domain, the seeds and the front are 0 / 1 planes and their 5 x 5 / 3 x 3 box sums small
+    # integers: held as uint8 (exact, a quarter of float32's bytes); the factors of the front's
+    # steps (1 / box sum) are divided as float32 at the texels that use them
+    dom = ((reg >= 0) & (edge == 0)).astype(np.uint8)
     del edge
     is_seed = (wsum > 1e-6) & (dom.reshape(-1)[uniq] > 0)
-    seed = np.zeros(R * S, dtype=np.float32)
-    seed[uniq[is_seed]] = 1.0
+    seed = np.zeros(R * S, dtype=np.uint8)
+    seed[uniq[is_seed]] = 1
     seed = seed.reshape(R, S)
     # the extension front and the smoothing do not depend on the values: their factors serve every pass
     bc = cv2.BORDER_CONSTANT
     # (held sparse: each factor is 0, or 1 for ``keep``, off the few texels a step reaches, where it changes nothing)
-    K = seed
+    K = seed.copy()
+    c, upd = np.empty_like(seed), np.empty_like(seed)
     grow = []
     for _ in range((int(band) + 1) // 2):  # two texels per step
-        c = cv2.boxFilter(K, -1, (5, 5), normalize=False, borderType=bc)
-        upd = cv2.multiply(cv2.subtract(dom, K), cv2.threshold(c, 1e-3, 1.0, cv2.THRESH_BINARY)[1])
+        cv2.boxFilter(K, -1, (5, 5), dst=c, normalize=False, borderType=bc)
+        cv2.subtract(dom, K, dst=upd)  # K lies inside dom: 0 or 1
+        upd[c == 0] = 0
         ring = np.flatnonzero(upd)
-        grow.append((ring, cv2.divide(upd, cv2.max(c, 1e-3)).reshape(-1)[ring]))  # upd is 0 where c is
-        K = cv2.add(K, upd)
+        grow.append((ring, _reciprocal(c.reshape(-1)[ring])))  # upd / box5(K), upd = 1 on the ring
+        cv2.add(K, upd, dst=K)
     del dom, c, upd
     free = cv2.subtract(K, seed)  # extended, non-seed texels (0 or 1): keep = 1 - free, smooth = free / box(K)
     ext = np.flatnonzero(free)
-    keep = (np.float32(1.0) - free.reshape(-1)[ext]).astype(np.float32)
-    smooth = cv2.divide(free, cv2.max(cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc), 1e-3)).reshape(-1)[ext]
+    keep = (np.float32(1.0) - free.reshape(-1)[ext].astype(np.float32)).astype(np.float32)
+    smooth = _reciprocal(cv2.boxFilter(K, -1, (3, 3), normalize=False, borderType=bc).reshape(-1)[ext])
+    del free
     dist = cv2.distanceTransform((seed == 0).astype(np.uint8), cv2.DIST_L2, 3)
-    tt = np.clip(1.0 - (dist - 1.0) / float(band), 0.0, 1.0)
-    del free, seed
-    fall = (tt * tt * (3.0 - 2.0 * tt) * K).astype(np.float32)  # P holds value x known, K in {0, 1}
+    del seed
+    # tt = clip(1 - (dist - 1) / band, 0, 1) and fall = tt * tt * (3 - 2 tt) * K, the same operations in place
+    dist -= 1.0
+    dist /= float(band)
+    tt = np.subtract(1.0, dist, out=dist)
+    np.clip(tt, 0.0, 1.0, out=tt)
+    fall = tt * tt
+    fall *= 3.0 - 2.0 * tt
+    fall *= K  # P holds value x known, K in {0, 1}
+    fall = fall.astype(np.float32, copy=False)
     del dist, tt, K  # of the atlas-sized float planes only the factors of the passes stay
     touched = fall > 0
     fall_t = fall[touched][:, None]
