@@ -23,7 +23,7 @@ TREE: dict[str, set[str]] = {
     "_shared": {"__init__", "arguments", "interrupts", "lazy", "parallel", "progress", "registry"},
     "imaging": {"__init__", "arrays", "sequences"},
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
-    "visibility": {"__init__", "settings", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
+    "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
                    "compute"},
     "mappings": {"__init__", "pairs", "compute"},
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
@@ -34,7 +34,7 @@ TREE: dict[str, set[str]] = {
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "mappings_npz", "output", "result_files", "export", "gltf_validator"},
-    "report": {"__init__", "page", "viewer", "comparison", "figures", "html", "validate"},
+    "report": {"__init__", "schema", "page", "viewer", "comparison", "figures", "html", "validate"},
     "synthetic": {"__init__", "room", "generate"},
     "cli": {"__init__", "common", "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info",
             "demo", "synthetic"},
@@ -243,8 +243,8 @@ def test_package_inits_import_no_stage_eagerly():
     runs its siblings (and the layers above stay out of the layers below)."""
     graph = direct_imports()
     eager = {pkg: sorted(graph[f"o3d_seqcc.{pkg}"] - {"o3d_seqcc._shared.lazy"})
-             for pkg in ("_shared", "imaging", "geometry", "visibility", "mappings", "evaluation", "io",
-                         "correction.methods")}
+             for pkg in ("_shared", "imaging", "geometry", "visibility", "mappings", "evaluation", "io")}
+    # (correction/methods/__init__.py is the literal method table: it imports its methods by design)
     assert not any(eager.values()), eager
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..imaging.arrays import dtype_scale, img_as_uint8, sample_colors
 from ..evaluation.metrics import thin_indices
+from ..mappings.pairs import thinned
 from .._shared.parallel import carried
 from ..evaluation.render import render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
@@ -147,10 +148,8 @@ def _outlier_k(c) -> float | None:
 
 
 def _thinned_pair(mappings, t: int, s: int, k: int):
-    """``mappings.pair(t, s)`` at :func:`~o3d_seqcc.evaluation.metrics.thin_indices` ``(n, k)`` of its mappings: only those built
-    (:func:`~o3d_seqcc.mappings.pairs.thinned`: the same values as building the whole pair and taking them)."""
-    from ..mappings.pairs import thinned
-
+    """``mappings.pair(t, s)`` at :func:`~o3d_seqcc.evaluation.metrics.thin_indices` ``(n, k)`` of its mappings:
+    only those built (:func:`~o3d_seqcc.mappings.pairs.thinned`: the same values as the whole pair, thinned)."""
     lo, hi = (t, s) if t < s else (s, t)
     if (lo, hi) not in mappings.pairs:
         return mappings.pair(t, s)  # no mappings: the empty pair
@@ -167,9 +166,8 @@ def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
     out = {}
     for t, s in edges:
         pm = _thinned_pair(inp.mappings, t, s, JIH_MAX_MAPPINGS)
-        idx = slice(None)
-        ct = sample_colors(inp.photos[t], pm.uv_a[idx]) / dtype_scale(inp.photos[t].dtype)
-        cs = sample_colors(inp.photos[s], pm.uv_b[idx]) / dtype_scale(inp.photos[s].dtype)
+        ct = sample_colors(inp.photos[t], pm.uv_a) / dtype_scale(inp.photos[t].dtype)
+        cs = sample_colors(inp.photos[s], pm.uv_b) / dtype_scale(inp.photos[s].dtype)
         if k is not None and len(ct):
             lut = inp.correction.edge_luts.get((t, s))
             keep = colour_inliers(ct, cs, quantile_luts(ct, cs, n_out=256 if lut is None else lut.shape[1]), k=float(k))
