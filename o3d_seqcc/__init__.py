@@ -18,6 +18,12 @@ or the whole job with the command line's defaults::
     res = o3d_seqcc.pipeline.run("scene.json")                         # correct + texture
     res.save("out/")                                                   # what `o3d-seqcc run` writes
 
+Every option's default is written once, in a settings object (:class:`VisibilitySettings`,
+:class:`CorrectionSettings`, :class:`TextureSettings`, and :class:`RunSettings` holding them)::
+
+    s = o3d_seqcc.RunSettings.from_options(method="seqcc", max_angle=60)
+    res = o3d_seqcc.pipeline.run("scene.json", settings=s)             # = run(..., method="seqcc", max_angle=60)
+
 Heavy dependencies are imported on first use of a name (PEP 562), so ``import o3d_seqcc`` is
 cheap.
 """
@@ -46,6 +52,10 @@ _LAZY: dict[str, str] = {
     "check_cameras": "visibility.camera_checks",
     "CameraReport": "visibility.camera_checks",
     "Distortion": "geometry.distortion",
+    # settings: every option's default, one object per stage and one for a run
+    "RunSettings": "settings",
+    "VisibilitySettings": "visibility.settings",
+    "CorrectionSettings": "correction.settings",
     # visibility and mappings (paper 3.1-3.2)
     "Visibility": "visibility.compute",
     "compute_visibility": "visibility.compute",
@@ -82,7 +92,7 @@ _LAZY: dict[str, str] = {
     "evaluate_semireal": "evaluation.semireal",
     # texturing, export, seams, renders (3.8)
     "SELECTION_METHODS": "texturing",
-    "TextureSettings": "texturing",
+    "TextureSettings": "texturing.settings",
     "TexturedMesh": "texturing",
     "load_textured_mesh": "texturing",
     "select_views": "texturing",
@@ -111,7 +121,7 @@ _LAZY: dict[str, str] = {
 #: submodules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES = frozenset({
     "correction", "datasets", "demo", "evaluation", "geometry", "imaging", "io", "mappings", "open3d_api",
-    "pipeline", "report", "scene", "synthetic", "texturing", "visibility",
+    "pipeline", "report", "scene", "settings", "synthetic", "texturing", "visibility",
 })
 
 __all__ = [
