@@ -444,3 +444,15 @@ def test_one_name_for_the_mapping_mode(tiny):
     assert seen == {"mappings": "dense"}
     with pytest.raises(TypeError, match="mappings_mode"):  # the old name of correct() is gone (never documented)
         sc.correct(tiny.scene, mappings_mode="dense")
+
+
+def test_every_field_is_documented_with_its_default():
+    """numpydoc ``Attributes``: one entry per field, saying its default (what the filters' and plugin's help shows)."""
+    from meshlab_filters.filters import _doc_entries
+
+    for cls in (VisibilitySettings, CorrectionSettings, TextureSettings, RunSettings):
+        doc = inspect.getdoc(cls)
+        assert set(_doc_entries(cls, "Attributes")) == set(cls.field_names()), cls.__name__
+        for name in cls.field_names():
+            head = next(line for line in doc.splitlines() if line.startswith(name + " :"))
+            assert "default" in head, head

@@ -12,6 +12,7 @@ naming the field and its valid values; an unknown name raises :class:`UnknownSet
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import fields, replace
 from typing import Any, ClassVar, Iterable, Mapping, TypeVar
 
@@ -48,10 +49,13 @@ class SettingsBase:
     @classmethod
     def check_names(cls, names: Iterable[str], *, where: str = "") -> None:
         """Raise :class:`UnknownSettingError` for names that are not fields, listing the valid ones."""
-        bad = sorted(set(names) - set(cls.field_names()))
+        valid = cls.field_names()
+        bad = sorted(set(names) - set(valid))
         if bad:
-            raise UnknownSettingError(f"{where + ': ' if where else ''}unknown {cls._label}(s) {bad}; valid: "
-                                      f"{sorted(cls.field_names())}")
+            close = {b: difflib.get_close_matches(b, valid, n=1) for b in bad}
+            hint = "; ".join(f"did you mean {c[0]!r} for {b!r}?" for b, c in close.items() if c)
+            raise UnknownSettingError(f"{where + ': ' if where else ''}unknown {cls._label}(s) {bad}"
+                                      f"{' (' + hint + ')' if hint else ''}; valid: {sorted(valid)}")
 
     def replace(self: S, **changes: Any) -> S:
         """A copy with some fields changed (validated); unknown names raise :class:`UnknownSettingError`."""

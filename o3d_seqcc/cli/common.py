@@ -91,7 +91,8 @@ def add_correction_arguments(p: argparse.ArgumentParser) -> None:
     """Reference, method, t_npm and mapping mode (``correct`` and ``run``; defaults: :class:`CorrectionSettings`'s)."""
     d = _CORRECTION
     p.add_argument("--reference", default=d.reference,
-                   help=f"reference view name (or index), or 'auto' (default {d.reference})")
+                   help=f"reference view name (or index), or 'auto' (default {d.reference}: the view with the smallest "
+                   "total path cost in the colour-correction graph)")
     p.add_argument("--method", default=d.method, choices=available_methods(), metavar="METHOD",
                    help=f"colour-correction method: {', '.join(available_methods())} (default {d.method}; "
                    "seqcc is the paper's)")
