@@ -45,7 +45,7 @@ def main() -> int:
     for _ in range(args.repeat):
         for method in METHODS:
             t = time.perf_counter()
-            res = correct(scene, reference="auto", method=method, mappings_mode=args.mappings)
+            res = correct(scene, reference="auto", method=method, mappings=args.mappings)
             dt = time.perf_counter() - t
             if dt < best.get(method, float("inf")):
                 best[method] = dt

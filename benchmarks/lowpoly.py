@@ -123,7 +123,7 @@ def _resolution(root: Path) -> dict:
     for mesh in ("mesh_decimated_uv_blender.ply", "tsdf_mesh.ply"):
         scene = sc.datasets.fountain(root, mesh=f"scene/{mesh}")
         vis = sc.compute_visibility(scene)
-        surf, vert = compute_mappings(scene, visibility=vis), compute_mappings(scene, visibility=vis, mode="vertices")
+        surf, vert = compute_mappings(scene, visibility=vis), compute_mappings(scene, visibility=vis, mappings="vertices")
         counts[mesh] = (surf.counts, vert.counts, resolve_t_npm("auto", surf)[0], vis.stats["split"]["input_faces"])
     (a_s, a_v, t, fa), (b_s, b_v, _, fb) = counts.values()
     keys = sorted(set(a_s) & set(b_s))

@@ -110,7 +110,7 @@ def synthetic_quality(n_views: int, width: int, height: int, seed: int) -> None:
 
         for mode in ("vertices", "dense"):
             t = time.perf_counter()
-            M = compute_mappings(scene, mode=mode, visibility=vis)
+            M = compute_mappings(scene, mappings=mode, visibility=vis)
             t_build = time.perf_counter() - t
             ok = n = ok_grid = 0
             err_max = 0.0
@@ -189,7 +189,7 @@ def fountain_speed(mesh_name: str, n_jobs: int | None) -> None:
     )
     print(f"  filter stats {_short_stats(vis.stats)}; split faces {vis.stats.get('split')}")
     t2, c2 = time.perf_counter(), time.process_time()
-    M = compute_mappings(scene, visibility=vis, mode="vertices")
+    M = compute_mappings(scene, visibility=vis, mappings="vertices")
     t_counts = time.perf_counter() - t2
     t3 = time.perf_counter()
     total = 0
@@ -217,7 +217,7 @@ def fountain_speed(mesh_name: str, n_jobs: int | None) -> None:
     print(f"  mappings (surface, the default): counts {t_s:.3f} s, build all {len(Ms.pairs)} pairs "
           f"{time.perf_counter() - t5:.2f} s ({ns} samples for {Ms.total} px of shared surface)")
     t4 = time.perf_counter()
-    Md = compute_mappings(scene, visibility=vis, mode="dense")
+    Md = compute_mappings(scene, visibility=vis, mappings="dense")
     some = list(Md.pairs)[:: max(1, len(Md.pairs) // 20)]
     nd = sum(Md.pairs[k].n for k in some)
     nv = sum(M.counts[k] for k in some)

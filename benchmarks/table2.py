@@ -242,7 +242,7 @@ def _fountain(args, what: str):
         return None
     scene = fountain(root, mesh="scene/mesh_decimated_uv_blender.ply")
     t0 = time.perf_counter()
-    mappings = compute_mappings(scene, mode=args.fountain_mappings, depth_edge_margin=args.depth_edge_margin)
+    mappings = compute_mappings(scene, mappings=args.fountain_mappings, depth_edge_margin=args.depth_edge_margin)
     return scene, mappings, time.perf_counter() - t0
 
 
@@ -305,7 +305,7 @@ def synthetic_block(args, methods, method_options) -> dict:
             for deg in args.pose_error:
                 # the mappings come from poses off by `deg` (the images stay exact): registration error
                 scene = perturb_poses(syn.scene, deg, seed=seed)
-                mappings = compute_mappings(scene, mode=args.synthetic_mappings)
+                mappings = compute_mappings(scene, mappings=args.synthetic_mappings)
                 label = f"synthetic ({args.synthetic_photometric} photometric, seed {seed})" + (
                     f", pose error {deg:g} deg (~{fx * np.deg2rad(deg):.1f} px)" if deg else ", exact poses"
                 )
@@ -413,7 +413,7 @@ def _semireal_room(args, specs) -> dict:
     with tempfile.TemporaryDirectory(prefix="table2_semiroom_") as tmp:
         syn = make_synthetic_scene(Path(tmp) / "room", n_views=args.synthetic_views, seed=args.seeds[0], photometric="none")
         masks = [syn.load_face_ids(v.name) >= 0 for v in syn.scene.views]
-        mappings = compute_mappings(syn.scene, mode=args.synthetic_mappings)
+        mappings = compute_mappings(syn.scene, mappings=args.synthetic_mappings)
         res = evaluate_semireal(
             syn.scene, methods=specs, seeds=args.semireal_seeds, reference=0, mappings=mappings, masks=masks,
             t_npm=args.synthetic_t_npm, stride=1,

@@ -27,9 +27,9 @@ filter                                    what it does to the MeshSet
 
 Parameter names follow pymeshlab's (lower case, no underscores: ``tnpm`` is the library's
 ``t_npm``, ``atlassize`` is ``TextureSettings.atlas_size``); their defaults are read from the
-library (:func:`o3d_seqcc.pipeline.run`, :func:`~o3d_seqcc.pipeline.correct_scene`,
-:class:`~o3d_seqcc.texturing.TextureSettings`), which are the command line's, and their
-descriptions from the library's docstrings. Enum parameters take the value's name or, as in
+library's settings objects (:class:`~o3d_seqcc.correction.settings.CorrectionSettings`,
+:class:`~o3d_seqcc.texturing.TextureSettings`, :class:`~o3d_seqcc.settings.RunSettings`), which
+are the command line's, and their descriptions from the settings' docstrings. Enum parameters take the value's name or, as in
 pymeshlab, its index. Unknown filter names raise :class:`~o3d_seqcc.errors.InputError` listing
 the valid ones; unknown parameters raise ``TypeError`` listing the filter's parameters; bad values
 raise ``InputError`` naming the parameter and what it accepts.
@@ -42,7 +42,7 @@ import inspect
 import logging
 import re
 import sys
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Callable, TextIO
 
 import numpy as np
@@ -196,15 +196,15 @@ def _param(keyword: str, label: str, defaults: dict[str, Any], docs: dict[str, s
                            label=label, description=desc, values=tuple(values), keyword=keyword)
 
 
-def _correction_parameters(run_defaults: dict, run_docs: dict) -> list[FilterParameter]:
+def _correction_parameters(cc_defaults: dict, cc_docs: dict) -> list[FilterParameter]:
     from o3d_seqcc.correction import available_methods
     from o3d_seqcc.mappings.compute import MODES
 
     return [
-        _param("reference", "Reference raster", run_defaults, run_docs, kind=str),
-        _param("method", "Correction method", run_defaults, run_docs, values=tuple(available_methods())),
-        _param("t_npm", "Minimum overlap per graph edge", run_defaults, run_docs, kind=int),  # or "auto"
-        _param("mappings", "Pairwise mappings", run_defaults, run_docs, values=tuple(MODES)),
+        _param("reference", "Reference raster", cc_defaults, cc_docs, kind=str),
+        _param("method", "Correction method", cc_defaults, cc_docs, values=tuple(available_methods())),
+        _param("t_npm", "Minimum overlap per graph edge", cc_defaults, cc_docs, kind=int),  # or "auto"
+        _param("mappings", "Pairwise mappings", cc_defaults, cc_docs, values=tuple(MODES)),
     ]
 
 
@@ -222,16 +222,18 @@ def _registry() -> Registry[MeshLabFilter]:
     from o3d_seqcc import pipeline
     from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
     from o3d_seqcc.correction.graph import WEIGHTS
+    from o3d_seqcc.settings import CorrectionSettings, RunSettings
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
     from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
     from . import meshset
 
-    run_defaults, run_docs = _defaults(pipeline.run), _doc_entries(pipeline.run, "Parameters")
-    cc_defaults, cc_docs = _defaults(pipeline.correct_scene), _doc_entries(pipeline.correct_scene, "Parameters")
+    # every default from the settings objects (the command line's), every description from their docstrings
+    run_defaults, run_docs = RunSettings.defaults(), _doc_entries(RunSettings, "Attributes")
+    cc_defaults, cc_docs = CorrectionSettings.defaults(), _doc_entries(CorrectionSettings, "Attributes")
     save_defaults = {**_defaults(pipeline.CorrectionRun.save), **_defaults(pipeline.RunResult.save)}
     save_docs = _doc_entries(pipeline.RunResult.save, "Parameters")
-    ts_defaults = {f.name: getattr(TextureSettings(), f.name) for f in fields(TextureSettings)}
+    ts_defaults = TextureSettings.defaults()
     ts_docs = _doc_entries(TextureSettings, "Attributes")
     enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS),
              "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS)}
@@ -255,10 +257,10 @@ def _registry() -> Registry[MeshLabFilter]:
                     "same surface point. The corrected rasters replace the MeshSet's rasters; the mesh layers are "
                     "kept. The same job as o3d-seqcc correct.",
         parameters=tuple([
-            *_correction_parameters(cc_defaults, {**cc_docs, **run_docs}),
+            *_correction_parameters(cc_defaults, cc_docs),
             _param("graph_weight", "Graph edge weight", cc_defaults, cc_docs, values=tuple(WEIGHTS)),
             _param("seed", "Random seed", cc_defaults, cc_docs),
-            _param("metrics", "Report metrics", cc_defaults, cc_docs),
+            _param("metrics", "Report metrics", run_defaults, run_docs),
             *_output_parameters("seqcc_corrected", save_defaults, save_docs,
                                 "images/<raster>.png, the mesh layers in layers/"),
         ]),
@@ -277,7 +279,7 @@ def _registry() -> Registry[MeshLabFilter]:
                             keyword="colorcorrection",
                             description="Colour-correct the rasters toward the reference first (o3d-seqcc run), "
                                         "or texture with the rasters as they are (o3d-seqcc texture)."),
-            *_correction_parameters(run_defaults, run_docs),
+            *_correction_parameters(cc_defaults, cc_docs),
             # atlas_size: an int budget or "auto" (sized to the charts), as t_npm
             *(_param(k, labels[k], ts_defaults, ts_docs, values=enums.get(k, ()), kind=int if k == "atlas_size" else None)
               for k in ts_defaults),

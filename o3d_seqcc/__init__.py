@@ -20,6 +20,12 @@ or the whole job with the command line's defaults (:class:`RunSettings` holds th
     res = o3d_seqcc.pipeline.run("scene.json")                         # correct + texture
     res.save("out/")                                                   # what `o3d-seqcc run` writes
 
+Every option's default is written once, in a settings object (:class:`VisibilitySettings`,
+:class:`CorrectionSettings`, :class:`TextureSettings`, and :class:`RunSettings` holding them)::
+
+    s = o3d_seqcc.RunSettings.from_options(method="seqcc", max_angle=60)
+    res = o3d_seqcc.pipeline.run("scene.json", settings=s)             # = run(..., method="seqcc", max_angle=60)
+
 Heavy dependencies are imported on first use of a name (PEP 562), so ``import o3d_seqcc`` is
 cheap.
 """
@@ -39,6 +45,10 @@ _LAZY: dict[str, str] = {
     **dict.fromkeys(("load_scene", "save_scene"), "io.load"),
     "Distortion": "geometry.distortion",
     **dict.fromkeys(("SyntheticScene", "make_synthetic_scene", "load_synthetic", "perturb_poses"), "synthetic"),
+    # settings: every option's default, one object per stage and one for a run
+    "RunSettings": "settings",
+    "VisibilitySettings": "visibility.settings",
+    "CorrectionSettings": "correction.settings",
     # 1. visibility (3.1-3.2): cameras checked first, then which faces each photo sees
     **dict.fromkeys(("check_cameras", "CameraReport"), "visibility.camera_checks"),
     **dict.fromkeys(("Visibility", "compute_visibility"), "visibility.compute"),
@@ -55,7 +65,8 @@ _LAZY: dict[str, str] = {
                      "CorrectionContext", "CorrectionResult", "LutTransform", "FunctionTransform",
                      "IdentityTransform"), "correction"),
     # 4. texturing (3.8): selection, atlas, leveling
-    **dict.fromkeys(("SELECTION_METHODS", "TextureSettings", "TexturedMesh", "load_textured_mesh", "select_views",
+    "TextureSettings": "texturing.settings",
+    **dict.fromkeys(("SELECTION_METHODS", "TexturedMesh", "load_textured_mesh", "select_views",
                      "bake_texture"), "texturing"),
     # 5. evaluation (4.2, Table 2), ground truth, seams, sharpness, renders
     **dict.fromkeys(("evaluate", "Evaluation"), "evaluation.metrics"),
@@ -77,7 +88,7 @@ _LAZY: dict[str, str] = {
 #: packages and modules reachable as attributes (``o3d_seqcc.pipeline.run(...)``) without an explicit import
 _SUBMODULES: dict[str, str] = {
     **{m: m for m in ("correction", "datasets", "demo", "evaluation", "geometry", "imaging", "io", "mappings",
-                      "open3d_api", "pipeline", "report", "scene", "synthetic", "texturing", "visibility")},
+                      "open3d_api", "pipeline", "report", "scene", "settings", "synthetic", "texturing", "visibility")},
     "parallel": "_shared.parallel",  # o3d_seqcc._shared.parallel.use(client): the executor of a block of calls
 }
 

@@ -85,7 +85,7 @@ def run_demo(
     out: str | os.PathLike = "out/demo",
     *,
     dataset: str = "synthetic", data_root: str | os.PathLike | None = None,
-    t_npm: int | str = "auto",
+    t_npm: int | str | None = None,
     overwrite: bool = False,
     settings: TextureSettings | None = None,
     save_options: dict[str, Any] | None = None,
@@ -105,10 +105,9 @@ def run_demo(
         else Open3D's download).
     data_root : path-like, optional
         Fountain only: a local copy of the set.
-    t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge: with surface mappings pixels of shared surface
-        (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
-        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.correction.graph.resolve_t_npm`.
+    t_npm : "auto" or int, optional
+        Minimum pair count for a graph edge; default :attr:`CorrectionSettings.t_npm
+        <o3d_seqcc.correction.settings.CorrectionSettings.t_npm>` ("auto").
     overwrite : bool, default False
         Regenerate the synthetic scene.
     settings : TextureSettings, optional

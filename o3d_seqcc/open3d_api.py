@@ -42,12 +42,11 @@ import numpy as np
 
 from . import pipeline
 from .visibility.camera_checks import check_cameras
-from .correction import DEFAULT_METHOD
 from .errors import InputError, warn
 from .imaging.arrays import img_as_dtype
 from .geometry.meshops import vertex_normals
 from .scene import Mesh, Scene, View
-from .texturing.settings import TextureSettings
+from .settings import CORRECTION_ONLY, RunSettings
 
 __all__ = ["correct_images", "scene_from_open3d", "texture_mesh"]
 
@@ -186,8 +185,8 @@ def _check_options(*, depth_scale: Any, **flags: Any) -> None:
 
 
 def scene_from_open3d(
-    mesh: Any, images: Sequence[Any], cameras: Any, *, depths: Sequence[Any] | None = None, depth_scale: float = 1000.0,
-    names: Sequence[str] | None = None,
+    mesh: Any, images: Sequence[Any], cameras: Any, *, depths: Sequence[Any] | None = None,
+    depth_scale: float = View.depth_scale, names: Sequence[str] | None = None,
 ) -> tuple[Scene, list[np.dtype]]:
     """An in-memory :class:`~o3d_seqcc.scene.Scene` from Open3D objects (see the module docstring).
 
@@ -252,12 +251,10 @@ def correct_images(
     cameras: Any,
     *,
     depths: Sequence[Any] | None = None,
-    reference: str | int = "auto",
-    method: str = DEFAULT_METHOD,
-    t_npm: int | str = "auto",
-    mappings: str = "surface",
-    depth_scale: float = 1000.0,
+    depth_scale: float = View.depth_scale,
     return_report: bool = False,
+    settings: RunSettings | None = None,
+    **options: Any,
 ) -> list | tuple[list, dict]:
     """Colour-correct registered images of a mesh toward a reference view (sequential pairwise correction).
 
@@ -265,22 +262,20 @@ def correct_images(
     ----------
     mesh, images, cameras, depths
         Open3D objects or arrays (see the module docstring).
-    reference : str or int, default "auto"
-        Index of the reference image, or ``"auto"`` (the view with the smallest total path cost).
-    method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
-        A colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge: with surface mappings pixels of shared surface
-        (``"auto"``: 1 % of the median photo's pixels), with vertex and dense mappings vertex
-        mappings (``"auto"``: the paper's 400); :func:`o3d_seqcc.correction.graph.resolve_t_npm`.
-    mappings : {"surface", "vertices", "dense"}, default "surface"
-    depth_scale : float, default 1000.0
+    depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
         Units per metre of integer depth images.
     return_report : bool, default False
         Also return the correction report, ``correct``'s report.json (:mod:`o3d_seqcc.report.schema`:
         ``report["correction"]`` holds the reference, graph edges, paths, unreachable views and
         per-view lookup tables; ``report["metrics"]`` the per-pair PSNR / CIEDE2000 before and
         after; ``report["timings_s"]``).
+    settings : RunSettings or CorrectionSettings, optional
+        Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults).
+    **options
+        Options changed from ``settings``, by their flat names (as :func:`o3d_seqcc.pipeline.correct_scene`):
+        :class:`~o3d_seqcc.correction.settings.CorrectionSettings` fields (``reference``: the index
+        of the reference image or ``"auto"``; ``method``; ``t_npm``; ``mappings``; ...) and
+        :class:`~o3d_seqcc.visibility.settings.VisibilitySettings` fields.
 
     Returns
     -------
@@ -288,9 +283,9 @@ def correct_images(
         The corrected images, in the type and dtype each came in.
     """
     _check_options(depth_scale=depth_scale, return_report=return_report)
+    rs = RunSettings.resolve(settings, options, where="correct_images", exclude=("metrics",))
     scene, dtypes = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
-    job = pipeline.correct_scene(scene, reference=reference, method=method, t_npm=t_npm, mappings=mappings,
-                                 metrics=return_report)
+    job = pipeline.correct_scene(scene, settings=rs, metrics=return_report)
     out = [_like(orig, px, dt) for orig, px, dt in zip(images, job.result.images, dtypes)]
     return (out, job.report) if return_report else out
 
@@ -302,14 +297,10 @@ def texture_mesh(
     *,
     depths: Sequence[Any] | None = None,
     correct: bool = True,
-    selection: str = "mrf",
-    atlas_size: int | str = TextureSettings.atlas_size,
-    reference: str | int = "auto",
-    method: str = DEFAULT_METHOD,
-    t_npm: int | str = "auto",
-    depth_scale: float = 1000.0,
+    depth_scale: float = View.depth_scale,
     return_result: bool = False,
-    **texture_options: Any,
+    settings: RunSettings | None = None,
+    **options: Any,
 ):
     """Texture a mesh from registered images: colour correction (optional), one image per face, an atlas.
 
@@ -318,19 +309,21 @@ def texture_mesh(
     mesh, images, cameras, depths
         Open3D objects or arrays (see the module docstring).
     correct : bool, default True
-        Colour-correct the images first (``reference``, ``method``, ``t_npm`` as in
-        :func:`correct_images`); False textures with the images as they are.
-    selection : {"mrf", "largest-area", "random"}, default "mrf"
-        Per-face image selection.
-    atlas_size : int or "auto", default "auto"
-        ``"auto"``: the atlas is sized to the charts at the photos' resolution; an integer: its
-        largest side in texels, a budget (:class:`~o3d_seqcc.texturing.TextureSettings`).
-    depth_scale : float, default 1000.0
+        Colour-correct the images first (as :func:`correct_images`); False textures with the
+        images as they are.
+    depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
     return_result : bool, default False
         Also return the :class:`~o3d_seqcc.pipeline.RunResult` (selection, seams, timings, and
         ``.save(out)`` to write OBJ/GLB and the report).
-    **texture_options
-        Other fields of :class:`~o3d_seqcc.texturing.TextureSettings`.
+    settings : RunSettings or TextureSettings, optional
+        Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults).
+    **options
+        Options changed from ``settings``, by their flat names (as :func:`o3d_seqcc.pipeline.run`):
+        :class:`~o3d_seqcc.texturing.TextureSettings` fields (``selection``: ``"mrf"``,
+        ``"largest-area"`` or ``"random"``; ``atlas_size``: ``"auto"``, sized to the charts at the
+        photos' resolution, or an integer budget for its largest side; ...),
+        :class:`~o3d_seqcc.correction.settings.CorrectionSettings` fields (``reference``,
+        ``method``, ``t_npm``, ...) and :class:`~o3d_seqcc.visibility.settings.VisibilitySettings` fields.
 
     Returns
     -------
@@ -340,11 +333,10 @@ def texture_mesh(
         textured and ``o3d.t.io.write_triangle_mesh`` writes it.
     """
     _check_options(depth_scale=depth_scale, return_result=return_result, correct=correct)
+    where = "texture_mesh" + ("" if correct else "(correct=False)")
+    exclude = ("metrics",) if correct else CORRECTION_ONLY
+    rs = RunSettings.resolve(settings, options, where=where, exclude=exclude)
     scene, _ = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
-    options = dict(selection=selection, atlas_size=atlas_size, **texture_options)
-    if correct:
-        res = pipeline.run(scene, reference=reference, method=method, t_npm=t_npm, **options)
-    else:
-        res = pipeline.texture(scene, **options)
+    res = pipeline.run(scene, settings=rs) if correct else pipeline.texture(scene, settings=rs)
     out = res.textured.to_open3d()
     return (out, res) if return_result else out

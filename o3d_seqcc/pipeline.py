@@ -32,16 +32,15 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ._shared.arguments import check_images_argument, check_type
-from .correction import DEFAULT_METHOD, CorrectionResult, check_method, correct
-from .errors import InputError
+from ._shared.arguments import check_images_argument
+from .correction import CorrectionResult, correct
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
 from .io.files import write_json
 from .io.load import load_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
-from .mappings.compute import DEFAULT_MODE, MODES, Mappings, compute_mappings
+from .mappings.compute import Mappings, compute_mappings
 from .geometry.meshops import face_adjacency
 from .evaluation.metrics import before_after
 from .geometry.orientation import up_axis_transform
@@ -53,8 +52,9 @@ from .report import REPORT_FILE, metrics_sample, write_report
 from .report.figures import warm_up
 from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
+from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
 from .evaluation.seams import SeamReport, seam_metric, selection_seams
-from .texturing import SELECTION_METHODS, TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
+from .texturing import TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility.compute import Visibility, compute_visibility
 
 __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
@@ -66,14 +66,6 @@ def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) 
     if isinstance(scene, Scene):
         return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
     return load_scene(scene, mesh=mesh)
-
-
-def _settings(settings: TextureSettings | None, options: dict[str, Any]) -> TextureSettings:
-    check_type("settings", settings, TextureSettings)
-    s = settings or TextureSettings()
-    s = s.updated(**options) if options else s
-    SELECTION_METHODS.check(s.selection)
-    return s
 
 
 def _import_in_background(*modules: str) -> None:
@@ -126,6 +118,8 @@ class RunResult:
         ``"scene"`` (the scene's files), ``"corrected"`` (:func:`run`) or ``"given"``.
     originals : list of (H, W, 3) arrays or None
         The images before correction (:func:`run`; None for :func:`texture`).
+    run_settings : RunSettings or None
+        Every option the run used (``settings`` is its ``texture``).
     """
 
     scene: Scene
@@ -144,6 +138,7 @@ class RunResult:
     source: str = ""
     images_from: str = "scene"
     originals: list | None = None
+    run_settings: RunSettings | None = None
     #: Table 2 started on a background thread by :func:`run` (:class:`_BackgroundTable2`), used by :meth:`save`
     _table2: Any = field(default=None, repr=False, compare=False)
 
@@ -323,10 +318,9 @@ def texture(
     *,
     images: Sequence[np.ndarray] | None = None,
     mesh: str | os.PathLike | None = None,
-    settings: TextureSettings | None = None,
-    seams: bool = True, split_faces: bool = True,
+    settings: RunSettings | TextureSettings | None = None,
     client: Any = None,
-    **texture_options: Any,
+    **options: Any,
 ) -> RunResult:
     """Texture the mesh from the scene's images (or ``images``): selection, atlas, seam metric.
 
@@ -338,17 +332,17 @@ def texture(
         One per view, instead of the scene's files (e.g. corrected images).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
-    settings : TextureSettings, optional
-        Default :class:`~o3d_seqcc.texturing.TextureSettings` (the command line's defaults).
-    seams : bool, default True
-        Compute the seam metric of the result.
-    split_faces : bool, default True
-        As :func:`run`.
+    settings : RunSettings or TextureSettings, optional
+        Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults); a
+        TextureSettings replaces its ``texture``. The correction's settings are not used.
     client : dask.distributed.Client, optional
         Run the per-view tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`); default local threads.
-    **texture_options
-        Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
-        ``atlas_size=4096``, ...).
+    **options
+        Options changed from ``settings``, by their flat names (:meth:`RunSettings.replace
+        <o3d_seqcc.settings.RunSettings.replace>`): fields of
+        :class:`~o3d_seqcc.texturing.TextureSettings` (``selection="largest-area"``,
+        ``atlas_size=4096``, ...) and :class:`~o3d_seqcc.visibility.settings.VisibilitySettings`
+        (``split_faces``, ``max_angle``, ...), ``seams``.
 
     Returns
     -------
@@ -357,7 +351,8 @@ def texture(
     source = str(scene) if not isinstance(scene, Scene) else ""
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
-    s = _settings(settings, texture_options)
+    rs = RunSettings.resolve(settings, options, where="texture", exclude=CORRECTION_ONLY)
+    s = rs.texture
     sc = _as_scene(scene, mesh)
     if images is None:
         imgs = scene_photos(sc.views)  # read when the bake needs them, kept while they fit
@@ -365,26 +360,21 @@ def texture(
         imgs = check_images_argument(images, sc.views)
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc, split_faces=split_faces)
-        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=seams)
+            vis = compute_visibility(sc, settings=rs.visibility)
+        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=rs.seams)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, seams=sm, timings=timings, command="texture", source=source,
-                     images_from="scene" if images is None else "given")
+                     images_from="scene" if images is None else "given", run_settings=rs)
 
 
 def run(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto",
-    method: str = DEFAULT_METHOD,
-    t_npm: int | str = "auto",
-    mappings: str = DEFAULT_MODE,
     mesh: str | os.PathLike | None = None,
-    settings: TextureSettings | None = None,
-    seams: bool = True, compare_original: bool = False, split_faces: bool = True,
+    settings: RunSettings | TextureSettings | None = None,
     client: Any = None,
-    **texture_options: Any,
+    **options: Any,
 ) -> RunResult:
     """Colour-correct every view toward a reference, then texture the mesh with the corrected images.
 
@@ -392,33 +382,25 @@ def run(
     ----------
     scene : Scene or path
         A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
-    reference : str or int, default "auto"
-        Reference view (name or index), or ``"auto"`` (the view with the smallest total path cost).
-    method : str, default :data:`~o3d_seqcc.correction.DEFAULT_METHOD` ("seqcc-global")
-        Colour-correction method (:data:`o3d_seqcc.correction.METHODS`; "seqcc" is the paper's).
-    t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge (:func:`o3d_seqcc.correction.graph.resolve_t_npm`): pixels of
-        shared surface, ``"auto"`` = 1 % of a photo (surface mappings), or vertex mappings.
-    mappings : {"surface", "vertices", "dense"}, default "surface"
-        Pairwise mapping mode (:func:`o3d_seqcc.mappings.compute_mappings`; vertices: the paper's).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
-    settings : TextureSettings, optional
-        Texturing options; default :class:`~o3d_seqcc.texturing.TextureSettings`.
-    seams : bool, default True
-        Compute the seam metric of the result.
-    compare_original : bool, default False
-        Also bake the uncorrected images (in memory) and report their seam metric.
-    split_faces : bool, default True
-        Split the faces no photo holds whole (clipped, partly hidden, too large, or whose texture
-        would slide inside them) into parts (:mod:`o3d_seqcc.visibility.refine`); False keeps the input's.
+    settings : RunSettings, optional
+        Every option of the run; default :class:`~o3d_seqcc.settings.RunSettings` (the command
+        line's defaults, documented there and in its stage classes). A
+        :class:`~o3d_seqcc.texturing.TextureSettings` (or another stage's settings) replaces that
+        stage only.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`; the
         scene's files must be readable at the same paths on every worker); default local
         threads (``joblib.parallel_config``). The outputs are identical either way.
-    **texture_options
-        Fields of :class:`~o3d_seqcc.texturing.TextureSettings` (``selection``, ``atlas_size``,
-        ``seed``, ...); ``seed`` also seeds the correction.
+    **options
+        Options changed from ``settings``, by their flat names (:meth:`RunSettings.replace
+        <o3d_seqcc.settings.RunSettings.replace>`; None: the settings' value):
+        :class:`~o3d_seqcc.correction.settings.CorrectionSettings` (``reference``, ``method``,
+        ``t_npm``, ``mappings``, ...), :class:`~o3d_seqcc.visibility.settings.VisibilitySettings`
+        (``split_faces``, ``max_angle``, ...), :class:`~o3d_seqcc.texturing.TextureSettings`
+        (``selection``, ``atlas_size``, ...; ``seed`` seeds the correction too) and the run's
+        own ``seams``, ``compare_original``.
 
     Returns
     -------
@@ -429,41 +411,41 @@ def run(
     InputError
         Unknown method, reference, mapping mode or texture option value, checked before any
         heavy work; bad scenes.
+    UnknownSettingError
+        An option name no settings object has (a ``TypeError``; the message lists the valid ones).
     """
     source = str(scene) if not isinstance(scene, Scene) else ""
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
-    check_method(method, t_npm=t_npm)
-    if mappings not in MODES:
-        raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
-    s = _settings(settings, texture_options)
+    rs = RunSettings.resolve(settings, options, where="run", exclude=("metrics",))
+    s, cs = rs.texture, rs.correction
     sc = _as_scene(scene, mesh)
-    if reference != "auto":
-        resolve_view(sc.names, reference)
+    if cs.reference != "auto":
+        resolve_view(sc.names, cs.reference)
     originals = scene_photos(sc.views)  # read when a task first needs them, kept while they fit
-    if method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
+    if cs.method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
         _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
     with use_executor(client):
         with _stage("visibility", timings):
-            vis = compute_visibility(sc, split_faces=split_faces)
+            vis = compute_visibility(sc, settings=rs.visibility)
         with _stage("mappings", timings):
-            maps = compute_mappings(sc, visibility=vis, mode=mappings)
+            maps = compute_mappings(sc, visibility=vis, mappings=cs.mappings)
         with _stage("correction", timings):
-            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
-                          seed=s.seed)
+            res = correct(sc, mappings=maps, images=originals, settings=cs)
         # the report's Table 2 needs the correction alone: on a spare thread while the texturing runs (local only:
         # a Dask client may be closed before save())
         bg = _BackgroundTable2(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
-        labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=seams)
+        labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=rs.seams)
         sm0 = None
-        if compare_original:
+        if rs.compare_original:
             with _stage("compare_original", timings):
                 # the same settings pack the same charts (they do not depend on the images) into the same atlas
                 sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
-                     command="run", source=source, images_from="corrected", originals=originals, _table2=bg)
+                     command="run", source=source, images_from="corrected", originals=originals, run_settings=rs,
+                     _table2=bg)
 
 
 @dataclass(frozen=True, eq=False)
@@ -522,51 +504,49 @@ class CorrectionRun:
 def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
-    reference: str | int = "auto", method: str = DEFAULT_METHOD, t_npm: int | str = "auto", mappings: str = DEFAULT_MODE,
-    graph_weight: str = "paper",
-    seed: int = 0,
-    metrics: bool = True,
-    mesh: str | os.PathLike | None = None, split_faces: bool = True,
+    mesh: str | os.PathLike | None = None,
+    settings: RunSettings | CorrectionSettings | None = None,
     client: Any = None,
+    **options: Any,
 ) -> CorrectionRun:
     """Colour-correct every view of a scene (the ``correct`` command), with its report.
 
     Parameters
     ----------
     scene : Scene or path
-    reference, method, t_npm, mappings
-        As :func:`run`.
-    seed : int, default 0
-        Seed of any randomness in the correction method (runs are deterministic for a seed).
-    graph_weight : {"paper", "log"}, default "paper"
-        Edge weight formula of the colour-correction graph.
-    metrics : bool, default True
-        Per-pair PSNR / CIEDE2000 before and after in the report (the slowest part).
     mesh : path-like, optional
-    split_faces : bool, default True
-        As :func:`run`.
+    settings : RunSettings or CorrectionSettings, optional
+        Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults); a
+        CorrectionSettings replaces its ``correction``. The texture's settings are not used.
     client : dask.distributed.Client, optional
         Run the per-view and per-edge tasks on its cluster (:mod:`o3d_seqcc._shared.parallel`).
+    **options
+        Options changed from ``settings``, by their flat names (as :func:`run`): fields of
+        :class:`~o3d_seqcc.correction.settings.CorrectionSettings` (``reference``, ``method``,
+        ``t_npm``, ``mappings``, ``seed``, ``graph_weight``, ...) and
+        :class:`~o3d_seqcc.visibility.settings.VisibilitySettings` (``split_faces``, ...), and
+        ``metrics`` (:attr:`RunSettings.metrics <o3d_seqcc.settings.RunSettings.metrics>`:
+        per-pair PSNR / CIEDE2000 before and after in the report, the slowest part).
 
     Returns
     -------
     CorrectionRun
     """
-    check_method(method, t_npm=t_npm)
-    if mappings not in MODES:
-        raise InputError(f"unknown mappings mode {mappings!r}; valid: {', '.join(MODES)}")
+    rs = RunSettings.resolve(settings, options, where="correct_scene", exclude=TEXTURE_ONLY)
+    cs = rs.correction
+    reference, mappings = cs.reference, cs.mappings
+    metrics = rs.metrics
     sc = _as_scene(scene, mesh)
     if reference != "auto":
         resolve_view(sc.names, reference)
     t = time.perf_counter()
     with use_executor(client):
         with _stage("mappings"):
-            maps = compute_mappings(sc, mode=mappings, split_faces=split_faces)
+            maps = compute_mappings(sc, mappings=mappings, settings=rs.visibility)
         t_map = time.perf_counter() - t
         originals = [v.load_image() for v in sc.views]
         with _stage("correction"):
-            res = correct(sc, reference=reference, method=method, t_npm=t_npm, mappings=maps, images=originals,
-                          seed=seed, graph_weight=graph_weight)
+            res = correct(sc, mappings=maps, images=originals, settings=cs)
     res.timings["mappings"] = t_map
     t = time.perf_counter()
     table2 = None

@@ -8,13 +8,14 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable
 
-from ..correction import DEFAULT_METHOD, available_methods
+from ..correction import available_methods
 from ..errors import InputError
 from ..io.export import FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
-from ..mappings.compute import DEFAULT_MODE, MODES
+from ..mappings.compute import MODES
 from ..geometry.orientation import UP_AXES
+from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
 
@@ -32,6 +33,7 @@ __all__ = [
     "print_report_path",
     "print_run_summary",
     "progress_from_args",
+    "run_options_from_args",
     "save_options_from_args",
     "scene_from_args",
     "scene_options_from_args",
@@ -39,6 +41,8 @@ __all__ = [
 ]
 
 _DEFAULTS = TextureSettings()
+#: the defaults of the correction, visibility and run options (the flags' defaults are these fields')
+_CORRECTION, _VISIBILITY, _RUN = CorrectionSettings(), VisibilitySettings(), RunSettings()
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,8 +56,9 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
                    "file says")
     p.add_argument("--depth-dir", help="folder of depth maps named after the views, for scenes without depth (MeshLab "
                    "projects, COLMAP, Meshroom): turns the depth-consistency filter on")
-    p.add_argument("--depth-scale", type=float, default=1000.0,
-                   help="depth units per metre of the --depth-dir maps (default 1000: millimetres)")
+    depth_scale = library_default(load_scene)["depth_scale"]
+    p.add_argument("--depth-scale", type=float, default=depth_scale,
+                   help=f"depth units per metre of the --depth-dir maps (default {depth_scale:g}: millimetres)")
     p.add_argument("--extrinsic", choices=EXTRINSIC_CONVENTIONS, default=None,
                    help="what the scene's pose matrices map (scene.json, COLMAP, RGB-D folders), when not the format's "
                    "own (scene.json and COLMAP world-to-camera, key.log camera-to-world); default: the format's, "
@@ -83,23 +88,24 @@ def scene_from_args(args: argparse.Namespace):
 
 
 def add_correction_arguments(p: argparse.ArgumentParser) -> None:
-    """Reference, method, t_npm and mapping mode (``correct`` and ``run``)."""
-    p.add_argument("--reference", default="auto", help="reference view name (or index), or 'auto' (default)")
-    p.add_argument("--method", default=DEFAULT_METHOD, choices=available_methods(), metavar="METHOD",
-                   help=f"colour-correction method: {', '.join(available_methods())} (default {DEFAULT_METHOD}; "
+    """Reference, method, t_npm and mapping mode (``correct`` and ``run``; defaults: :class:`CorrectionSettings`'s)."""
+    d = _CORRECTION
+    p.add_argument("--reference", default=d.reference,
+                   help=f"reference view name (or index), or 'auto' (default {d.reference}: the view with the smallest "
+                   "total path cost in the colour-correction graph)")
+    p.add_argument("--method", default=d.method, choices=available_methods(), metavar="METHOD",
+                   help=f"colour-correction method: {', '.join(available_methods())} (default {d.method}; "
                    "seqcc is the paper's)")
-    from ..pipeline import run
-
-    add_t_npm_argument(p, library_default(run)["t_npm"])
-    p.add_argument("--mappings", choices=MODES, default=DEFAULT_MODE,
-                   help=f"pairwise mappings (default {DEFAULT_MODE}: the shared faces' vertices and points inside "
+    add_t_npm_argument(p, d.t_npm)
+    p.add_argument("--mappings", choices=MODES, default=d.mappings,
+                   help=f"pairwise mappings (default {d.mappings}: the shared faces' vertices and points inside "
                    "the large ones at the photos' resolution, pairs counted in pixels of shared surface; vertices: "
                    "the paper's face vertices, counted; dense: vertices and interior points, counted)")
 
 
 def add_split_argument(p: argparse.ArgumentParser) -> None:
-    """``--no-split-faces`` (:func:`o3d_seqcc.pipeline.run`'s ``split_faces``)."""
-    p.add_argument("--no-split-faces", dest="split_faces", action="store_false",
+    """``--no-split-faces`` (:attr:`VisibilitySettings.split_faces`, on by default)."""
+    p.add_argument("--no-split-faces", dest="split_faces", action="store_false", default=_VISIBILITY.split_faces,
                    help="keep the mesh's faces as they are: by default a face no photo holds whole (clipped by the "
                    "image border, partly hidden, larger than a photo, or seen so deep its texture would slide) is "
                    "split into parts the photos that see them can texture")
@@ -118,8 +124,9 @@ def t_npm_value(text: str) -> int | str:
     return value
 
 
-def add_t_npm_argument(p: argparse.ArgumentParser, default: int | str, *, extra: str = "") -> None:
-    """``--t-npm auto|N``, with the library function's default (:func:`o3d_seqcc.correction.graph.resolve_t_npm`)."""
+def add_t_npm_argument(p: argparse.ArgumentParser, default: int | str | None = None, *, extra: str = "") -> None:
+    """``--t-npm auto|N`` (:func:`o3d_seqcc.correction.graph.resolve_t_npm`), default :attr:`CorrectionSettings.t_npm`."""
+    default = _CORRECTION.t_npm if default is None else default
     p.add_argument("--t-npm", type=t_npm_value, default=default, metavar="auto|N",
                    help=f"minimum pair count for a colour-correction graph edge (default {default}): pixels of "
                    "shared surface with --mappings surface (auto: 1%% of the median photo's pixels), vertex "
@@ -133,14 +140,18 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
     if outputs:
         p.add_argument("--out", required=True, help="output folder (refused if it exists, unless --overwrite)")
         p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
-        p.add_argument("--format", default="glb,obj", help=f"comma-separated export formats among {', '.join(FORMATS)} "
-                       "(default glb,obj)")
+        from ..pipeline import RunResult
+
+        formats = ",".join(library_default(RunResult.save)["formats"])
+        p.add_argument("--format", default=formats, help=f"comma-separated export formats among {', '.join(FORMATS)} "
+                       f"(default {formats})")
     p.add_argument("--selection", default=d.selection, choices=sorted(SELECTION_METHODS),
                    help="per-face image selection: mrf (default: largest areas with few image transitions), "
                    "largest-area or random (the paper's two)")
     p.add_argument("--smoothness", type=float, default=d.smoothness,
                    help=f"mrf: Potts weight per interior edge (default {d.smoothness:g})")
-    p.add_argument("--seed", type=int, default=d.seed, help="seed of random selection / mrf order (default 0)")
+    p.add_argument("--seed", type=int, default=d.seed,
+                   help=f"seed of random selection / mrf order, and of the correction (default {d.seed})")
     p.add_argument("--data-term", default=d.data_term, choices=DATA_TERMS,
                    help=f"mrf: what makes a photo good for a face (default {d.data_term}: its gradient magnitude "
                    "integrated over the face's projection, large and sharp; area: the projected area alone)")
@@ -167,7 +178,8 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
                    "the most faces); 'none' to skip the picture")
     add_export_arguments(p)
     if outputs:
-        p.add_argument("--no-seams", dest="seams", action="store_false", help="skip the seam metric in report.json")
+        p.add_argument("--no-seams", dest="seams", action="store_false", default=_RUN.seams,
+                       help="skip the seam metric in report.json")
 
 
 def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
@@ -223,26 +235,37 @@ def texture_settings_from_args(args: argparse.Namespace) -> TextureSettings:
     return TextureSettings(**{f.name: getattr(args, f.name) for f in fields(TextureSettings) if hasattr(args, f.name)})
 
 
+def run_options_from_args(args: argparse.Namespace, *, texture: bool = True) -> RunSettings:
+    """:class:`~o3d_seqcc.settings.RunSettings` from the parsed options: every flag whose destination is a
+    settings field (``--method`` -> ``correction.method``, ``--no-split-faces`` -> ``visibility.split_faces``,
+    ``--no-seams`` -> ``seams``, ...); the texture options only with ``texture``."""
+    names = [n for n in RunSettings.routes() if hasattr(args, n) and (texture or RunSettings.routes()[n] != ("texture",))]
+    rs = RunSettings().replace(**{n: getattr(args, n) for n in names if n != "seed"})
+    if hasattr(args, "seed"):  # run: the selection's seed seeds the correction too; correct: the correction's
+        rs = rs.replace(seed=args.seed) if texture else rs.replace(correction=rs.correction.replace(seed=args.seed))
+    return rs.replace(texture=texture_settings_from_args(args)) if texture else rs
+
+
 def prepare_out_dir(args: argparse.Namespace, scene) -> Path:
     """Check ``--out`` against the scene's inputs before any work (:func:`o3d_seqcc.io.output.check_output`)."""
     check_output(args.out, overwrite=args.overwrite, inputs=scene.input_paths())
     return Path(args.out)
 
 
-def texture_job_from_args(args: argparse.Namespace) -> tuple[TextureSettings, dict[str, Any], Any, Path]:
-    """What ``run`` and ``texture`` check before any work: export formats and options, texture
+def texture_job_from_args(args: argparse.Namespace) -> tuple[RunSettings, dict[str, Any], Any, Path]:
+    """What ``run`` and ``texture`` check before any work: export formats and options, the run's
     settings, the scene, and ``--out`` against the scene's inputs.
 
     Returns
     -------
-    (TextureSettings, dict, Scene, Path)
+    (RunSettings, dict, Scene, Path)
         The settings, the keyword options of :meth:`~o3d_seqcc.pipeline.RunResult.save`, the
         loaded scene and the output folder.
     """
     from ..pipeline import parse_formats
 
     parse_formats(args.format)
-    settings = texture_settings_from_args(args)
+    settings = run_options_from_args(args)
     save_options = save_options_from_args(args)
     scene = scene_from_args(args)
     return settings, save_options, scene, prepare_out_dir(args, scene)

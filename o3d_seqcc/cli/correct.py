@@ -17,6 +17,7 @@ import argparse
 
 from ..correction.graph import WEIGHTS
 from ..pipeline import correct_scene
+from ..settings import CorrectionSettings, RunSettings
 from .common import add_progress_argument
 from .common import (
     add_correction_arguments,
@@ -24,6 +25,7 @@ from .common import (
     add_split_argument,
     prepare_out_dir,
     print_report_path,
+    run_options_from_args,
     scene_from_args,
 )
 
@@ -31,9 +33,7 @@ from .common import (
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     out = prepare_out_dir(args, scene)
-    job = correct_scene(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
-                        graph_weight=args.graph_weight, seed=args.seed, metrics=not args.no_metrics,
-                        split_faces=args.split_faces)
+    job = correct_scene(scene, settings=run_options_from_args(args, texture=False))
     job.save(out, overwrite=args.overwrite)
     r, names = job.result, job.scene.names
     print(f"corrected {len(names)} views with {r.method} toward {names[r.reference]} "
@@ -52,10 +52,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     add_correction_arguments(p)
     add_split_argument(p)
-    p.add_argument("--graph-weight", choices=WEIGHTS, default="paper",
-                   help="edge weight: paper = 1 - n/total (default), log = log(total/n) (prefers strong edges)")
-    p.add_argument("--no-metrics", action="store_true", help="skip the before/after metrics in report.json (faster)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    d = CorrectionSettings()
+    p.add_argument("--graph-weight", choices=WEIGHTS, default=d.graph_weight,
+                   help=f"edge weight: paper = 1 - n/total, log = log(total/n) (prefers strong edges); default "
+                   f"{d.graph_weight}")
+    p.add_argument("--no-metrics", dest="metrics", action="store_false", default=RunSettings().metrics,
+                   help="skip the before/after metrics in report.json (faster)")
+    p.add_argument("--seed", type=int, default=d.seed, help=f"random seed of the correction (default {d.seed})")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty OUT")
     add_progress_argument(p)

@@ -17,7 +17,6 @@ from .common import (
     add_atlas_arguments,
     add_export_arguments,
     add_t_npm_argument,
-    library_default,
     save_options_from_args,
     texture_settings_from_args,
 )
@@ -86,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    add_t_npm_argument(p, library_default(run_demo)["t_npm"])
+    add_t_npm_argument(p)  # CorrectionSettings.t_npm
     p.add_argument("--dataset", choices=DATASETS, default="synthetic",
                    help="the synthetic room (default, scored against its ground truth) or the real Fountain set")
     p.add_argument("--data-root", help="fountain: a local copy of the set (default: the folder named by "

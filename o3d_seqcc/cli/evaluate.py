@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..correction import available_methods
+from ..correction import CorrectionSettings, available_methods
 from ..errors import InputError
 from ..evaluation.fit import evaluate_scene
 from ..io.output import write_output_json
@@ -61,8 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default=None, choices=available_methods(), metavar="METHOD",
                    help=f"fit this correction method here and score it (in-sample and held-out): "
                    f"{', '.join(available_methods())}")
-    p.add_argument("--reference", default="auto", help="reference view for --method: name, index or auto (default)")
-    add_t_npm_argument(p, d["t_npm"], extra="; for --method")
+    c = CorrectionSettings()
+    p.add_argument("--reference", default=c.reference,
+                   help=f"reference view for --method: name, index or auto (default {c.reference})")
+    add_t_npm_argument(p, c.t_npm, extra="; for --method")
     p.add_argument("--blur", type=float, default=0.0,
                    help="Gaussian sigma (px) applied to the images for scoring only (default 0)")
     p.add_argument("--min-n", type=int, default=1, help="skip pairs with fewer mappings (default 1: all pairs)")

@@ -17,10 +17,11 @@ from ..io.output import check_output_file, output_file
 from ..correction.graph import mappings_summary
 from ..mappings.compute import MODES, compute_mappings
 from ..evaluation.render import plot_pair
-from ..visibility.compute import FILTERS, compute_visibility
-from .common import add_scene_arguments, library_default, scene_from_args
+from ..settings import CorrectionSettings, VisibilitySettings
+from ..visibility.settings import FILTERS, OBLIQUE_REFERENCES
+from .common import add_scene_arguments, scene_from_args
 
-_D = library_default(compute_visibility)
+_D = VisibilitySettings.defaults()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,12 +49,12 @@ def run(args: argparse.Namespace) -> int:
     elif args.plot and Path(args.plot).suffix.lower() == ".png":
         raise InputError(f"--plot {args.plot}: give a pair 'A,B' (view names or indices) or a folder")
     filters = tuple(f for f in FILTERS if f not in set(args.disable or ()))
-    M = compute_mappings(scene, mode=args.mode, occlusion_tol=args.occlusion_tol, depth_tol=args.depth_tol,
-                         depth_atol=args.depth_atol, depth_edge_margin=args.depth_edge_margin, max_angle=args.max_angle,
-                         oblique_reference=args.oblique_reference, two_sided=args.two_sided, filters=filters)
+    vs = VisibilitySettings.from_options(**{n: getattr(args, n) for n in VisibilitySettings.field_names()
+                                            if hasattr(args, n)}, filters=filters)
+    M = compute_mappings(scene, mappings=args.mappings, settings=vs)
     with output_file(out, option="--out", inputs=inputs, overwrite=bool(args.overwrite)) as tmp:
         save_mappings(M, tmp, format="arrays" if args.arrays else "auto")
-    summary = {"out": str(out), **mappings_summary(M)}
+    summary = {"out": str(out), **mappings_summary(M, t_npm=CorrectionSettings().t_npm)}
     if args.plot:
         if pair is None:
             a, b = max(M.counts, key=M.counts.get)
@@ -74,7 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     p.add_argument("--out", required=True, help="output .npz (read it with o3d_seqcc.io.mappings_npz.load_mappings)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
-    p.add_argument("--mode", choices=MODES, default=library_default(compute_mappings)["mode"],
+    p.add_argument("--mode", dest="mappings", choices=MODES, default=CorrectionSettings().mappings,
                    help="surface (default): the shared faces' vertices and points inside the large ones at the photos' "
                    "resolution, pairs counted in "
                    "pixels; vertices: the 3 vertices of each shared face (paper); dense: the vertices plus interior "
@@ -86,7 +87,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="plot only the final mappings instead of the four filter stages (paper Fig. 3)")
     p.add_argument("--max-angle", type=float, default=_D["max_angle"],
                    help=f"oblique filter threshold in degrees (default {_D['max_angle']:g})")
-    p.add_argument("--oblique-reference", choices=("ray", "axis"), default=_D["oblique_reference"],
+    p.add_argument("--oblique-reference", choices=OBLIQUE_REFERENCES, default=_D["oblique_reference"],
                    help="viewing direction of the oblique filter: ray to the camera (default) or focal axis (paper)")
     p.add_argument("--depth-tol", type=float, default=_D["depth_tol"],
                    help=f"relative depth-consistency threshold (default {_D['depth_tol']:g})")
@@ -97,7 +98,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    f"default {_D['depth_edge_margin']}")
     p.add_argument("--occlusion-tol", type=float, default=_D["occlusion_tol"],
                    help=f"relative z-buffer tolerance (default {_D['occlusion_tol']:g})")
-    p.add_argument("--two-sided", action="store_true", help="no back-face removal (meshes with unreliable normals)")
+    p.add_argument("--two-sided", action="store_true", default=_D["two_sided"],
+                   help="no back-face removal (meshes with unreliable normals)")
     p.add_argument("--disable", action="append", choices=FILTERS, help="disable a filter (repeatable)")
     p.add_argument("--arrays", action="store_true",
                    help="store every pair's arrays explicitly instead of the compact per-vertex layout")

@@ -15,6 +15,7 @@ import argparse
 from dataclasses import replace
 
 from .. import pipeline
+from ..settings import RunSettings
 from .common import add_progress_argument
 from .common import (
     add_correction_arguments,
@@ -28,9 +29,7 @@ from .common import (
 
 def run(args: argparse.Namespace) -> int:
     settings, save_options, scene, out = texture_job_from_args(args)
-    res = pipeline.run(scene, reference=args.reference, method=args.method, t_npm=args.t_npm, mappings=args.mappings,
-                       settings=settings, seams=args.seams, compare_original=args.compare_original,
-                       split_faces=args.split_faces)
+    res = pipeline.run(scene, settings=settings)
     res = replace(res, source=args.scene)
     res.save(out, overwrite=args.overwrite, formats=args.format, save_images=args.save_images,
              selection_view=args.selection_view, **save_options)
@@ -46,6 +45,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_split_argument(p)
     add_texture_arguments(p)
     p.add_argument("--save-images", action="store_true", help="also write the corrected images to OUT/images/")
-    p.add_argument("--compare-original", action="store_true",
+    p.add_argument("--compare-original", action="store_true", default=RunSettings().compare_original,
                    help="also report the seam metric of the same texturing with the uncorrected images")
     add_progress_argument(p)

@@ -26,7 +26,7 @@ from .common import (
 def run(args: argparse.Namespace) -> int:
     settings, save_options, scene, out = texture_job_from_args(args)
     images = read_view_images(scene, args.images) if args.images else None
-    res = pipeline.texture(scene, images=images, settings=settings, seams=args.seams, split_faces=args.split_faces)
+    res = pipeline.texture(scene, images=images, settings=settings)
     res = replace(res, source=args.scene, images_from=str(args.images) if args.images else "scene")
     res.save(out, overwrite=args.overwrite, formats=args.format, selection_view=args.selection_view,
              **save_options)

@@ -16,8 +16,9 @@ per-view transforms it returns. The methods, one module per family:
 - :mod:`~o3d_seqcc.correction.methods.global_methods`: ``"gain-compensation"``,
   ``"histogram-matching"`` (#5-#6, over all pairs at once).
 
-Unknown method names raise ``ValueError`` listing the valid ones; unknown options
-``TypeError``.
+Its options and their defaults are :class:`~o3d_seqcc.correction.settings.CorrectionSettings`.
+Unknown method names raise ``InputError`` (a ``ValueError``) listing the valid ones; unknown
+options ``TypeError``.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from .graph import (
 from ..imaging.sequences import FloatImages, ImageSequence, image_dtypes
 from ..scene import resolve_view
 from .methods import METHODS, available_methods, register_method
+from .settings import CorrectionSettings
 from .base import (
     DEFAULT_METHOD,
     CorrectedImages,
@@ -53,18 +55,20 @@ from .base import (
     apply_transform,
 )
 
-__all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "FunctionTransform",
+__all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "CorrectionSettings",
+           "FunctionTransform",
            "IdentityTransform", "LutTransform", "Transform", "apply_transform", "available_methods", "check_method",
            "correct", "register_method"]
 
 logger = logging.getLogger(__name__)
 
 
-def check_method(method: str, *, t_npm: int | str = "auto") -> None:
+def check_method(method: str, *, t_npm: int | str | None = None) -> None:
     """Raise ``InputError`` for an unknown ``method`` (listing the valid names) or a ``t_npm`` that is neither
-    ``"auto"`` nor a positive integer."""
+    ``"auto"`` nor a positive integer (None: not checked)."""
     METHODS.check(method)
-    check_t_npm(t_npm)
+    if t_npm is not None:
+        check_t_npm(t_npm)
 
 
 def _check_images(images: Sequence[np.ndarray], names: list[str], sizes: list[tuple[int, int]] | None) -> list[np.ndarray]:
@@ -90,15 +94,9 @@ def _check_images(images: Sequence[np.ndarray], names: list[str], sizes: list[tu
 def correct(
     scene=None,
     *,
-    reference: str | int = "auto",
-    method: str = DEFAULT_METHOD,
-    t_npm: int | str = "auto",
     mappings=None,
-    mappings_mode: str = "surface",
     images: Sequence[np.ndarray] | None = None,
-    seed: int = 0,
-    interpolation: str = "bilinear",
-    graph_weight: str = "paper",
+    settings: CorrectionSettings | None = None,
     **options,
 ) -> CorrectionResult:
     """Colour-correct all views toward a reference view.
@@ -108,31 +106,25 @@ def correct(
     scene : o3d_seqcc.Scene, optional
         The scene; may be omitted when both ``images`` and ``mappings`` are given (views are
         then named by ``mappings.view_names`` or their index).
-    reference : str or int, default "auto"
-        View name, index, or ``"auto"`` (:func:`o3d_seqcc.correction.graph.choose_reference`).
-    method : str, default :data:`DEFAULT_METHOD` ("seqcc-global")
-        A name of :data:`METHODS` (see the module docstring); ``"seqcc"`` is the paper's.
-    t_npm : "auto" or int, default "auto"
-        Minimum pair count for a graph edge (:func:`o3d_seqcc.correction.graph.resolve_t_npm`): with
-        surface mappings (the default) pixels of shared surface, ``"auto"`` = 1 % of the median
-        photo's pixels; with vertex and dense mappings vertex mappings (scaled for dense by
-        :func:`o3d_seqcc.correction.graph.scale_t_npm`), ``"auto"`` = the paper's 400.
-    mappings : o3d_seqcc.mappings.Mappings, optional
-        Precomputed filtered mappings (default: ``compute_mappings(scene, mode=mappings_mode)``).
-    mappings_mode : {"surface", "vertices", "dense"}, default "surface"
+    mappings : Mappings or {"surface", "vertices", "dense"}, optional
+        Precomputed filtered mappings (:class:`~o3d_seqcc.mappings.Mappings`), or the mapping
+        mode to compute them with (``compute_mappings(scene, mappings=...)``); default the
+        settings' ``mappings`` mode.
     images : list of (H, W, 3) arrays or ImageSequence, optional
         Images to correct instead of the scene's files (uint8, uint16 or float [0, 1]). A lazy
         :class:`~o3d_seqcc.imaging.sequences.ImageSequence` (e.g. ``SceneImages(scene.views)``) is read
         view by view when needed, and the result's ``images`` are then lazy too
         (:class:`~o3d_seqcc.correction.base.CorrectedImages`).
-    seed : int, default 0
-    interpolation : {"bilinear", "nearest"}, default "bilinear"
-        Colour sampling at the mappings.
-    graph_weight : {"paper", "log"}, default "paper"
-        Edge weight formula (:func:`o3d_seqcc.correction.graph.build_graph`).
+    settings : CorrectionSettings, optional
+        Reference, method, ``t_npm``, seed, interpolation, graph weight and method options;
+        default :class:`~o3d_seqcc.correction.settings.CorrectionSettings` (its attributes
+        document each option and its default).
     **options
-        Options of the method (e.g. seqcc: ``cmf="csvr"``, ``cmf_options={...}``, ``bits``);
-        unknown names raise ``TypeError``.
+        Fields of :class:`~o3d_seqcc.correction.settings.CorrectionSettings` changed from
+        ``settings`` (``reference``, ``method``, ``t_npm``, ``seed``, ``interpolation``,
+        ``graph_weight``; None: the settings' value); any other name is an option of the method
+        (e.g. seqcc: ``cmf="csvr"``, ``cmf_options={...}``, ``bits``), added to its
+        ``method_options``: unknown names raise ``TypeError``.
 
     Returns
     -------
@@ -144,11 +136,20 @@ def correct(
     ------
     InputError
         Unknown method or option (lists the valid ones; an unknown option's error is also a
-        ``TypeError``), unknown reference (lists the valid names), no edge left at ``t_npm`` (says the largest
-        pair count), a reference without edges, images not matching the scene, neither a scene
-        nor images and mappings.
+        ``TypeError``) or other option value, unknown reference (lists the valid names), no edge
+        left at ``t_npm`` (says the largest pair count), a reference without edges, images not
+        matching the scene, neither a scene nor images and mappings.
     """
-    check_method(method, t_npm=t_npm)
+    if isinstance(mappings, str):
+        options["mappings"], mappings = mappings, None
+    fields = set(CorrectionSettings.field_names()) - {"method_options"}
+    given = {k: options.pop(k) for k in list(options) if k in fields}
+    if options:  # the method's own options, on top of the settings' (method_options= replaces them)
+        base = given.get("method_options") or (settings.method_options if settings is not None else {})
+        given["method_options"] = {**base, **options}
+    cs = CorrectionSettings.resolve(settings, given, where="correct")
+    reference, method, t_npm, seed = cs.reference, cs.method, cs.t_npm, cs.seed
+    interpolation, graph_weight, options = cs.interpolation, cs.graph_weight, cs.method_options
     fn = METHODS[method]
     METHODS.check_options(method, options)
     if scene is None:
@@ -180,7 +181,7 @@ def correct(
     if mappings is None:
         from ..mappings.compute import compute_mappings
 
-        mappings = compute_mappings(scene, mode=mappings_mode)
+        mappings = compute_mappings(scene, mappings=cs.mappings)
     if getattr(mappings, "n_views", n) != n:
         raise InputError(f"mappings are for {mappings.n_views} views but there are {n}; recompute them")
     timings["mappings"] = time.perf_counter() - t0

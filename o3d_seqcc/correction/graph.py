@@ -117,7 +117,7 @@ def resolve_t_npm(t_npm, mappings, *, image_sizes=None) -> tuple[int, str]:
 
 
 def build_graph(
-    counts: Mapping[tuple[int, int], int], n_views: int, *, t_npm: int = 400, weight: str = "paper"
+    counts: Mapping[tuple[int, int], int], n_views: int, *, t_npm: int = PAPER_T_NPM, weight: str = "paper"
 ) -> nx.Graph:
     """Build the colour-correction weighted graph.
 
@@ -297,9 +297,10 @@ def scale_t_npm(t_npm: float, mappings) -> int:
     return scaled
 
 
-def mappings_summary(mappings: Mappings, *, t_npm: int | str = "auto") -> dict[str, Any]:
+def mappings_summary(mappings: Mappings, *, t_npm: int | str) -> dict[str, Any]:
     """A JSON-friendly summary: pairs, pairs with at least ``t_npm`` (see
-    :func:`resolve_t_npm`), totals, filter counts, timings."""
+    :func:`resolve_t_npm`; e.g. :attr:`CorrectionSettings.t_npm
+    <o3d_seqcc.correction.settings.CorrectionSettings.t_npm>`), totals, filter counts, timings."""
     st = mappings.filter_stats
     counts = sorted(mappings.counts.values())
     try:

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..correction import correct
+from ..correction import CorrectionSettings, correct
 from ..errors import InputError
 from ..correction.graph import PAPER_T_NPM
 from .metrics import Evaluation, blur_images, evaluate
@@ -80,12 +80,12 @@ def evaluate_method(
     mappings,
     *,
     method: str,
-    reference: str | int = "auto",
+    reference: str | int | None = None,
     holdout: float = 0.5,
     seed: int = 0,
-    t_npm: int | str = "auto",
+    t_npm: int | str | None = None,
     blur: float = 0.0,
-    interpolation: str = "bilinear",
+    interpolation: str | None = None,
     min_n: int = 1,
     scene=None,
     **options: Any,
@@ -102,22 +102,24 @@ def evaluate_method(
         All pairwise mappings of the scene.
     method : str
         Name in :data:`o3d_seqcc.correction.METHODS` (e.g. "none", "seqcc", "gain-compensation").
-    reference : str or int, default "auto"
-        Passed to ``correct``; the reference actually used by the in-sample run is reused for
-        the held-out run (so both use the same view).
+    reference : str or int, optional
+        Passed to ``correct`` (default :class:`~o3d_seqcc.correction.settings.CorrectionSettings`'s,
+        "auto"); the reference actually used by the in-sample run is reused for the held-out run
+        (so both use the same view).
     holdout : float, default 0.5
         Fraction of mesh faces whose mappings are held out for scoring; 0 skips the held-out run.
     seed : int, default 0
         Seed of the face split.
-    t_npm : "auto" or int, default "auto"
-        Minimum pair count per graph edge (passed to ``correct``;
+    t_npm : "auto" or int, optional
+        Minimum pair count per graph edge (default the settings', "auto"; passed to ``correct``;
         :func:`o3d_seqcc.correction.graph.resolve_t_npm`). With ``holdout`` the fit half has fewer
         mappings per pair; ``t_npm`` (``"auto"`` resolved first) is scaled by ``1 - holdout``
         for the held-out fit so the graph keeps the same edges.
     blur : float, default 0.0
         Gaussian sigma (px) applied to the corrected images before scoring only.
     interpolation, min_n
-        Passed to :func:`evaluate` (``min_n`` scaled by ``holdout`` for the held-out part).
+        Passed to :func:`evaluate` (``interpolation`` default the settings', "bilinear"; ``min_n``
+        scaled by ``holdout`` for the held-out part).
     **options
         Extra keyword options of the method, passed to ``correct``.
 
@@ -127,6 +129,9 @@ def evaluate_method(
     """
     if not 0.0 <= float(holdout) < 1.0:
         raise InputError(f"holdout must be in [0, 1), got {holdout}")
+    cs = CorrectionSettings.resolve(None, {"reference": reference, "method": method, "t_npm": t_npm,
+                                           "interpolation": interpolation}, where="evaluate_method")
+    reference, t_npm, interpolation = cs.reference, cs.t_npm, cs.interpolation
     if isinstance(scene_or_images, (list, tuple, np.ndarray)):
         images = [np.asarray(im) for im in scene_or_images]
     else:
@@ -164,10 +169,10 @@ def evaluate_scene(
     *,
     mappings: str = "vertices",
     method: str | None = None,
-    reference: str | int = "auto",
+    reference: str | int | None = None,
     holdout: float = 0.0,
     seed: int = 0,
-    t_npm: int | str = "auto",
+    t_npm: int | str | None = None,
     blur: float = 0.0,
     min_n: int = 1,
 ) -> dict[str, Any]:
@@ -182,7 +187,7 @@ def evaluate_scene(
         ``holdout`` then scores a random fraction of the faces only. With one, the method and
         ``"none"`` are fitted here and scored in-sample and (``holdout > 0``) held out.
     reference, t_npm
-        Passed to the method.
+        Passed to the method (default :class:`~o3d_seqcc.correction.settings.CorrectionSettings`'s).
     holdout : float in [0, 1), default 0
     seed : int, default 0
         Seed of the face split.
@@ -206,7 +211,7 @@ def evaluate_scene(
         raise InputError(f"holdout must be in [0, 1), got {holdout}")
     if method is not None:
         check_method(method)
-    maps = compute_mappings(scene, mode=mappings)
+    maps = compute_mappings(scene, mappings=mappings)
     out: dict[str, Any] = {"mappings": mappings, "holdout": holdout, "seed": seed, "blur": blur, "min_n": min_n,
                            "n_pairs": len(maps.pairs)}
     rows = []

@@ -322,7 +322,7 @@ def evaluate_semireal(
     mappings=None,
     images: Sequence[np.ndarray] | None = None,
     masks: Sequence[np.ndarray] | None = None,
-    t_npm: int | str = "auto",
+    t_npm: int | str | None = None,
     ranges: dict[str, Any] | None = None,
     stride: int = 2,
     unchanged: bool = True,
@@ -344,8 +344,9 @@ def evaluate_semireal(
         The photos (default: the scene's).
     masks : sequence of (H, W) bool arrays, optional
         Scored pixels (default :func:`coverage_masks`).
-    t_npm : "auto" or int, default "auto"
-        Graph threshold (:func:`o3d_seqcc.correction.graph.resolve_t_npm`).
+    t_npm : "auto" or int, optional
+        Graph threshold (:func:`o3d_seqcc.correction.graph.resolve_t_npm`); default
+        :attr:`CorrectionSettings.t_npm <o3d_seqcc.correction.settings.CorrectionSettings.t_npm>`.
     ranges : dict, optional
         Ranges of the hidden change (:func:`make_semireal`).
     stride : int, default 2
@@ -357,7 +358,7 @@ def evaluate_semireal(
     -------
     SemiRealResult
     """
-    from ..correction import LutTransform, correct
+    from ..correction import CorrectionSettings, LutTransform, correct
     from ..correction.graph import build_graph, choose_reference, resolve_t_npm
     from ..mappings.compute import compute_mappings
     from ..scene import resolve_view
@@ -365,6 +366,7 @@ def evaluate_semireal(
     if mappings is None:
         mappings = compute_mappings(scene)
     originals = [v.load_image() for v in scene.views] if images is None else [np.asarray(im) for im in images]
+    t_npm = CorrectionSettings.resolve(None, {"t_npm": t_npm}, where="evaluate_semireal").t_npm
     masks = coverage_masks(scene) if masks is None else list(masks)
     t_eff = resolve_t_npm(t_npm, mappings, image_sizes=[(v.width, v.height) for v in scene.views])[0]
     graph = build_graph(dict(mappings.counts), len(originals), t_npm=t_eff)

@@ -118,7 +118,7 @@ def load_scene(
     intrinsic: np.ndarray | str | os.PathLike | None = None,
     image_dir: str | os.PathLike | None = None,
     depth_dir: str | os.PathLike | None = None,
-    depth_scale: float = 1000.0,
+    depth_scale: float = View.depth_scale,
     extrinsic: str | None = None,
     axes: str | None = None,
     check_cameras: bool = True,
@@ -147,7 +147,7 @@ def load_scene(
         Folder of depth maps registered to the images, for the views that have none (MeshLab
         projects, COLMAP and Meshroom models carry no depth): ``<view name>.png`` or the image's
         file name with a depth extension (``.png``, ``.tif``, ``.tiff``, ``.exr``).
-    depth_scale : float, default 1000.0
+    depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
         Units per metre of the depth maps of ``depth_dir`` (1000: millimetres).
     extrinsic : {"world-to-camera", "camera-to-world"}, optional
         What the file's pose matrices map, when it is not the format's own convention

@@ -149,7 +149,7 @@ def load(
     *,
     mesh: str | os.PathLike | None = None,
     intrinsic: np.ndarray | None = None,
-    depth_scale: float = 1000.0,
+    depth_scale: float = View.depth_scale,
 ) -> Scene:
     """Load an Open3D RGB-D folder.
 
@@ -162,7 +162,7 @@ def load(
     intrinsic : (3, 3) array or path-like, optional
         The colour camera's pinhole matrix, or a file holding it (:func:`read_intrinsic`);
         default :data:`~o3d_seqcc.scene.PRIMESENSE_INTRINSIC`, for 640x480 images only.
-    depth_scale : float, default 1000.0
+    depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
 
     Raises
     ------

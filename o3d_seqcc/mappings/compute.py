@@ -28,6 +28,7 @@ Pixel coordinates follow the package convention: x right, y down, pixel centres 
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
@@ -48,7 +49,8 @@ logger = logging.getLogger(__name__)
 
 #: mapping modes accepted by :func:`compute_mappings`
 MODES = ("surface", "vertices", "dense")
-#: the default mapping mode (:func:`compute_mappings`, :func:`o3d_seqcc.pipeline.run`, the command line)
+#: the default mapping mode: :attr:`o3d_seqcc.correction.settings.CorrectionSettings.mappings` (the mode is
+#: defined here, with :data:`MODES`, the stage before the correction; every entry point reads it from the settings)
 DEFAULT_MODE = "surface"
 
 
@@ -277,12 +279,13 @@ def _max_usable_area(vis) -> np.ndarray:
 def compute_mappings(
     scene,
     *,
-    mode: str = DEFAULT_MODE,
+    mappings: str | None = None,
     visibility=None,
     sample_spacing: float = 3.0,
     dense_spacing: float = 3.0,
     dense_max_level: int = 6,
     cache_size: int = 8,
+    mode: str | None = None,
     **filter_options: Any,
 ) -> Mappings:
     """Pairwise mappings of every pair of views (paper 3.1), after the filters of 3.2.
@@ -291,8 +294,9 @@ def compute_mappings(
     ----------
     scene : Scene or None
         May be None when ``visibility`` is given.
-    mode : {"surface", "vertices", "dense"}, default "surface"
-        ``"surface"``: the vertices of every face usable in both views and points inside the
+    mappings : {"surface", "vertices", "dense"}, default :data:`DEFAULT_MODE` ("surface")
+        The mapping mode (:attr:`o3d_seqcc.correction.settings.CorrectionSettings.mappings`, the
+        command line's ``--mappings``). ``"surface"``: the vertices of every face usable in both views and points inside the
         larger ones, about one per ``sample_spacing``^2 pixels of the smaller projection; pairs
         counted by their shared surface in pixels (see the module docstring). ``"vertices"``: the projections of the 3
         vertices of every face usable in both views (the paper). ``"dense"``: the 3 vertices plus the centroids of the ``L**2`` sub-triangles
@@ -312,9 +316,11 @@ def compute_mappings(
         Cap on the subdivision level (at most 3 + 36 points per face).
     cache_size : int, default 8
         Number of built pairs kept in memory by the lazy ``pairs`` mapping.
+    mode : str, optional
+        Deprecated name of ``mappings`` (a ``DeprecationWarning``).
     **filter_options
-        Passed to :func:`~o3d_seqcc.visibility.compute_visibility` (``mesh``, ``occlusion_tol``,
-        ``depth_tol``, ``max_angle``, ``n_jobs``, ...).
+        Passed to :func:`~o3d_seqcc.visibility.compute_visibility` (``mesh``, ``settings``, the
+        fields of :class:`~o3d_seqcc.visibility.settings.VisibilitySettings`, ``n_jobs``, ...).
 
     Returns
     -------
@@ -332,8 +338,15 @@ def compute_mappings(
     """
     from ..visibility.compute import compute_visibility
 
+    if mode is not None:
+        warnings.warn("compute_mappings(mode=...) is deprecated: the option is called mappings= (as in "
+                      "pipeline.run, correct and --mappings)", DeprecationWarning, stacklevel=2)
+        if mappings is not None and mappings != mode:
+            raise InputError(f"compute_mappings: mappings={mappings!r} and its old name mode={mode!r} disagree")
+        mappings = mode
+    mode = DEFAULT_MODE if mappings is None else mappings
     if mode not in MODES:
-        raise ValueError(f"unknown mapping mode {mode!r}; valid: {', '.join(MODES)}")
+        raise InputError(f"unknown mapping mode {mode!r}; valid: {', '.join(MODES)}")
     if visibility is None:
         visibility = compute_visibility(scene, **filter_options)
     elif filter_options:

@@ -228,13 +228,13 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
     if f["method"]:
         s = f["settings"]
         ref = rep["correction"]["reference"]
-        maps = compute_mappings(sc, visibility=vis, mode=f["mappings"] or "vertices")  # older reports: the paper's
+        maps = compute_mappings(sc, visibility=vis, mappings=f["mappings"] or "vertices")  # older reports: the paper's
         seed = s.get("seed", (rep.get("selection") or {}).get("seed", 0))
         t_npm = s.get("t_npm", f["t_npm"])
         correction = correct(sc, reference=ref, method=f["method"], t_npm=t_npm if t_npm == "auto" else int(t_npm),
                              mappings=maps,
-                             images=photos, seed=int(seed), interpolation=s.get("interpolation", "bilinear"),
-                             graph_weight=s.get("graph_weight", "paper"), **s.get("options", {}))
+                             images=photos, seed=int(seed), interpolation=s.get("interpolation"),  # None: the default
+                             graph_weight=s.get("graph_weight"), **s.get("options", {}))
         corrected = correction.images
         if f["metrics"] is None and f["command"] == "run":
             logger.info("report.json has no metrics (older o3d-seqcc): computing Table 2")

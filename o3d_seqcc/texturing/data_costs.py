@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import InputError
 from ..imaging.arrays import img_as_float, img_as_uint8, rgb_to_lab, sample_bilinear
 from .bake import row_spans
-from .settings import DATA_TERMS, OUTLIER_REMOVALS
+from .settings import DATA_TERMS, OUTLIER_REMOVALS, TextureSettings
 
 __all__ = ["DATA_TERMS", "OUTLIER_REMOVALS", "ScoredVisibility", "face_view_statistics", "gradient_magnitude",
            "photometric_outliers", "score_visibility"]
@@ -372,7 +372,7 @@ class ScoredVisibility:
                                cos_angle=cos, uv=base.uv, depth=base.depth)
 
 
-def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, data_term: str = "gmi",
+def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, data_term: str = TextureSettings.data_term,
                      outlier_removal: str = "none") -> ScoredVisibility:
     """The usable incidences of ``visibility`` with their quality (``data_term``) and without outliers.
 

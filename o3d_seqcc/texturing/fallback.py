@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .settings import TextureSettings
+
 __all__ = ["FALLBACK_GREY", "fallback_corner_colors"]
 
 #: grey used for faces that no view sees and that touch no seen face (RGB, 0-255)
@@ -46,7 +48,7 @@ def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iter
 
 def fallback_corner_colors(
     corner_col: np.ndarray, wf: np.ndarray, labels: np.ndarray, adjacency: np.ndarray, *,
-    fallback: str = "smooth", iters: int = 256,
+    fallback: str = TextureSettings.fallback, iters: int = 256,
 ) -> np.ndarray:
     """Colours of the corners of the faces seen by no view.
 

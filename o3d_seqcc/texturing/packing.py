@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, warn
+from .settings import TextureSettings
 
 __all__ = ["MAX_AUTO_ATLAS_SIZE", "Packing", "pack_charts"]
 
@@ -230,8 +231,9 @@ def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
 
 
 def pack_charts(
-    uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int | str = "auto",
-    texels_per_pixel: float | str = "auto", overflow: str = "scale", padding: int = 4, power_of_two: bool = True,
+    uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int | str = TextureSettings.atlas_size,
+    texels_per_pixel: float | str = TextureSettings.texels_per_pixel, overflow: str = TextureSettings.overflow,
+    padding: int = TextureSettings.padding, power_of_two: bool = TextureSettings.power_of_two,
 ) -> Packing:
     """Pack charts into square pages, sized to them or of at most ``atlas_size`` (see the module docstring).
 

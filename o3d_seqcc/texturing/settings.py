@@ -1,17 +1,20 @@
 """One settings struct for the texturing stages (mvs-texturing's ``tex::Settings``).
 
 The defaults here are the defaults of every entry point: :func:`o3d_seqcc.texturing.select_views`,
-:func:`o3d_seqcc.texturing.bake_texture`, :func:`o3d_seqcc.pipeline.run` and the ``texture`` /
-``run`` commands all read them from :class:`TextureSettings`.
+:func:`o3d_seqcc.texturing.bake_texture`, :func:`o3d_seqcc.pipeline.run` (through
+:class:`~o3d_seqcc.settings.RunSettings`), :func:`o3d_seqcc.texture_mesh`, the pymeshlab filters,
+the MeshLab plugin and the ``texture`` / ``run`` / ``demo`` commands all read them from
+:class:`TextureSettings`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .._shared.options import SettingsBase, check_choice, check_types
 from ..errors import InputError
 from ..visibility.dense import VisibilityLike  # noqa: F401  (the stages' one visibility protocol, re-exported)
 
@@ -36,7 +39,7 @@ OVERFLOWS = ("scale", "pages")
 MAX_ATLAS_SIZE = 16384
 
 @dataclass(frozen=True)
-class TextureSettings:
+class TextureSettings(SettingsBase):
     """Options of view selection, atlas baking and seam leveling.
 
     Attributes
@@ -121,17 +124,14 @@ class TextureSettings:
     local_band: int = 2
     fallback: str = "smooth"
 
+    _label = "texture setting"
+
     def __post_init__(self) -> None:
-        _check_types(self)
-        if self.fallback not in FALLBACKS:
-            raise ValueError(f"unknown fallback {self.fallback!r}; valid: {', '.join(map(repr, FALLBACKS))}")
-        if self.data_term not in DATA_TERMS:
-            raise ValueError(f"unknown data_term {self.data_term!r}; valid: {', '.join(map(repr, DATA_TERMS))}")
-        if self.outlier_removal not in OUTLIER_REMOVALS:
-            raise ValueError(f"unknown outlier_removal {self.outlier_removal!r}; valid: "
-                             f"{', '.join(map(repr, OUTLIER_REMOVALS))}")
-        if self.overflow not in OVERFLOWS:
-            raise ValueError(f"unknown overflow {self.overflow!r}; valid: {', '.join(map(repr, OVERFLOWS))}")
+        check_types(self)
+        check_choice("fallback", self.fallback, FALLBACKS, flag="--fallback")
+        check_choice("data_term", self.data_term, DATA_TERMS, flag="--data-term")
+        check_choice("outlier_removal", self.outlier_removal, OUTLIER_REMOVALS, flag="--outlier-removal")
+        check_choice("overflow", self.overflow, OVERFLOWS, flag="--atlas-overflow")
         object.__setattr__(self, "atlas_size", parse_atlas_size(self.atlas_size))
         object.__setattr__(self, "texels_per_pixel", parse_texels_per_pixel(self.texels_per_pixel))
         if isinstance(self.padding, bool) or int(self.padding) != self.padding or not 0 <= self.padding <= 64:
@@ -146,11 +146,9 @@ class TextureSettings:
             raise InputError(f"leveling_smoothness (--leveling-smoothness) must be >= 0, got {self.leveling_smoothness}")
 
     def updated(self, **changes: Any) -> "TextureSettings":
-        """A copy with some fields changed; unknown names raise ``TypeError`` listing the valid ones."""
-        bad = sorted(set(changes) - {f.name for f in fields(self)})
-        if bad:
-            raise TypeError(f"unknown texture setting(s) {bad}; valid: {sorted(f.name for f in fields(self))}")
-        return replace(self, **changes)
+        """:meth:`replace` (its earlier name): a copy with some fields changed; unknown names raise
+        :class:`~o3d_seqcc._shared.options.UnknownSettingError` (a ``TypeError``) listing the valid ones."""
+        return self.replace(**changes)
 
 
 def _auto_or_parsed(value: Any, parse: Any, message: str) -> Any:
@@ -185,25 +183,6 @@ def parse_atlas_size(value: Any) -> int | str:
         raise InputError(f"atlas_size (--atlas-size) must be at most {MAX_ATLAS_SIZE} (the largest texture GPUs "
                          f"load), got {value}; use overflow='pages' (--atlas-overflow pages) for more")
     return int(value)
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
-
-
-_TYPES = {"int": (_is_int, "an integer"),
-          "float": (lambda v: _is_int(v) or isinstance(v, (float, np.floating)), "a number"),
-          "bool": (lambda v: isinstance(v, (bool, np.bool_)) or _is_int(v) and v in (0, 1), "True or False"),
-          "str": (lambda v: isinstance(v, str), "a string")}
-
-
-def _check_types(settings: Any) -> None:
-    """Every field of the type it is declared with (``padding="big"`` names the field, not ``int()``)."""
-    for f in fields(settings):
-        kind = _TYPES.get(str(f.type))
-        v = getattr(settings, f.name)
-        if kind is not None and not kind[0](v):
-            raise InputError(f"{f.name} must be {kind[1]}, got {v!r:.60} ({type(v).__name__})")
 
 
 def parse_texels_per_pixel(value: Any) -> float | str:

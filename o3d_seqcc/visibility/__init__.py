@@ -7,6 +7,7 @@
 - :mod:`~o3d_seqcc.visibility.per_view`: one view's task (frustum, projection, the filters) -> ``ViewRecord``;
 - :mod:`~o3d_seqcc.visibility.refine`: faces no photo holds whole, split into parts;
 - :mod:`~o3d_seqcc.visibility.stray`: far-away components no photo sees, dropped;
+- :mod:`~o3d_seqcc.visibility.settings`: :class:`VisibilitySettings`, the options of the stage and their defaults;
 - :mod:`~o3d_seqcc.visibility.compute`: :class:`Visibility` (one sparse record per view) and
   :func:`compute_visibility`, the stage.
 """
@@ -16,7 +17,8 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    **dict.fromkeys(("Visibility", "compute_visibility", "FILTERS", "UsableFaces"), "compute"),
+    **dict.fromkeys(("Visibility", "compute_visibility", "UsableFaces"), "compute"),
+    **dict.fromkeys(("VisibilitySettings", "FILTERS", "OBLIQUE_REFERENCES"), "settings"),
     **dict.fromkeys(("ViewRecord", "view_record"), "per_view"),
     **dict.fromkeys(("check_cameras", "CameraReport"), "camera_checks"),
     "depth_from_point_cloud": "depthmaps",

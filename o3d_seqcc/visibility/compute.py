@@ -48,7 +48,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -63,6 +63,7 @@ from .refine import refine_visibility
 from .stray import drop_faces, stray_faces
 from .dense import DenseViews, DenseVisibility, UsableFaces, VisibilityLike
 from .per_view import ViewRecord, VisibilityJob, summarize_records, view_record
+from .settings import FILTERS, VisibilitySettings
 
 __all__ = [
     "FILTERS",
@@ -71,6 +72,7 @@ __all__ = [
     "ViewRecord",
     "Visibility",
     "VisibilityLike",
+    "VisibilitySettings",
     "compute_visibility",
     "depth_from_point_cloud",
     "project_points",
@@ -78,8 +80,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: names of the filters of :func:`compute_visibility`
-FILTERS = ("occlusion", "depth", "oblique")
 
 _DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area", "cos_angle", "uv", "depth", "_XT",
           "_cache")
@@ -116,6 +116,8 @@ class Visibility(DenseViews):
     parent_faces : (F,) int64, optional
         The face of the input mesh each face of ``mesh`` is part of, when faces were split
         (``split_faces``); None when ``mesh`` is the input mesh.
+    settings : VisibilitySettings, optional
+        The options :func:`compute_visibility` ran with (None for :meth:`from_arrays`).
 
     The stages read it through :class:`~o3d_seqcc.visibility.dense.VisibilityLike` (the sparse
     methods below). Dense views for tests and figures (:class:`~o3d_seqcc.visibility.dense.DenseViews`,
@@ -134,6 +136,7 @@ class Visibility(DenseViews):
     uv_table: tuple | None = None
     image_sizes: tuple | None = None
     parent_faces: np.ndarray | None = None
+    settings: VisibilitySettings | None = None
 
     # ---- shape ---------------------------------------------------------------------------
 
@@ -289,24 +292,9 @@ def compute_visibility(
     scene,
     *,
     mesh: Mesh | str | os.PathLike | None = None,
-    occlusion_tol: float = 0.01,
-    occlusion_atol: float = 1e-3,
-    occlusion_spacing: float = 4.0,
-    occlusion_max_level: int = 64,
-    depth_tol: float = 0.03,
-    depth_atol: float = 0.05,
-    max_depth_disagreement: float = 0.5,
-    fill_radius: int = 6,
-    depth_edge_margin: int = 0,
-    max_angle: float = 75.0,
-    oblique_reference: str = "ray",
-    two_sided: bool = False,
-    filters: Iterable[str] = FILTERS,
-    split_faces: bool = True,
-    split_min_px: float = 4.0,
-    split_max_distortion: float = 0.5,
-    split_max_rounds: int = 8,
+    settings: VisibilitySettings | None = None,
     n_jobs: int | None = None,
+    **options: Any,
 ) -> Visibility:
     """Project the mesh into every view and apply the paper's three filters.
 
@@ -315,68 +303,22 @@ def compute_visibility(
     scene : Scene
     mesh : Mesh or path, optional
         Default ``scene.load_mesh()``.
-    occlusion_tol : float, default 0.01
-        Relative z-buffer tolerance: a test point at distance ``d`` is hidden when the mesh is hit
-        closer than ``d * (1 - occlusion_tol) - occlusion_atol``.
-    occlusion_atol : float, default 1e-3
-        Absolute z-buffer tolerance in scene units (1 mm for metric scenes).
-    occlusion_spacing : float, default 4.0
-        Spacing in px of the interior test points of faces larger than ``2 * spacing**2`` px^2;
-        0 tests vertices only.
-    occlusion_max_level : int, default 64
-        Cap on the interior grid level (at most ~2000 test points per face and view).
-    depth_tol : float, default 0.03
-        Relative depth-consistency threshold (3 % of the mesh depth) ...
-    depth_atol : float, default 0.05
-        ... with this absolute floor in scene units (5 cm): inconsistent when
-        ``|z_mesh - z_image| > max(depth_atol, depth_tol * z_mesh)``. The defaults absorb the
-        few-cm noise of consumer depth sensors and TSDF meshes; a 30 cm disagreement is caught
-        up to 10 m.
-    max_depth_disagreement : float, default 0.5
-        Warn when more than this fraction of the vertices of a view's valid, unoccluded faces
-        disagree with its depth data (depth map or point cloud not registered to the mesh?).
-    fill_radius : int, default 6
-        Hole filling of depth images rendered from point clouds, see
-        :func:`depth_from_point_cloud`. Depth maps are used as they are (0 = no evidence).
-    depth_edge_margin : int, default 0
-        Also mark as depth-inconsistent the faces with a vertex within this many pixels of a
-        depth discontinuity (a jump beyond the depth tolerance in the depth image). Guards
-        against colour/depth misregistration (fountain: 2-17 px) sampling the wrong side of an
-        occluding contour; 0 (the paper) disables it.
-    max_angle : float, default 75.0
-        Oblique threshold in degrees between the face normal and the viewing direction.
-    oblique_reference : {"ray", "axis"}, default "ray"
-        Viewing direction: from the face centroid to the camera centre, or the camera's focal
-        axis (the paper). "ray" is the default because at the image border the focal axis
-        underestimates the true viewing angle by up to the half field of view.
-    two_sided : bool, default False
-        Treat faces as two-sided (no back-face removal; angles use ``|cos|``). For meshes with
-        unreliable orientation.
-    filters : iterable of str, default all of ``FILTERS``
-        Filters to apply (``"occlusion"``, ``"depth"``, ``"oblique"``); disabled filters give
-        all-False masks.
-    split_faces : bool, default True
-        Split the faces that no view can use whole but some view sees in part (clipped by the
-        image border, partly hidden, larger than any photo) until their parts are usable
-        (:mod:`o3d_seqcc.visibility.refine`: conforming longest-edge bisection); the result's ``mesh`` is
-        then the refined mesh and ``parent_faces`` maps its faces to the input's.
-    split_min_px : float, default 4.0
-        ... down to parts whose longest edge is this many pixels in the views seeing them.
-    split_max_distortion : float, default 0.5
-        Also split faces whose texture would slide by more than this many pixels inside them
-        (their corners' projections interpolated linearly vs the photo's perspective:
-        :func:`o3d_seqcc.visibility.refine.distortion`; large faces seen in depth); ``inf`` turns it off.
-    split_max_rounds : int, default 8
-        ... in at most this many rounds (each divides a split face's area by about 4).
+    settings : VisibilitySettings, optional
+        The filter and split options; default :class:`~o3d_seqcc.visibility.settings.VisibilitySettings`
+        (its attributes document each option, its range and default).
     n_jobs : int, optional
         Threads for the per-view tasks (projection, depth maps, ray queries), joblib semantics
         (None: the active ``joblib.parallel_config`` or 1; -1: all cores). Inside
         :func:`o3d_seqcc._shared.parallel.use` with a Dask client the tasks run on its cluster instead.
+    **options
+        Fields of :class:`~o3d_seqcc.visibility.settings.VisibilitySettings` changed from
+        ``settings`` (``occlusion_tol``, ``depth_tol``, ``max_angle``, ``filters``,
+        ``split_faces``, ...; None: the settings' value).
 
     Returns
     -------
     Visibility
-        One sparse record per view. ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
+        One sparse record per view (``settings``: the options used). ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
         ``normals_flipped``, ``split`` (:class:`~o3d_seqcc.visibility.refine.Refinement` stats), the totals (face-view incidences) ``valid``, ``occluded``,
         ``depth_inconsistent``, ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
         ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
@@ -385,40 +327,16 @@ def compute_visibility(
     Raises
     ------
     InputError
-        No view sees any face; depth maps of the wrong size or dtype; unreadable point clouds.
-    ValueError
-        Unknown filter or ``oblique_reference``, out-of-range thresholds.
+        No view sees any face; depth maps of the wrong size or dtype; unreadable point clouds;
+        an unknown filter or ``oblique_reference``, out-of-range thresholds (a ``ValueError``).
+    UnknownSettingError
+        An option that is not a field of the settings (a ``TypeError``).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    filters = tuple(filters)
-    unknown = set(filters) - set(FILTERS)
-    if unknown:
-        raise ValueError(f"unknown filter(s) {sorted(unknown)}; valid: {', '.join(FILTERS)}")
-    if oblique_reference not in ("ray", "axis"):
-        raise ValueError(f"unknown oblique_reference {oblique_reference!r}; valid: 'ray', 'axis'")
-    if not 0.0 < float(max_angle) <= 180.0:
-        raise InputError(f"max_angle (--max-angle) must be in (0, 180] degrees, got {max_angle}")
-    if not (0 <= occlusion_tol < 1 and occlusion_atol >= 0):
-        raise InputError(f"occlusion_tol (--occlusion-tol) must be in [0, 1) and occlusion_atol >= 0, "
-                         f"got {occlusion_tol}, {occlusion_atol}")
-    if not (depth_tol >= 0 and depth_atol >= 0):
-        raise InputError(f"depth_tol (--depth-tol) and depth_atol (--depth-atol) must be >= 0, got {depth_tol}, {depth_atol}")
-    opts = {
-        "occlusion_tol": float(occlusion_tol),
-        "occlusion_atol": float(occlusion_atol),
-        "occlusion_spacing": float(occlusion_spacing),
-        "occlusion_max_level": int(occlusion_max_level),
-        "depth_tol": float(depth_tol),
-        "depth_atol": float(depth_atol),
-        "max_depth_disagreement": float(max_depth_disagreement),
-        "fill_radius": int(fill_radius),
-        "depth_edge_margin": int(depth_edge_margin),
-        "max_angle": float(max_angle),
-        "oblique_reference": oblique_reference,
-        "two_sided": bool(two_sided),
-        "filters": filters,
-    }
+    vs = VisibilitySettings.resolve(settings, options, where="compute_visibility")
+    split_faces = vs.split_faces
+    opts = vs.filter_options()
     if mesh is None:
         mesh = scene.load_mesh()
     elif not isinstance(mesh, Mesh):
@@ -461,8 +379,8 @@ def compute_visibility(
              "visibility, the atlas and the textured mesh; remove them from the mesh to silence this")
     if split_faces:
         t1 = time.perf_counter()
-        ref = refine_visibility(job, records, ex, vertex_normals=mesh.vertex_normals, min_px=split_min_px,
-                                max_distortion=split_max_distortion, max_rounds=split_max_rounds)
+        ref = refine_visibility(job, records, ex, vertex_normals=mesh.vertex_normals, min_px=vs.split_min_px,
+                                max_distortion=vs.split_max_distortion, max_rounds=vs.split_max_rounds)
         split = {**ref.stats, "input_faces": int(len(faces))}
         if split["faces_added"]:
             mesh = Mesh(vertices=ref.vertices, faces=ref.faces, vertex_normals=ref.vertex_normals)
@@ -487,4 +405,4 @@ def compute_visibility(
             np.stack([np.asarray(v.extrinsic, np.float64) for v in views]) if V else np.zeros((0, 4, 4)))
     return Visibility(mesh=mesh, records=tuple(records), stats=stats, view_names=tuple(v.name for v in views),
                       options=opts, cameras=cams, image_sizes=tuple((int(v.width), int(v.height)) for v in views),
-                      parent_faces=parent)
+                      parent_faces=parent, settings=vs)

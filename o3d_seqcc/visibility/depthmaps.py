@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.camera import inside_image, pixel_index, project_points
+from .settings import VisibilitySettings
 
 __all__ = ["depth_edges", "depth_from_point_cloud"]
 
@@ -21,7 +22,7 @@ def depth_from_point_cloud(
     width: int,
     height: int,
     *,
-    fill_radius: int = 6,
+    fill_radius: int = VisibilitySettings.fill_radius,
     inpaint_radius: float = 3.0,
 ) -> np.ndarray:
     """Render a depth image from a point cloud: nearest point per pixel, small holes inpainted.

@@ -30,7 +30,7 @@ def test_evaluate_prints_and_writes_json(syn, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "PSNR" in text and "CIEDE2000" in text
     d = json.loads(js.read_text())
-    ev = evaluate([v.load_image() for v in syn.scene.views], compute_mappings(syn.scene, mode="vertices"))
+    ev = evaluate([v.load_image() for v in syn.scene.views], compute_mappings(syn.scene, mappings="vertices"))
     assert d["evaluation"]["psnr"]["mean"] == pytest.approx(ev.psnr.mean)
     assert d["evaluation"]["ciede2000"]["weighted_mean"] == pytest.approx(ev.ciede2000.weighted_mean)
     assert d["evaluation"]["n_pairs"] == ev.n_pairs and len(d["evaluation"]["pairs"]) == ev.n_pairs

@@ -306,7 +306,7 @@ def test_seqcc_stays_close_to_ground_truth_with_pose_error(tmp_path):
     scene = synthetic.perturb_poses(ss.scene, 1.0, seed=0)
     assert not np.allclose(scene.views[1].extrinsic, ss.scene.views[1].extrinsic)
     np.testing.assert_array_equal(scene.views[0].extrinsic, ss.scene.views[0].extrinsic)  # reference kept exact
-    mappings = compute_mappings(scene, mode="dense")
+    mappings = compute_mappings(scene, mappings="dense")
     gt = [read_image(ss.gt_images[n]) for n in scene.names]
     masks = [np.load(ss.face_ids[n]) >= 0 for n in scene.names]
     de = {}

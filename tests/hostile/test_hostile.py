@@ -475,7 +475,7 @@ ARG_CASES = [
     ("atlas_size='big'", lambda S: sc.pipeline.run(S, atlas_size="big"),
      r"atlas_size \(--atlas-size\) must be 'auto' or an integer >= 8, got 'big'"),
     ("smoothness='x'", lambda S: sc.pipeline.texture(S, smoothness="x"), r"smoothness must be a number"),
-    ("settings=dict", lambda S: sc.pipeline.texture(S, settings={"atlas_size": 512}), r"settings must be a TextureSettings"),
+    ("settings=dict", lambda S: sc.pipeline.texture(S, settings={"atlas_size": 512}), r"settings must be a RunSettings, .*TextureSettings or None, got dict"),
     ("texture(images=[1,2,3])", lambda S: sc.pipeline.texture(S, images=[1, 2, 3]), r"images\[0\] must be a \(48, 64, 3\)"),
     ("client=5", lambda S: sc.pipeline.run(S, client=5), r"client must be a dask.distributed.Client"),
     ("float images in 0..255", lambda S: (lambda m, i, c: sc.correct_images(m, [x.astype(np.float32) for x in i], c))(

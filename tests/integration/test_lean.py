@@ -181,7 +181,7 @@ def test_thinned_pairs_are_the_full_pairs_taken(tmp_path):
     vis = compute_visibility(scene)
     rng = np.random.default_rng(3)
     for mode in ("surface", "vertices", "dense"):
-        m = compute_mappings(scene, visibility=vis, mode=mode)
+        m = compute_mappings(scene, visibility=vis, mappings=mode)
         src = m.pairs.source
         levels = 0
         for key in m.pairs:

@@ -11,7 +11,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc.cli import build_parser, main
-from o3d_seqcc.cli.common import library_default, texture_settings_from_args
+from o3d_seqcc.cli.common import texture_settings_from_args
 from o3d_seqcc.texturing import TextureSettings, bake_texture
 
 SMALL = ["--t-npm", "50", "--atlas-size", "1024"]
@@ -63,9 +63,9 @@ def test_library_defaults_are_the_command_line_defaults(small_scene):
         if hasattr(args, f.name):
             assert getattr(args, f.name) == getattr(d, f.name), f.name
     assert (args.reference, args.method, args.t_npm, args.mappings) == ("auto", "seqcc-global", "auto", "surface")
-    lib = library_default(sc.pipeline.run)
-    assert (lib["t_npm"], lib["mappings"], lib["split_faces"]) == (args.t_npm, args.mappings, args.split_faces) \
-        == ("auto", "surface", True)
+    rs = sc.RunSettings()  # the library's defaults (every entry point's: tests/test_settings.py)
+    assert (rs.correction.t_npm, rs.correction.mappings, rs.visibility.split_faces) \
+        == (args.t_npm, args.mappings, args.split_faces) == ("auto", "surface", True)
 
 
 def test_texture_only_and_textured_mesh_conversions(small_scene, tmp_path):
@@ -85,7 +85,7 @@ def test_texture_only_and_textured_mesh_conversions(small_scene, tmp_path):
     tri = tm.to_trimesh()
     np.testing.assert_allclose(tri.visual.uv, tm.uv)
     assert tri.visual.material.image.size == (tm.texture.shape[1], tm.texture.shape[0])
-    with pytest.raises(TypeError, match="unknown texture setting"):
+    with pytest.raises(TypeError, match=r"unknown setting\(s\) \['atlas_sise'\] \(did you mean 'atlas_size'"):
         sc.pipeline.texture(small_scene.scene, atlas_sise=1024)
 
 

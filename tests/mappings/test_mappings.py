@@ -78,7 +78,7 @@ def test_sample_colors_bilinear_on_gradient(rng):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_plane_mappings_are_exact(plane_scene, mode):
-    M = compute_mappings(plane_scene, mode=mode)
+    M = compute_mappings(plane_scene, mappings=mode)
     assert M.mode == mode and M.n_views == 3 and M.view_names == ("v0", "v1", "v2")
     assert set(M.pairs) == {(0, 1), (0, 2), (1, 2)}
     mesh = M.visibility.mesh
@@ -107,7 +107,7 @@ def test_plane_mappings_are_exact(plane_scene, mode):
 
 
 def test_vertices_mode_is_the_paper_definition(plane_scene):
-    M = compute_mappings(plane_scene, mode="vertices")
+    M = compute_mappings(plane_scene, mappings="vertices")
     vis = M.visibility
     for (a, b), pm in M.pairs.items():
         shared = np.flatnonzero(vis.usable[a] & vis.usable[b])
@@ -122,8 +122,8 @@ def test_vertices_mode_is_the_paper_definition(plane_scene):
 
 
 def test_dense_has_more_mappings_and_the_same_precision(occluder_scene):
-    mv = compute_mappings(occluder_scene, mode="vertices")
-    md = compute_mappings(occluder_scene, mode="dense", visibility=mv.visibility)
+    mv = compute_mappings(occluder_scene, mappings="vertices")
+    md = compute_mappings(occluder_scene, mappings="dense", visibility=mv.visibility)
     assert md.total >= 4 / 3 * mv.total  # at least the centroid of each face
     assert set(md.counts) == set(mv.counts)
     for key in mv.pairs:
@@ -170,7 +170,7 @@ def test_no_overlap_raises(tmp_path):
 
 def test_bad_arguments(plane_scene):
     with pytest.raises(ValueError, match="vertices, dense"):
-        compute_mappings(plane_scene, mode="pixels")
+        compute_mappings(plane_scene, mappings="pixels")
     vis = compute_visibility(plane_scene)
     with pytest.raises(TypeError, match="max_angle"):
         compute_mappings(plane_scene, visibility=vis, max_angle=60)
@@ -191,7 +191,7 @@ def test_bad_arguments(plane_scene):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_split_by_face(plane_scene, mode):
-    M = compute_mappings(plane_scene, mode=mode)
+    M = compute_mappings(plane_scene, mappings=mode)
     fit, test = M.split(0.25, seed=3)
     faces_all = M.faces()
     f_fit, f_test = fit.faces(), test.faces()
@@ -253,7 +253,7 @@ def test_hand_built_mappings():
 @pytest.mark.parametrize("fmt", ["compact", "arrays"])
 @pytest.mark.parametrize("mode", MODES)
 def test_save_load_round_trip(plane_scene, tmp_path, fmt, mode):
-    M = compute_mappings(plane_scene, mode=mode)
+    M = compute_mappings(plane_scene, mappings=mode)
     fit, _ = M.split(0.3, seed=1)
     for src in (M, fit):
         p = save_mappings(src, tmp_path / f"m_{fmt}.npz", format=fmt)
@@ -319,7 +319,7 @@ def test_cli_mappings(occluder_scene, tmp_path, capsys):
 
 
 def test_fountain_counts_and_depth_agreement(fountain_scene):
-    M = compute_mappings(fountain_scene, mode="vertices")  # the paper's filter acts at the vertices
+    M = compute_mappings(fountain_scene, mappings="vertices")  # the paper's filter acts at the vertices
     c = np.array(list(M.counts.values()))
     n_pairs = 33 * 32 // 2
     assert len(c) > 0.9 * n_pairs

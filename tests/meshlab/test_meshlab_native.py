@@ -17,8 +17,7 @@ import o3d_seqcc as sc
 from meshlab_filters import get_filter
 from meshlab_filters.native import (CORRECT_TITLE, NATIVE_FILTERS, TEXTURE_TITLE, cli_arguments, cpp_header,
                                     filter_script, native_filters)
-from o3d_seqcc.cli.common import library_default
-from o3d_seqcc.pipeline import correct_scene
+from o3d_seqcc.settings import CorrectionSettings
 from o3d_seqcc.texturing import TextureSettings
 
 
@@ -35,8 +34,9 @@ def test_parameters_carry_the_library_defaults_and_help_texts():
     assert tex["atlassize"]["default"] == str(ts.atlas_size) and tex["atlassize"]["flag"] == "--atlas-size"
     assert tex["texelsperpixel"]["default"] == str(ts.texels_per_pixel)
     assert tex["selection"]["default"] == ts.selection and ts.selection in tex["selection"]["values"]
-    assert cor["tnpm"]["default"] == str(library_default(correct_scene)["t_npm"])
-    assert cor["method"]["default"] == library_default(correct_scene)["method"]
+    cs = CorrectionSettings()  # every default from the settings (tests/test_settings.py checks all of them)
+    assert cor["tnpm"]["default"] == str(cs.t_npm)
+    assert cor["method"]["default"] == cs.method
     for f in NATIVE_FILTERS:
         reg = get_filter(f.registry)
         for p in table[f.title].values():

@@ -59,7 +59,7 @@ def test_surface_counts_are_the_shared_area_in_pixels_on_any_tessellation(tmp_pa
         assert inside == pytest.approx(want / 9.0, rel=0.35)
     else:
         assert inside == 0 and (want / len(f)) < 9  # faces smaller than a sample cell: their vertices only
-    assert compute_mappings(scene, visibility=vis, mode="vertices").count(0, 1) == 3 * len(f)
+    assert compute_mappings(scene, visibility=vis, mappings="vertices").count(0, 1) == 3 * len(f)
 
 
 def test_surface_samples_land_on_the_same_surface_point(tmp_path):
@@ -87,7 +87,7 @@ def test_t_npm_auto_is_one_percent_of_a_photo_and_the_error_names_the_numbers(tm
     t, how = resolve_t_npm("auto", maps)
     assert t == round(AUTO_T_NPM_FRACTION * W * H) == 48 and "1%" in how and f"{W}x{H}" in how
     assert resolve_t_npm(500, maps)[0] == 500
-    assert resolve_t_npm("auto", compute_mappings(scene, filters=(), mode="vertices"))[0] == 400
+    assert resolve_t_npm("auto", compute_mappings(scene, filters=(), mappings="vertices"))[0] == 400
     n = maps.count(0, 1)
     assert n > 48
     images = [np.full((H, W, 3), 128, np.uint8)] * 2

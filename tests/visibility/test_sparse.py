@@ -121,7 +121,7 @@ def test_shared_counts_packed_and_sparse_agree_with_brute_force(rng, weighted):
 def test_dense_mappings_counts_from_records(wide_scene):
     vis = compute_visibility(wide_scene)
     for mode in ("vertices", "dense"):
-        maps = compute_mappings(wide_scene, visibility=vis, mode=mode)
+        maps = compute_mappings(wide_scene, visibility=vis, mappings=mode)
         for k in maps.pairs:
             assert maps.pairs[k].n == maps.counts[k]
 

@@ -15,7 +15,7 @@ from o3d_seqcc.texturing.data_costs import ScoredVisibility, score_visibility
 from o3d_seqcc.visibility.compute import Visibility
 from o3d_seqcc.visibility.dense import DenseVisibility, VisibilityLike
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _strip(rng, n=6):
