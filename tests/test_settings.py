@@ -181,7 +181,7 @@ def _record_stages(monkeypatch, seen: dict) -> None:
     def corr(scene, settings=None, **kw):
         seen["correction"] = settings
         return SimpleNamespace(images=[], timings={}, method="", reference=0, t_npm=1, graph_edges=[], paths={},
-                               unreachable=[], transforms=[])
+                               unreachable=[], transforms=[], settings={})
 
     def tex(scene, images, v, s, timings, *, want_seams):
         seen["texture"], seen["seams"] = s, want_seams
@@ -211,9 +211,10 @@ def test_pipeline_runs_with_the_defaults(tiny, monkeypatch):
     job = pipeline.correct_scene(tiny.scene)
     assert (seen["mappings"], seen["mappings_visibility"], seen["correction"]) == (
         d.correction.mappings, d.visibility, d.correction)
-    assert (job.report["t_npm"], job.report["mappings"], job.report["seed"], job.report["graph_weight"],
-            "metrics" in job.report) == (d.correction.t_npm, d.correction.mappings, d.correction.seed,
-                                         d.correction.graph_weight, d.metrics)
+    # report.json (one schema, issue 23): the correction's part records the mode; its settings are the
+    # CorrectionResult's own record (the stub's is empty); metrics are on by default
+    assert (job.report["correction"]["mappings"], job.report["metrics"] is not None) == (
+        d.correction.mappings, d.metrics)
     # the old keywords still work, and reach their stage
     seen.clear()
     res = pipeline.run(tiny.scene, method="seqcc", t_npm=50, mappings="dense", split_faces=False, seed=2, atlas_size=512,
@@ -390,7 +391,7 @@ def test_unknown_names_list_the_valid_ones():
         pipeline.texture("scene.json", method="seqcc")
     with pytest.raises(TypeError, match=r"atlas_size"):  # correct_scene() does not texture
         pipeline.correct_scene("scene.json", atlas_size=512)
-    with pytest.raises(TypeError, match=r"bogus.*valid: \['bits'"):  # a method's options are the method's
+    with pytest.raises(TypeError, match=r"bogus.*valid: bits"):  # a method's options are the method's
         CorrectionSettings(method="seqcc", method_options={"bogus": 1})
     with pytest.raises(sc.InputError, match="settings must be a VisibilitySettings"):
         sc.compute_visibility(None, settings=TextureSettings())
