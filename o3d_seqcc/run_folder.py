@@ -29,6 +29,7 @@ from .io.result_files import meshlab_project, write_images
 from ._shared.parallel import carried
 from .evaluation.render import write_selection_picture
 from .report import REPORT_FILE, cached_images
+from .report.validate import page_bytes
 
 __all__ = ["write_run_folder"]
 
@@ -130,7 +131,7 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
     if report:
         head, rest = page.split("<!-- timings -->", 1)
         tail = rest.split("<!-- /timings -->", 1)[1]
-        atomic_write_bytes(stage / REPORT_FILE, (head + timings_block(final) + tail).encode("utf-8"))
+        atomic_write_bytes(stage / REPORT_FILE, page_bytes(head + timings_block(final) + tail))
         res.timings["report"] = t_report
         final["timings_s"]["report"] = round(t_report, 4)
     write_json(stage / "report.json", final)

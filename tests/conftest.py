@@ -43,6 +43,28 @@ def rng() -> np.random.Generator:
 #: from ``pytest --durations=0`` of the full run: each takes about 4 s or more on this 2-core machine. A test module
 #: may also mark itself (``pytestmark = pytest.mark.slow``); an entry naming no test of its file stops the run.
 SLOW = """
+cli/test_cli_correct.py::test_correct_writes_images_scene_report_and_chains
+cli/test_cli_evaluate.py::test_correct_chains_into_evaluate
+cli/test_cli_evaluate.py::test_evaluate_prints_and_writes_json
+cli/test_cli_messages.py::test_quiet_prints_nothing_on_success
+cli/test_cli_texture.py::test_run_corrects_and_textures
+cli/test_cli_texture.py::test_texture_engine_options
+cli/test_cli_texture.py::test_texture_with_images_folder
+cli/test_cli_texture.py::test_texture_writes_outputs_and_refuses_existing_folder
+cli/test_progress.py::test_cli_shows_bars_on_a_terminal_and_not_in_a_pipe
+geometry/test_distortion.py::test_distorted_scene_textured_like_the_undistorted_one
+hostile/test_hostile.py::test_cli_terminated_exit_code_and_cleanup
+io/test_fuzz_loaders.py
+io/test_reliability.py::test_a_warning_is_printed_once
+io/test_reliability.py::test_failure_after_loading_leaves_nothing_and_rerun_works
+io/test_reliability.py::test_killed_run_leaves_previous_output_intact
+io/test_reliability.py::test_overwrite_replaces_the_whole_previous_output
+io/test_reliability.py::test_symlinked_out_is_followed_and_images_symlink_not_written_through
+meshlab/test_meshlab_native.py::test_progress_lines_of_the_command_line
+report/test_report.py::test_the_report_is_one_self_contained_file
+report/test_report.py::test_the_report_renders_in_headless_chromium
+test_open3d_api.py::test_texture_mesh_is_an_open3d_textured_mesh
+texturing/test_atlas.py::test_fountain_mip_bleed_level2_and_coverage
 integration/test_cli_demo.py
 integration/test_dask.py
 integration/test_examples.py
