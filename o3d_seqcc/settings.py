@@ -18,11 +18,10 @@ correction and the view selection) or as whole stage objects (``visibility=Visib
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
-from ._shared.options import SettingsBase, UnknownSettingError, check_types
+from ._shared.options import SettingsBase, UnknownSettingError, check_names, check_types
 from .correction.settings import CorrectionSettings
 from .errors import InputError
 from .texturing import SELECTION_METHODS
@@ -98,13 +97,7 @@ class RunSettings(SettingsBase):
 
     @classmethod
     def check_names(cls, names, *, where: str = "") -> None:
-        valid = cls.option_names()
-        bad = sorted(set(names) - set(valid))
-        if bad:
-            close = {b: difflib.get_close_matches(b, valid, n=1) for b in bad}
-            hint = "; ".join(f"did you mean {c[0]!r} for {b!r}?" for b, c in close.items() if c)
-            raise UnknownSettingError(f"{where + ': ' if where else ''}unknown setting(s) {bad}"
-                                      f"{' (' + hint + ')' if hint else ''}; valid: {list(valid)}")
+        check_names(names, list(cls.option_names()), label="setting", where=where)
 
     def replace(self, **changes: Any) -> "RunSettings":
         """A copy with options changed: flat names (``method="seqcc"``, ``max_angle=60``, ``seed=1``) go to

@@ -79,6 +79,13 @@ def _parents(name: str) -> list[str]:
     return [".".join(parts[:k]) for k in range(2, len(parts) + 1)]
 
 
+def _import_root(node: ast.ImportFrom, base: list[str]) -> str:
+    """The absolute module an ``from X import ...`` names, for a module in the package ``base`` (a list of names)."""
+    if node.level:
+        return ".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
+    return node.module or ""
+
+
 def module_graph() -> dict[str, set[str]]:
     """Module -> package modules it imports (relative and absolute imports, any nesting level)."""
     modules = {_module_name(p): p for p in PKG.rglob("*.py")}
@@ -90,10 +97,7 @@ def module_graph() -> dict[str, set[str]]:
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             targets: list[str] = []
             if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    root = ".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
-                else:
-                    root = node.module or ""
+                root = _import_root(node, base)
                 targets = [root] + [f"{root}.{a.name}" for a in node.names]
             elif isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
@@ -210,8 +214,7 @@ def direct_imports() -> dict[str, set[str]]:
         deps: set[str] = set()
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.ImportFrom):
-                root = (".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
-                        if node.level else node.module or "")
+                root = _import_root(node, base)
                 for a in node.names:
                     sub = f"{root}.{a.name}"
                     deps.add(sub if sub in modules else root)
@@ -257,8 +260,7 @@ def test_no_private_names_across_packages():
         base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("o3d_seqcc")):
-                root = (".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
-                        if node.level else node.module)
+                root = _import_root(node, base)
                 bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names
                         if a.name.startswith("_") and not a.name.startswith("__") and stage(root) != stage(name)]
     assert not bad, bad

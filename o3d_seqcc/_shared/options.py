@@ -20,13 +20,24 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["SettingsBase", "UnknownSettingError", "check_choice", "check_types"]
+__all__ = ["SettingsBase", "UnknownSettingError", "check_choice", "check_names", "check_types"]
 
 S = TypeVar("S", bound="SettingsBase")
 
 
 class UnknownSettingError(InputError, TypeError):
     """An option name no settings object has (a ``TypeError``, as an unknown keyword argument is)."""
+
+
+def check_names(names: Iterable[str], valid: list[str], *, label: str, where: str = "") -> None:
+    """Raise :class:`UnknownSettingError` for the ``names`` not in ``valid``: each with its closest valid name,
+    then the valid ones (in the order given)."""
+    bad = sorted(set(names) - set(valid))
+    if bad:
+        close = {b: difflib.get_close_matches(b, valid, n=1) for b in bad}
+        hint = "; ".join(f"did you mean {c[0]!r} for {b!r}?" for b, c in close.items() if c)
+        raise UnknownSettingError(f"{where + ': ' if where else ''}unknown {label}(s) {bad}"
+                                  f"{' (' + hint + ')' if hint else ''}; valid: {list(valid)}")
 
 
 class SettingsBase:
@@ -49,13 +60,7 @@ class SettingsBase:
     @classmethod
     def check_names(cls, names: Iterable[str], *, where: str = "") -> None:
         """Raise :class:`UnknownSettingError` for names that are not fields, listing the valid ones."""
-        valid = cls.field_names()
-        bad = sorted(set(names) - set(valid))
-        if bad:
-            close = {b: difflib.get_close_matches(b, valid, n=1) for b in bad}
-            hint = "; ".join(f"did you mean {c[0]!r} for {b!r}?" for b, c in close.items() if c)
-            raise UnknownSettingError(f"{where + ': ' if where else ''}unknown {cls._label}(s) {bad}"
-                                      f"{' (' + hint + ')' if hint else ''}; valid: {sorted(valid)}")
+        check_names(names, sorted(cls.field_names()), label=cls._label, where=where)
 
     def replace(self: S, **changes: Any) -> S:
         """A copy with some fields changed (validated); unknown names raise :class:`UnknownSettingError`."""
