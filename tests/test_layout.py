@@ -86,28 +86,31 @@ def _import_root(node: ast.ImportFrom, base: list[str]) -> str:
     return node.module or ""
 
 
+def _import_nodes():
+    """(module name, its package as a list of names, import node) for every import in the package, at any depth."""
+    for path in PKG.rglob("*.py"):
+        name = _module_name(path)
+        base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                yield name, base, node
+
+
 def module_graph() -> dict[str, set[str]]:
     """Module -> package modules it imports (relative and absolute imports, any nesting level)."""
     modules = {_module_name(p): p for p in PKG.rglob("*.py")}
-    graph: dict[str, set[str]] = {}
-    for name, path in modules.items():
-        is_pkg = path.name == "__init__.py"
-        base = name.split(".") if is_pkg else name.split(".")[:-1]
-        deps: set[str] = set()
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            targets: list[str] = []
-            if isinstance(node, ast.ImportFrom):
-                root = _import_root(node, base)
-                targets = [root] + [f"{root}.{a.name}" for a in node.names]
-            elif isinstance(node, ast.Import):
-                targets = [a.name for a in node.names]
-            for t in targets:
-                if t in modules:
-                    # the packages that hold the importer itself are already being imported: not an edge
-                    deps.update(p for p in _parents(t) if not (name == p or name.startswith(p + ".")))
-        deps.discard(name)
-        graph[name] = {d for d in deps if d in modules and d != "o3d_seqcc"}
-    return graph
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, base, node in _import_nodes():
+        if isinstance(node, ast.ImportFrom):
+            root = _import_root(node, base)
+            targets = [root] + [f"{root}.{a.name}" for a in node.names]
+        else:
+            targets = [a.name for a in node.names]
+        for t in targets:
+            if t in modules:
+                # the packages that hold the importer itself are already being imported: not an edge
+                graph[name].update(p for p in _parents(t) if not (name == p or name.startswith(p + ".")))
+    return {name: {d for d in deps if d in modules and d not in ("o3d_seqcc", name)} for name, deps in graph.items()}
 
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -207,21 +210,14 @@ def direct_imports() -> dict[str, set[str]]:
     nothing of its own stage eagerly (lazy re-exports), so only the named module is a dependency.
     """
     modules = {_module_name(p): p for p in PKG.rglob("*.py")}
-    out: dict[str, set[str]] = {}
-    for name, path in modules.items():
-        is_pkg = path.name == "__init__.py"
-        base = name.split(".") if is_pkg else name.split(".")[:-1]
-        deps: set[str] = set()
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.ImportFrom):
-                root = _import_root(node, base)
-                for a in node.names:
-                    sub = f"{root}.{a.name}"
-                    deps.add(sub if sub in modules else root)
-            elif isinstance(node, ast.Import):
-                deps.update(a.name for a in node.names)
-        out[name] = {d for d in deps if d in modules and d not in ("o3d_seqcc", name)}
-    return out
+    out: dict[str, set[str]] = {name: set() for name in modules}
+    for name, base, node in _import_nodes():
+        if isinstance(node, ast.ImportFrom):
+            root = _import_root(node, base)
+            out[name].update(f"{root}.{a.name}" if f"{root}.{a.name}" in modules else root for a in node.names)
+        else:
+            out[name].update(a.name for a in node.names)
+    return {name: {d for d in deps if d in modules and d not in ("o3d_seqcc", name)} for name, deps in out.items()}
 
 
 def upward_imports(graph: dict[str, set[str]]) -> list[str]:
@@ -253,16 +249,13 @@ def test_package_inits_import_no_stage_eagerly():
 
 def test_no_private_names_across_packages():
     """``from ..other_stage.module import _private`` is an internal reaching across a stage boundary."""
-    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
     stage = lambda m: m.split(".")[1] if m.count(".") else ""  # noqa: E731
     bad = []
-    for name, path in modules.items():
-        base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("o3d_seqcc")):
-                root = _import_root(node, base)
-                bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names
-                        if a.name.startswith("_") and not a.name.startswith("__") and stage(root) != stage(name)]
+    for name, base, node in _import_nodes():
+        if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("o3d_seqcc")):
+            root = _import_root(node, base)
+            bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names
+                    if a.name.startswith("_") and not a.name.startswith("__") and stage(root) != stage(name)]
     assert not bad, bad
 
 
