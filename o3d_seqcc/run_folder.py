@@ -26,6 +26,7 @@ import numpy as np
 from .io.export import export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
 from .io.files import atomic_write_bytes, write_json
 from .io.result_files import meshlab_project, write_images
+from ._shared.interrupts import held
 from ._shared.parallel import carried
 from .evaluation.render import write_selection_picture
 from .report import REPORT_FILE, cached_images
@@ -95,12 +96,13 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
               "orientation": {**orientation, "applies_to": [f for f in fmts]}}
     pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="o3d_seqcc-save")
     try:
-        files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, fmts=fmts, tfmt=tfmt,
-                            quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
-        pic = pool.submit(carried(write_selection_picture, "save: selection picture"), res.scene, res.visibility,
-                          res.selection, stage / "selection.png", view) if picture else None
-        prelude = pool.submit(carried(res._report_prelude, "save: table 2 and seam steps"), table2,
-                              images) if report else None
+        with held():  # a signal inside submit's Thread.start would leave a writer that shutdown does not join
+            files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, fmts=fmts, tfmt=tfmt,
+                                quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
+            pic = pool.submit(carried(write_selection_picture, "save: selection picture"), res.scene,
+                              res.visibility, res.selection, stage / "selection.png", view) if picture else None
+            prelude = pool.submit(carried(res._report_prelude, "save: table 2 and seam steps"), table2,
+                                  images) if report else None
         rep = page = None
         t = time.perf_counter()
         if report:  # the page, while the files are written: everything but the export's seconds is known

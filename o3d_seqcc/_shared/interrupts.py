@@ -4,6 +4,9 @@
 process at once: a staging folder and a lock would be left beside an output.
 :func:`interruptible` turns them into :class:`Terminated` (a ``KeyboardInterrupt``) for the time
 of a block; :func:`o3d_seqcc.io.output.output_folder` and the command line enter it.
+:func:`held` makes a short block whole: a signal that arrives inside it is raised when it ends
+(``ThreadPoolExecutor.submit`` interrupted inside ``Thread.start`` leaves a running worker that
+``shutdown(wait=True)`` does not join: it went on writing into a staging folder being removed).
 """
 
 from __future__ import annotations
@@ -13,7 +16,9 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
-__all__ = ["Terminated", "interruptible"]
+__all__ = ["Terminated", "held", "interruptible"]
+
+_HOLD = {"depth": 0, "pending": None}  # held() blocks open in the main thread; the signal that came in one
 
 
 class Terminated(KeyboardInterrupt):
@@ -29,7 +34,37 @@ class Terminated(KeyboardInterrupt):
 
 
 def _raise_terminated(signum: int, frame) -> None:
-    raise Terminated(signum)
+    if _HOLD["depth"]:  # inside held(): raised when the block ends
+        _HOLD["pending"] = int(signum)
+        return
+    raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
+
+
+@contextmanager
+def held() -> Iterator[None]:
+    """A signal that would interrupt the block (Ctrl-C's SIGINT; SIGTERM / SIGHUP inside
+    :func:`interruptible`) is raised when the block ends instead, as ``KeyboardInterrupt`` /
+    :class:`Terminated`.
+
+    For a few statements that must not be cut in two, such as starting the threads that write into
+    a staging folder (so that every one of them is joined before the folder is removed). Only in the
+    main thread (signals are handled there); a program's own SIGINT handler is kept. Re-entrant.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = signal.signal(signal.SIGINT, _raise_terminated) \
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler else None
+    _HOLD["depth"] += 1
+    try:
+        yield
+    finally:
+        _HOLD["depth"] -= 1
+        if saved is not None:
+            signal.signal(signal.SIGINT, saved)
+        pending, _HOLD["pending"] = (_HOLD["pending"], None) if not _HOLD["depth"] else (None, _HOLD["pending"])
+        if pending is not None:
+            raise KeyboardInterrupt() if pending == signal.SIGINT else Terminated(pending)
 
 
 @contextmanager

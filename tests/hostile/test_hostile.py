@@ -377,6 +377,35 @@ def test_termination_while_staging_cleans_up(tmp_path, sig):
     assert _beside(tmp_path) == []  # no staging folder, no lock, no output
 
 
+def test_a_signal_inside_the_saves_thread_start_leaves_no_staging_folder(S, tmp_path):
+    # SIGTERM inside ThreadPoolExecutor.submit's Thread.start left a worker that shutdown(wait=True) did not join:
+    # it wrote the mesh files into the staging folder while the guard removed it (1 run in 80 under load, in CI).
+    # Here the signal is made to land there every time; held() around the submits defers it past them.
+    out = tmp_path / "o"
+    r = python(f"""
+        import os, signal, threading
+        import o3d_seqcc as sc
+        from o3d_seqcc._shared.interrupts import Terminated, interruptible
+        res = sc.pipeline.run({str(S)!r}, t_npm=10, atlas_size=512)
+        start, sent = threading.Thread.start, []
+        def signalling_start(self):
+            start(self)
+            if self.name.startswith("o3d_seqcc-save") and not sent:
+                sent.append(signal.SIGTERM)
+                os.kill(os.getpid(), signal.SIGTERM)
+                sum(range(10 ** 5))  # the handler runs here, inside start
+        threading.Thread.start = signalling_start
+        try:
+            with interruptible():
+                res.save({str(out)!r}, selection_view="none")
+            print("saved")
+        except Terminated as e:
+            print("terminated", e.name, len(sent))
+    """, timeout=180)
+    assert r.stdout.strip() == "terminated SIGTERM 1", r.stdout + r.stderr
+    assert _beside(tmp_path) == ["S"]  # no staging folder written into after its removal, no lock, no output
+
+
 def test_cli_terminated_exit_code_and_cleanup(S, tmp_path):
     out = tmp_path / "o"
     p = subprocess.Popen([sys.executable, "-m", "o3d_seqcc", "run", str(S), "--out", str(out), *RUN], env=ENV,
