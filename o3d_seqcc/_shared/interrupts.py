@@ -33,11 +33,15 @@ class Terminated(KeyboardInterrupt):
         return signal.Signals(self.signum).name
 
 
+def _interrupt(signum: int) -> KeyboardInterrupt:
+    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
+
+
 def _raise_terminated(signum: int, frame) -> None:
     if _HOLD["depth"]:  # inside held(): raised when the block ends
         _HOLD["pending"] = int(signum)
         return
-    raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
+    raise _interrupt(signum)
 
 
 @contextmanager
@@ -62,9 +66,9 @@ def held() -> Iterator[None]:
         _HOLD["depth"] -= 1
         if saved is not None:
             signal.signal(signal.SIGINT, saved)
-        pending, _HOLD["pending"] = (_HOLD["pending"], None) if not _HOLD["depth"] else (None, _HOLD["pending"])
-        if pending is not None:
-            raise KeyboardInterrupt() if pending == signal.SIGINT else Terminated(pending)
+        if not _HOLD["depth"] and _HOLD["pending"] is not None:
+            pending, _HOLD["pending"] = _HOLD["pending"], None
+            raise _interrupt(pending)
 
 
 @contextmanager
