@@ -46,8 +46,10 @@ from ..errors import InputError
 from ..imaging.arrays import img_as_uint8
 from ..geometry.meshops import face_adjacency, vertex_normals, weld_vertices
 from .._shared.progress import steps
-from .bake import (barycentric, edge_texels, gutter_texels, push_pull_fill, rasterize_faces, release_free_memory,
-                   sample_image)
+from .._shared.parallel import LocalExecutor, carried, current as current_executor
+from ..imaging.sequences import LRUCache, default_cache_bytes
+from .bake import (bary_coefficients, edge_texels, gutter_owner, push_pull_fill, rasterize_owner, release_free_memory,
+                   sample_image, texel_bary)
 from .charts import build_charts
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
@@ -59,10 +61,8 @@ __all__ = ["bake_texture", "push_pull_fill"]
 
 logger = logging.getLogger(__name__)
 
-#: texels per step where a per-texel expression would otherwise make (n, 3, 3) temporaries
-_TEXEL_CHUNK = 1 << 22
-#: texels grouped by view and sampled per block of the bake's pass over the views (:func:`_per_view_pass`)
-_SAMPLE_TEXELS = 1 << 24
+#: canvas texels per band of the bake's passes over the atlas (a band's temporaries: about 80 bytes per written texel)
+_BAND_TEXELS = 1 << 21
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):
@@ -167,65 +167,185 @@ def bake_texture(
         no face is seen.
     """
     s = (settings or TextureSettings()).updated(**options) if options else (settings or TextureSettings())
-    with steps("bake", 6) as step:
+    with steps("bake", 7) as step:
         return _bake(mesh, views_images, visibility, selection, s, adjacency, step)
 
 
-def _per_view_pass(views_images, labels, fuv, face, bary, density: float):
-    """Passes over the views: texel colours of every face from its view, and its corners' colours.
+def _threads() -> int:
+    """Threads for the bake's bands: the local executor's (``-j``), one under a Dask client (the bake runs here)."""
+    ex = current_executor()
+    return ex.threads() if isinstance(ex, LocalExecutor) else 1
 
-    The texels are taken :data:`_SAMPLE_TEXELS` at a time (their grouping by view, 14 bytes per
-    texel, is made for one block, not for the whole atlas); the first block's pass also reads
-    every view's corner colours, later blocks read only the views they sample. Every texel's
-    colour is computed on its own, so the blocks change no value.
+
+def _corner_pass(views_images, labels: np.ndarray, fuv: np.ndarray, cache: LRUCache, threads: int = 1):
+    """Every seen face's corner colours in its view (the leveling's means and the point values), one task per view.
+
+    Returns ``corner_mean``, ``corner_point`` (F, 3, 3) float64, NaN for unseen faces; the uint8 images read go
+    into ``cache`` for the texel pass. ``threads`` views at a time (each view's values are its own).
     """
     F = len(labels)
-    n = len(face)
-    col = np.zeros((n, 3), dtype=np.float32)
     corner_mean = np.full((F, 3, 3), np.nan)
     corner_point = np.full((F, 3, 3), np.nan)
-    fuv32 = fuv.astype(np.float32)
     f_order, f_views, f_bounds = _groups(labels)
+    tasks = [(int(v), f_order[f_bounds[i]:f_bounds[i + 1]]) for i, v in enumerate(f_views) if v >= 0]
+
+    def one(task):
+        v, fs = task
+        img = _image(views_images, v, cache)
+        p = fuv[fs]
+        h, w = img.shape[:2]
+        out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
+        if out.any():
+            bad = fs[out.any(axis=1)]
+            raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which "
+                             "they project outside the image: select only usable views (select_views does)")
+        return corner_colors(img, p.reshape(-1, 2))
+
+    for (v, fs), (m, pt) in zip(tasks, _map(one, tasks, threads, "o3d_seqcc-corners")):
+        corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
+    return corner_mean, corner_point
+
+
+def _map(fn, items, threads: int, name: str):
+    """``fn`` over ``items`` in order, on ``threads`` threads (the executor's context carried to them)."""
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        return [fn(it) for it in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix=name) as pool:
+        return list(pool.map(carried(fn), items))
+
+
+def _image(views_images, v: int, cache: LRUCache) -> np.ndarray:
+    """View ``v``'s image as uint8, read once while it fits ``cache``."""
+    return cache.get(v, lambda: img_as_uint8(views_images[v], where=f"image of view {v}"))
+
+
+def _regions(owner: np.ndarray, face_chart: np.ndarray, n_image: int) -> np.ndarray:
+    """(texels,) int32 image chart of every written texel's face (the local leveling's regions), -1 elsewhere
+    (free texels, the fallback region), in bands of :data:`_BAND_TEXELS`."""
+    region = np.full(len(owner), -1, dtype=np.int32)
+    chart = np.where(face_chart < n_image, face_chart, -1).astype(np.int32)
+    for a in range(0, len(owner), _BAND_TEXELS):
+        codes = owner[a:a + _BAND_TEXELS]
+        loc = np.flatnonzero(codes != -1)
+        c = codes[loc]
+        region[loc + a] = chart[np.where(c >= 0, c, -2 - c)]
+    return region
+
+
+def _pixel_aligned(ctxy: np.ndarray, faces: np.ndarray, fuv: np.ndarray, density: float):
+    """Faces whose texels are their photo's pixels moved by whole texels: ``(ok, ox, oy, swap, limit)``, (F,) each.
+
+    Where a face's texel corners are its corners in its photo plus an integer offset (x and y swapped
+    where xatlas turned the chart), the affine map of every one of its texels (inside, under its edges,
+    in its gutter) to its photo is ``(X - ox, Y - oy)`` (swapped: ``(Y - oy, X - ox)``), an exact pixel
+    centre: :func:`~o3d_seqcc.texturing.bake.sample_image` gives that pixel. The bake computes the
+    source point in float32 (``bary @ corners``); ``limit`` bounds ``|b0| + |b1| + |b2|`` for which that
+    rounding stays far below OpenCV's 1/32-pixel grid (the point is then read as the pixel, exactly
+    as the sampling would): ``8192 / max |corner coordinate|``.
+    """
+    F = len(faces)
+    none = np.zeros(F, dtype=bool)
+    if density < 0.999 or F == 0:
+        return none, None, None, None, None
+    T = np.asarray(ctxy, dtype=np.float64)[faces]
+    P = np.asarray(fuv, dtype=np.float64)
+    ok_all = np.isfinite(P).all(axis=(1, 2)) & (np.abs(_edge_area(T)) > 1e-12)
+    found = []
+    for Q in (P, P[..., ::-1]):
+        d = T - Q
+        same = (d == d[:, :1]).all(axis=(1, 2)) & (d[:, 0] == np.round(d[:, 0])).all(axis=1)
+        found.append((same & ok_all, d[:, 0]))
+    (plain, dp), (turned, dt) = found
+    ok = plain | turned
+    swap = ~plain & turned
+    o = np.where(plain[:, None], dp, dt)
+    o = np.where(ok[:, None], o, 0.0).astype(np.int64)
+    cmax = np.nan_to_num(np.abs(P).max(axis=(1, 2)), nan=np.inf)
+    limit = (8192.0 / np.maximum(cmax, 1.0)).astype(np.float32)
+    return ok, o[:, 0], o[:, 1], swap, limit
+
+
+def _edge_area(p: np.ndarray) -> np.ndarray:
+    return (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+
+
+def _texel_pass(tex: np.ndarray, owner: np.ndarray, ctxy: np.ndarray, faces: np.ndarray, labels: np.ndarray,
+                fuv: np.ndarray, views_images, add: np.ndarray | None, density: float, cache: LRUCache,
+                threads: int) -> None:
+    """Every texel the owner canvas gives a face: its colour in the face's view plus the leveling offsets, into ``tex``.
+
+    In bands of :data:`_BAND_TEXELS` texels (``threads`` side by side; each band's texels grouped by view). A
+    texel inside its face samples the view at the barycentric point of its face's projection; one under a thin
+    face's edge or in a gutter (``owner`` ``-2 - f``) continues the face's affine map there, and takes the
+    offsets (``add`` (F, 3 corners, 3 channels): global leveling, fallback colours) at the nearest point of
+    the face. Texels of pixel-aligned faces (:func:`_pixel_aligned`) read their pixel directly. Every texel's
+    value is computed on its own, so the bands change no value.
+    """
+    H, S = tex.shape[:2]
+    coeffs = bary_coefficients(ctxy, faces)
+    fuv32 = fuv.astype(np.float32)
     key = labels.astype(np.int16 if labels.max(initial=0) < 2**15 else np.int32)
-    for start in range(0, max(n, 1), _SAMPLE_TEXELS):
-        stop = min(n, start + _SAMPLE_TEXELS)
-        keys = key[face[start:stop]]
-        t_order = np.argsort(keys, kind="stable")  # the texels of the block grouped by view, in order
-        ks = keys[t_order]
-        del keys
-        cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, dtype=np.int64)
-        t_views, t_bounds = ks[cut], np.r_[cut, len(ks)]
-        del ks, cut
-        t_order = (t_order + start).astype(np.int32 if n < 2**31 else np.int64)
-        t_pos = {int(v): (t_bounds[i], t_bounds[i + 1]) for i, v in enumerate(t_views)}
-        first = start == 0
-        for i, v in enumerate(f_views):
-            if v < 0 or not (first or int(v) in t_pos):
+    aligned, ox, oy, swap, limit = _pixel_aligned(ctxy, faces, fuv, density)
+    adds = None if add is None else [np.ascontiguousarray(add[:, i]) for i in range(3)]
+    flat_tex = tex.reshape(-1, 3)
+    rows = max(1, _BAND_TEXELS // max(S, 1))
+
+    def band(r0: int) -> None:
+        a, b = r0 * S, min(H, r0 + rows) * S
+        codes = owner[a:b]
+        loc = np.flatnonzero(codes != -1)
+        if not len(loc):
+            return
+        c = codes[loc]
+        inside = c >= 0
+        f = np.where(inside, c, -2 - c).astype(np.intp)
+        del c
+        y, x = np.divmod(loc + a, S)
+        bary = texel_bary(ctxy, faces, f, x, y, inside=inside, coeffs=coeffs)
+        col = np.zeros((len(loc), 3), dtype=np.float32)
+        order, views, bounds = _groups(key[f])
+        for i, v in enumerate(views):
+            if v < 0:  # unseen faces: their fallback colours below
                 continue
-            img = img_as_uint8(views_images[v], where=f"image of view {v}")
-            if first:
-                fs = f_order[f_bounds[i]:f_bounds[i + 1]]
-                p = fuv[fs]
+            ts = order[bounds[i]:bounds[i + 1]]
+            img = _image(views_images, int(v), cache)
+            ft = f[ts]
+            if aligned.any():
+                fast = aligned[ft]
+                fast &= np.abs(bary[ts]).sum(axis=1) <= limit[ft]
+                tf, ff = ts[fast], ft[fast]
+                X, Y = x[tf] - ox[ff], y[tf] - oy[ff]
+                t = swap[ff]
                 h, w = img.shape[:2]
-                out = (p[..., 0] < -1.0) | (p[..., 0] > w) | (p[..., 1] < -1.0) | (p[..., 1] > h)
-                if out.any():
-                    bad = fs[out.any(axis=1)]
-                    raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which "
-                                     "they project outside the image: select only usable views (select_views does)")
-                m, pt = corner_colors(img, p.reshape(-1, 2))
-                corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
-            if int(v) in t_pos:
-                a, b = t_pos[int(v)]
-                ts = t_order[a:b]
-                src = np.empty((len(ts), 2), dtype=np.float32)
-                for c in range(0, len(ts), _TEXEL_CHUNK):  # (chunk, 3, 2) corners at a time
-                    tc = ts[c:c + _TEXEL_CHUNK]
-                    src[c:c + len(tc)] = _interp(bary[tc], fuv32[face[tc]])
+                col[tf] = img[np.clip(np.where(t, X, Y), 0, h - 1), np.clip(np.where(t, Y, X), 0, w - 1)]
+                ts, ft = ts[~fast], ft[~fast]
+                del tf, ff, X, Y, t, fast
+            if len(ts):
+                src = _interp(bary[ts], fuv32[ft])
                 col[ts] = sample_image(img, src[:, 0], src[:, 1], density=density)
-                del src
-            del img
-        del t_order
-    return col, corner_mean, corner_point
+        del order, x, y
+        if adds is not None:
+            ex = np.flatnonzero(~inside)
+            bary[ex] = _clip_bary(bary[ex])  # under edges and in gutters: the nearest point of the face
+            # col += b0 a0 + b1 a1 + b2 a2 (:func:`_interp`'s float32 operations, in place)
+            acc = adds[0][f]
+            acc *= bary[:, 0:1]
+            tmp = adds[1][f]
+            tmp *= bary[:, 1:2]
+            acc += tmp
+            np.take(adds[2], f, axis=0, out=tmp)
+            tmp *= bary[:, 2:3]
+            acc += tmp
+            col += acc
+            del acc, tmp
+        np.rint(col, out=col)
+        np.clip(col, 0, 255, out=col)
+        flat_tex[loc + a] = col.astype(np.uint8)
+
+    _map(band, range(0, H, rows), threads, "o3d_seqcc-bake")
 
 
 def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:
@@ -249,33 +369,21 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_pack = time.perf_counter()
     step("rasterize")
     seen = labels >= 0
-    # per texel: int32 canvas index and face (compact) where the canvas allows, float32 barycentrics
-    tidx, tface, tbary = rasterize_faces(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
-                                         compact=True)
-    eidx, eface = edge_texels(ctxy, cs.faces, tidx, H, S)  # slivers own the texels under their edges
-    # covered texels ascending: the edge texels (none of them covered) merged into the face texels
-    pos = np.searchsorted(tidx, eidx)
-    cidx, cface = np.insert(tidx, pos, eidx), np.insert(tface, pos, eface)
-    del pos
-    gidx, gface = gutter_texels(cidx, cface, H, S, reach=float(s.padding) + 1.0 if s.padding > 0 else 0.0)
-    del cidx, cface
-    xidx = np.r_[eidx, gidx]
-    xface = np.r_[eface, gface]
-    gy, gx = np.divmod(xidx, S)
-    idx = np.concatenate([tidx, xidx.astype(tidx.dtype)])
-    face = np.concatenate([tface, xface.astype(tface.dtype)])
-    n_face = len(tidx)  # texels inside faces first, then under thin faces' edges and in gutters
-    del tidx, tface
-    bary = np.concatenate([tbary, barycentric(ctxy, cs.faces, xface, gx.astype(np.float64),
-                                              gy.astype(np.float64)).astype(np.float32)])
-    del tbary, gx, gy, eidx, eface, gidx, gface, xidx, xface
+    # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
+    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    eidx, eface = edge_texels(ctxy, cs.faces, None, H, S, free=owner == -1)  # slivers own the texels under their edges
+    owner[eidx] = -2 - eface.astype(np.int32)
+    del eidx, eface
+    threads = _threads()
+    if s.padding > 0:
+        gidx, gface = gutter_owner(owner, H, S, float(s.padding) + 1.0, threads=threads)
+        owner[gidx] = -2 - gface.astype(np.int32)
+        del gidx, gface
     release_free_memory()
     t_raster = time.perf_counter()
-    step("sample")
-    col, corner_mean, corner_point = _per_view_pass(views_images, labels, fuv, face, bary, pk.texels_per_pixel)
-    release_free_memory()
-    t_sample = time.perf_counter()
     step("seam leveling")
+    cache = LRUCache(default_cache_bytes())
+    corner_mean, corner_point = _corner_pass(views_images, labels, fuv, cache, threads)
     lev_stats = corner_off = None
     if s.leveling:
         corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, cs.level_chart,
@@ -293,31 +401,24 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         cc = corner_point if corner_off is None else corner_point + corner_off
         add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
         logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
-    if corner_off is not None or n_unseen:
-        bary[n_face:] = _clip_bary(bary[n_face:])  # gutter texels: the nearest point of the face
-        for a in range(0, len(col), _TEXEL_CHUNK):  # (chunk, 3, 3) corner values at a time, not (n, 3, 3)
-            b = a + _TEXEL_CHUNK
-            col[a:b] += _interp(bary[a:b], add[face[a:b]])
-    del bary, add
-    canvas = np.zeros((H * S, 3), dtype=np.uint8)
-    np.rint(col, out=col)
-    np.clip(col, 0, 255, out=col)
-    canvas[idx] = col.astype(np.uint8)
-    del col
-    release_free_memory()
-    written = np.zeros(H * S, dtype=bool)
-    written[idx] = True
+    del corner_mean, corner_point
     t_level = time.perf_counter()
+    step("sample")
+    tex = np.zeros((H, S, 3), dtype=np.uint8)
+    _texel_pass(tex, owner, ctxy, cs.faces, labels, fuv, views_images,
+                add if corner_off is not None or n_unseen else None, pk.texels_per_pixel, cache, threads)
+    del cache, add
+    written = owner != -1
+    release_free_memory()
+    t_sample = time.perf_counter()
     step("local seam leveling")
     local_stats = None
-    tex = canvas.reshape(H, S, 3)
+    n_texels = int(np.count_nonzero(written))
     if s.local_leveling and int(s.padding) < 1:
         logger.warning("bake_texture: local seam leveling needs padding >= 1 (got %d): skipped", int(s.padding))
     elif s.local_leveling:
-        region = np.full(H * S, -1, dtype=np.int32)
-        for a in range(0, len(idx), _TEXEL_CHUNK):
-            rc = cs.face_chart[face[a:a + _TEXEL_CHUNK]]
-            region[idx[a:a + _TEXEL_CHUNK]] = np.where(rc < cs.n_image, rc, -1)  # image charts, not the fallback region
+        region = _regions(owner, cs.face_chart, cs.n_image)
+        del owner
         tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
                                                adjacency, wf, band=int(s.local_band))
         del region
@@ -326,8 +427,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
                     local_stats["time_s"])
     t_local = time.perf_counter()
     step("gutters")
-    n_texels = len(idx)
-    del canvas, idx, face  # the atlas-sized index arrays (8 or 16 bytes per written texel) are done
+    owner = None  # the atlas-sized face canvas is done
     release_free_memory()
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
@@ -356,7 +456,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         "vertices_out": int(len(cs.vertex_index)), "packer": "xatlas", "pack_log": list(pk.log),
         "xatlas_utilization": pk.utilization, "leveling": lev_stats, "local_leveling": local_stats,
         "time_charts_s": t_charts - t0, "time_pack_s": t_pack - t_charts, "time_raster_s": t_raster - t_pack,
-        "time_sample_s": t_sample - t_raster, "time_leveling_s": t_level - t_sample, "time_local_s": t_local - t_level,
+        "time_leveling_s": t_level - t_raster, "time_sample_s": t_sample - t_level, "time_local_s": t_local - t_sample,
         "time_fill_s": t_end - t_local, "time_total_s": t_end - t0,
     }
     logger.info("bake_texture: %d charts, %d page(s) of %dx%d at %.3g texels/pixel, coverage %.0f%%, %d -> %d vertices "

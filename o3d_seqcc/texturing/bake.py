@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["barycentric", "edge_texels", "gutter_texels", "push_pull_fill", "rasterize_faces", "release_free_memory",
-           "row_spans", "sample_image"]
+__all__ = ["bary_coefficients", "barycentric", "edge_texels", "gutter_owner", "gutter_texels", "push_pull_fill",
+           "rasterize_faces", "rasterize_owner", "release_free_memory", "row_spans", "sample_image", "texel_bary"]
 
 
 def _area2(p: np.ndarray) -> np.ndarray:
@@ -140,15 +140,117 @@ def release_free_memory() -> None:
 _LIBC = None
 
 
+def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int, *,
+                    order: np.ndarray | None = None, chunk: int = 2_000_000) -> np.ndarray:
+    """The face whose UV triangle holds each texel centre: a canvas of face ids (the face drawn last wins).
+
+    Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles; each span is
+    written as it comes, so the memory is the canvas (4 bytes per texel) and one chunk's spans.
+
+    Parameters
+    ----------
+    txy : (M, 2) float
+        Texel coordinates of the vertices (texel (X, Y) has its centre at (X, Y)).
+    faces : (F, 3) int
+    height, width : int
+        Canvas size.
+    order : (F,) int, optional
+        Drawing order: where triangles overlap, the face drawn last keeps the texel.
+    chunk : int
+        Texels (estimated from bounding boxes) handled per vectorised step.
+
+    Returns
+    -------
+    (height * width,) int32
+        Face id per texel (row-major), -1 where no texel centre is inside a face.
+    """
+    if len(faces) >= 2**31 - 2:
+        raise ValueError(f"{len(faces)} faces: face ids must fit int32")
+    fo = np.arange(len(faces)) if order is None else np.asarray(order, dtype=np.int64)
+    owner = np.full(height * width, -1, dtype=np.int32)
+    if len(fo) == 0:
+        return owner
+    p = np.asarray(txy, dtype=np.float64)[np.asarray(faces)[fo]]
+    fo32 = fo.astype(np.int32)
+    for k, y, xs, n, _, _ in row_spans(p, height, width, chunk=chunk):
+        total = int(n.sum())
+        if total == 0:
+            continue
+        first = y.astype(np.int64) * width + xs - (np.cumsum(n) - n)  # span start minus its offset in the run
+        pos = np.repeat(first, n)
+        pos += np.arange(total, dtype=np.int64)
+        owner[pos] = np.repeat(fo32[k], n)  # in drawing order: the last face written keeps a texel
+        del pos
+    return owner
+
+
+def bary_coefficients(txy: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The first two barycentric coordinates of every UV triangle as affine functions of the texel position.
+
+    ``(A0, A1, B0, B1, C0, C1)``, each (F,) float64 contiguous: ``l_i = A_i x + (B_i y + C_i)``
+    (:func:`_edge_functions`; zero for triangles of near-zero area), the form :func:`texel_bary` evaluates.
+    """
+    A, B, C, _ = _edge_functions(np.asarray(txy, dtype=np.float64)[np.asarray(faces)])
+    return tuple(np.ascontiguousarray(m[:, i]) for m in (A, B, C) for i in (0, 1))[::1]
+
+
+def texel_bary(txy: np.ndarray, faces: np.ndarray, face: np.ndarray, x: np.ndarray, y: np.ndarray, *,
+               inside: np.ndarray | bool = True, coeffs: tuple | None = None) -> np.ndarray:
+    """(n, 3) float32 barycentric coordinates of texel centres (x, y) in the UV triangles of ``faces[face]``.
+
+    Texels ``inside`` their face (:func:`rasterize_owner`) get the row-span form of the
+    rasterisation (``l_i = A_i x + (B_i y + C_i)`` from the face's edge functions), the others
+    (under a thin face's edge, in a gutter) :func:`barycentric`'s: the float64 arithmetic the
+    bake has always used, rounded to float32.
+
+    Parameters
+    ----------
+    txy : (M, 2) float64
+    faces : (F, 3) int
+    face : (n,) int
+    x, y : (n,) int or float
+        Texel columns and rows.
+    inside : (n,) bool or bool
+        Which texels lie inside their face.
+    coeffs : tuple, optional
+        :func:`bary_coefficients` of ``txy, faces`` (computed when omitted).
+    """
+    face = np.asarray(face)
+    n = len(face)
+    out = np.empty((n, 3), dtype=np.float32)
+    ins = np.broadcast_to(np.asarray(inside, dtype=bool), (n,))
+    every = bool(ins.all())
+    if every or ins.any():
+        A0, A1, B0, B1, C0, C1 = bary_coefficients(txy, faces) if coeffs is None else coeffs
+        sel = slice(None) if every else np.flatnonzero(ins)
+        f = face[sel]
+        xi = np.asarray(x, dtype=np.float64)[sel]
+        yi = np.asarray(y, dtype=np.float64)[sel]
+        l0 = B0[f] * yi
+        l0 += C0[f]
+        l0 += A0[f] * xi  # A x + (B y + C), as the row spans evaluate it
+        l1 = B1[f] * yi
+        l1 += C1[f]
+        l1 += A1[f] * xi
+        out[sel, 0] = l0
+        out[sel, 1] = l1
+        np.subtract(1.0, l0, out=l0)
+        l0 -= l1
+        out[sel, 2] = l0
+    if not every:
+        sel = np.flatnonzero(~ins)
+        out[sel] = barycentric(txy, faces, face[sel], np.asarray(x, dtype=np.float64)[sel],
+                               np.asarray(y, dtype=np.float64)[sel])
+    return out
+
+
 def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int, *,
                     order: np.ndarray | None = None, chunk: int = 2_000_000,
                     compact: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Texels whose centre lies in a UV triangle, with their face and barycentric coordinates.
 
-    Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles. Memory: the
-    chunks keep only their faces (int32) and barycentric coordinates; the texel a chunk entry
-    lands on goes straight into one canvas-sized int32 "last entry wins" map, so the peak is
-    about 16 bytes per entry plus the outputs and 4 bytes per canvas texel.
+    :func:`rasterize_owner`'s canvas, listed: memory about 4 bytes per canvas texel plus the
+    outputs.
 
     Parameters
     ----------
@@ -176,56 +278,30 @@ def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
     """
     small = compact and height * width < 2**31 and len(faces) < 2**31
     itype = np.int32 if small else np.int64
-    fo = np.arange(len(faces)) if order is None else np.asarray(order, dtype=np.int64)
-    empty = (np.zeros(0, dtype=itype), np.zeros(0, dtype=itype), np.zeros((0, 3), dtype=np.float32))
-    if len(fo) == 0:
-        return empty
-    p = np.asarray(txy, dtype=np.float64)[np.asarray(faces)[fo]]
-    fparts, bparts, offsets = [], [], [0]
-    winner = np.full(height * width, -1, dtype=np.int32)  # the last entry of a texel (the face drawn last) wins
-    for k, y, xs, n, a, r in row_spans(p, height, width, chunk=chunk):
-        t = np.repeat(np.arange(len(k)), n)  # one entry per texel
-        x = xs[t] + (np.arange(len(t)) - np.repeat(np.cumsum(n) - n, n))
-        xf = x.astype(np.float64)
-        l0 = a[t, 0] * xf + r[t, 0]
-        l1 = a[t, 1] * xf + r[t, 1]
-        bary = np.stack([l0, l1, 1.0 - l0 - l1], axis=1).astype(np.float32)
-        del xf, l0, l1
-        o = offsets[-1]
-        if o + len(t) >= 2**31 and winner.dtype == np.int32:
-            winner = winner.astype(np.int64)
-        winner[y[t].astype(np.int64) * width + x] = np.arange(o, o + len(t), dtype=winner.dtype)
-        fparts.append(fo[k[t]].astype(np.int32 if len(faces) < 2**31 else np.int64))
-        bparts.append(bary)
-        offsets.append(o + len(t))
-        del t, x, bary
-    if offsets[-1] == 0:
-        return empty
-    cov = np.flatnonzero(winner >= 0)
-    w = winner[cov]
-    del winner
-    cov = cov.astype(itype, copy=False)
-    face = np.empty(len(cov), dtype=itype)
-    bary = np.empty((len(cov), 3), dtype=np.float32)
-    for i in range(len(fparts)):  # one chunk at a time: no concatenation of all the entries
-        sel = np.flatnonzero((w >= offsets[i]) & (w < offsets[i + 1]))
-        loc = w[sel] - offsets[i]
-        face[sel] = fparts[i][loc]
-        bary[sel] = bparts[i][loc]
-        fparts[i] = bparts[i] = None
-        del sel, loc
-    release_free_memory()
-    return cov, face, bary
+    owner = rasterize_owner(txy, faces, height, width, order=order, chunk=chunk)
+    cov = np.flatnonzero(owner >= 0)
+    face = owner[cov]
+    del owner
+    if len(cov) == 0:
+        return np.zeros(0, dtype=itype), np.zeros(0, dtype=itype), np.zeros((0, 3), dtype=np.float32)
+    y, x = np.divmod(cov, width)
+    bary = texel_bary(txy, faces, face, x, y)
+    return cov.astype(itype, copy=False), face.astype(itype, copy=False), bary
 
 
-def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray, height: int, width: int, *,
-                max_altitude: float = 2.0, step: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray | None, height: int, width: int, *,
+                max_altitude: float = 2.0, step: float = 0.5,
+                free: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Texels under the edges of thin faces that no face covers (conservative rasterisation).
 
     A texel belongs to a face when its centre is inside (:func:`rasterize_faces`), so a sliver
     (a UV triangle less than ``max_altitude`` texels thick) may own almost no texel and its
     gutter would not follow its length. Its edges are sampled every ``step`` texels and the
     texels under them that no face covers are given to it (first face wins, vectorised).
+
+    ``covered`` lists the covered texels (flat indices); or give ``free`` instead, a (height *
+    width,) bool canvas, True where no face covers the texel (a :func:`rasterize_owner` canvas
+    ``== -1``).
 
     Returns
     -------
@@ -242,16 +318,24 @@ def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray, height:
     if len(thin) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     n = np.maximum(np.ceil(L[thin] / step).astype(np.int64), 1).reshape(-1) + 1  # samples per edge, ends included
-    ei = np.repeat(np.arange(len(thin) * 3), n)
-    t = (np.arange(len(ei)) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n).clip(1)
-    f = thin[ei // 3]
-    start = p[f, ei % 3]
-    pts = start + e[f, ei % 3] * t[:, None]
-    x = np.clip(np.rint(pts[:, 0]), 0, width - 1).astype(np.int64)
-    y = np.clip(np.rint(pts[:, 1]), 0, height - 1).astype(np.int64)
-    idx = y * width + x
-    free = np.ones(height * width, dtype=bool)
-    free[covered] = False
+    # sample k of an edge at start + e * (k / (n - 1)), its values repeated from the edge's (no (samples, 2) gathers)
+    k = np.arange(int(n.sum()), dtype=np.float64)
+    k -= np.repeat((np.cumsum(n) - n).astype(np.float64), n)
+    k /= np.repeat(np.maximum(n - 1, 1).astype(np.float64), n)
+    f = np.repeat(np.repeat(thin, 3), n)
+    pe, ee = p[thin].reshape(-1, 2), e[thin].reshape(-1, 2)  # (3 per thin face) edge starts and vectors
+    idx = np.zeros(len(k), dtype=np.int64)
+    for a, size, stride in ((0, width, 1), (1, height, width)):  # idx = y * width + x
+        v = np.repeat(ee[:, a], n)
+        v *= k
+        v += np.repeat(pe[:, a], n)
+        np.rint(v, out=v)
+        np.clip(v, 0, size - 1, out=v)
+        idx += v.astype(np.int64) * stride
+        del v
+    if free is None:
+        free = np.ones(height * width, dtype=bool)
+        free[covered] = False
     m = free[idx]
     idx, f = idx[m], f[m]
     u, first = np.unique(idx, return_index=True)
@@ -294,6 +378,73 @@ def gutter_texels(idx: np.ndarray, face: np.ndarray, height: int, width: int,
     return gidx, np.asarray(face)[lab.reshape(-1)[gidx] - 1].astype(np.int64)
 
 
+#: rows of canvas above and below a band that its gutters' distance transform reads (the labels of texels within
+#: ``reach`` of a face depend on the texels within a few ``reach`` of them only: the whole-canvas values)
+GUTTER_MARGIN = 32
+#: rows of canvas per band of :func:`gutter_owner`
+GUTTER_BAND_ROWS = 512
+
+
+def gutter_owner(owner: np.ndarray, height: int, width: int, reach: float, *,
+                 threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`gutter_texels` of an owner canvas, in row bands (on ``threads`` threads).
+
+    Parameters
+    ----------
+    owner : (height * width,) int32
+        -1 at free texels; any other value marks a covered texel: its face ``f`` (>= 0), or
+        ``-2 - f`` (a texel given to face ``f`` otherwise, e.g. under a thin face's edge).
+    reach : float
+        Largest Euclidean distance (texels) of a gutter texel from a covered one.
+    threads : int
+        Bands computed side by side (OpenCV releases the GIL).
+
+    Returns
+    -------
+    gidx : (m,) int64
+        Flat canvas indices of the gutter texels, ascending.
+    gface : (m,) int64
+        The face of their nearest covered texel: what :func:`gutter_texels` gives on the whole
+        canvas (its chamfer distances and labels, computed on each band with
+        :data:`GUTTER_MARGIN` rows of context above and below, the same within ``reach``).
+    """
+    import cv2
+
+    if reach <= 0 or height * width == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if reach + 2 > GUTTER_MARGIN / 4:
+        raise ValueError(f"gutter reach {reach} needs a margin over {GUTTER_MARGIN} rows")
+    grid = owner.reshape(height, width)
+
+    def band(r0: int) -> tuple[np.ndarray, np.ndarray]:
+        r1 = min(height, r0 + GUTTER_BAND_ROWS)
+        a, b = max(0, r0 - GUTTER_MARGIN), min(height, r1 + GUTTER_MARGIN)
+        sub = grid[a:b]
+        free = (sub == -1).view(np.uint8)
+        if not free.any() or free.all():
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        dist, lab = cv2.distanceTransformWithLabels(free, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+        core = slice(r0 - a, r1 - a)
+        near = dist[core] <= reach + 1e-3
+        near &= free[core] > 0
+        loc = np.flatnonzero(near.reshape(-1))
+        codes = sub.reshape(-1)
+        cov = codes[codes != -1]  # the covered texels in raster order: what the labels enumerate
+        f = cov[lab[core].reshape(-1)[loc] - 1].astype(np.int64)
+        f = np.where(f < -1, -2 - f, f)
+        return loc + r0 * width, f
+
+    starts = range(0, height, GUTTER_BAND_ROWS)
+    if threads > 1 and height > GUTTER_BAND_ROWS:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-gutters") as pool:
+            parts = list(pool.map(band, starts))
+    else:
+        parts = [band(r0) for r0 in starts]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
 def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:
     import cv2
 
@@ -321,6 +472,29 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, *, density: fl
         img = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_AREA)
         x = (x + 0.5) * (nw / w) - 0.5
         y = (y + 0.5) * (nh / h) - 0.5
+    n = len(x)
+    out = np.empty((n, 3), dtype=np.float32)
+    # points at a pixel centre, as OpenCV's remap sees them (to 1/32 px: round(32 x) in float32): INTER_LANCZOS4 is
+    # then the pixel itself (its only non-zero weight), which the 2 x 2 range keeps: read directly
+    X = np.rint(np.asarray(x, dtype=np.float32) * np.float32(32)).astype(np.int64)
+    Y = np.rint(np.asarray(y, dtype=np.float32) * np.float32(32)).astype(np.int64)
+    at = ((X | Y) & 31) == 0
+    h, w = img.shape[:2]
+    sel = np.flatnonzero(at)
+    out[sel] = img[np.clip(Y[sel] >> 5, 0, h - 1), np.clip(X[sel] >> 5, 0, w - 1)]
+    del X, Y, sel
+    rest = np.flatnonzero(~at)
+    if len(rest) < n:
+        if len(rest):
+            out[rest] = _sample_lanczos(img, np.asarray(x)[rest], np.asarray(y)[rest])
+        return out
+    return _sample_lanczos(img, x, y)
+
+
+def _sample_lanczos(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """:func:`sample_image`'s Lanczos, clamped to the 2 x 2 neighbourhood's range, at every point (float32 (n, 3))."""
+    import cv2
+
     n = len(x)
     cols = 4096
     # the 2 x 2 neighbourhood's range: min / max filters (anchored at the top-left pixel) read at the floor
@@ -351,6 +525,14 @@ SAMPLE_CHUNK = 1 << 21
 
 #: rows of a full-resolution page handled at a time by :func:`push_pull_fill` (even)
 FILL_BAND_ROWS = 1024
+
+
+def _as_uint8(values: np.ndarray) -> np.ndarray:
+    """``clip(rint(values), 0, 255)`` as uint8 for non-negative float32 values (OpenCV's rounding to nearest even and
+    saturation: the same numbers, one pass)."""
+    import cv2
+
+    return cv2.convertScaleAbs(np.ascontiguousarray(values)).reshape(values.shape)
 
 
 def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -409,19 +591,22 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     filled = c / np.maximum(m, 1e-12)[..., None]
     for c, m in reversed(levels[:-1]):
         up = cv2.resize(filled, (m.shape[1], m.shape[0]), interpolation=cv2.INTER_LINEAR)
-        filled = c + up * (1.0 - np.clip(m, 0.0, 1.0))[..., None]
+        wgt = np.clip(m, 0.0, 1.0)
+        np.subtract(1.0, wgt, out=wgt)
+        up *= wgt[..., None]
+        up += c  # c + up * (1 - clip(m, 0, 1)), in place
+        filled = up
+        del wgt
     del levels, c, m
     out = img.copy()
     if not banded:
         up = cv2.resize(filled, (W, H), interpolation=cv2.INTER_LINEAR)
-        empty = ~mask
-        out[empty] = np.clip(np.rint(up[empty]), 0, 255).astype(np.uint8)
+        np.copyto(out, _as_uint8(up), where=~mask[..., None])
         return out
     h2 = filled.shape[0]
     for r in range(0, H, B):  # output rows r .. r1 read level-1 rows r/2 - 1 .. r1/2 (clamped at the page)
         r1 = min(H, r + B)
         s0, s1 = max(r // 2 - 1, 0), min(r1 // 2 + 1, h2)
         up = cv2.resize(filled[s0:s1], (W, 2 * (s1 - s0)), interpolation=cv2.INTER_LINEAR)[r - 2 * s0:r1 - 2 * s0]
-        empty = ~mask[r:r1]
-        out[r:r1][empty] = np.clip(np.rint(up[empty]), 0, 255).astype(np.uint8)
+        np.copyto(out[r:r1], _as_uint8(up), where=~mask[r:r1, :, None])
     return out

@@ -140,7 +140,9 @@ def seam_leveling_offsets(
     w = np.minimum(1.0, float(huber) / np.maximum(step, 1e-12)) if len(pairs) else np.zeros(0)
     e = np.concatenate([fm[:, [0, 1]], fm[:, [1, 2]], fm[:, [2, 0]]])
     e.sort(axis=1)
-    e = np.unique(e[e[:, 0] != e[:, 1]], axis=0)
+    e = e[e[:, 0] != e[:, 1]]
+    key = np.unique(e[:, 0] * np.int64(max(M, 1)) + e[:, 1])  # the unique rows in their lexicographic order
+    e = np.stack([key // max(M, 1), key % max(M, 1)], axis=1)
     ii = np.r_[pairs[:, 0], e[:, 0]]
     jj = np.r_[pairs[:, 1], e[:, 1]]
     ww = np.r_[w, np.full(len(e), float(smoothness))]
@@ -387,22 +389,29 @@ def local_seam_leveling(
     del free
     dist = cv2.distanceTransform((seed == 0).astype(np.uint8), cv2.DIST_L2, 3)
     del seed
-    # tt = clip(1 - (dist - 1) / band, 0, 1) and fall = tt * tt * (3 - 2 tt) * K, the same operations in place
-    dist -= 1.0
-    dist /= float(band)
-    tt = np.subtract(1.0, dist, out=dist)
+    # fall = tt * tt * (3 - 2 tt) * K with tt = clip(1 - (dist - 1) / band, 0, 1): zero off K, so made at K's texels
+    kidx = np.flatnonzero(K)
+    del K
+    tt = dist.reshape(-1)[kidx]
+    del dist  # of the atlas-sized planes only the passes' buffer stays
+    tt -= 1.0
+    tt /= float(band)
+    np.subtract(1.0, tt, out=tt)
     np.clip(tt, 0.0, 1.0, out=tt)
     fall = tt * tt
     fall *= 3.0 - 2.0 * tt
-    fall *= K  # P holds value x known, K in {0, 1}
-    fall = fall.astype(np.float32, copy=False)
-    del dist, tt, K  # of the atlas-sized float planes only the factors of the passes stay
-    touched = fall > 0
-    fall_t = fall[touched][:, None]
-    del fall
+    del tt
+    pos = fall > 0
+    touched = kidx[pos]  # ascending flat indices
+    fall_t = fall[pos].astype(np.float32, copy=False)[:, None]
+    del kidx, fall, pos
     out = tex.copy()
     sub = out[:R]
-    total = np.zeros((int(np.count_nonzero(touched)), 3), dtype=np.float32)
+    flat_sub = sub.reshape(-1, 3)
+    total = np.zeros((len(touched), 3), dtype=np.float32)
+    seeds = uniq[is_seed]
+    p = np.zeros((R, S), dtype=np.float32)  # one buffer for every channel and pass: set at the seeds, reset after
+    flat = p.reshape(-1)
     for k in range(int(passes)):
         diff = sample_bilinear(sub, pb[:, 0], pb[:, 1]) - sample_bilinear(sub, pa[:, 0], pa[:, 1])  # other - own (p)
         if k == 0:
@@ -411,20 +420,19 @@ def local_seam_leveling(
         vals = np.stack([np.bincount(inv, weights=w * np.tile(dv[:, c], 4), minlength=len(uniq)) for c in range(3)], 1)
         off = np.zeros((len(fall_t), 3), dtype=np.float32)
         for c in range(3):  # one channel at a time (single-channel factors, no merges)
-            p = np.zeros(R * S, dtype=np.float32)
-            p[uniq[is_seed]] = vals[is_seed, c] / wsum[is_seed]
-            p = p.reshape(R, S)
-            flat = p.reshape(-1)
+            flat[seeds] = vals[is_seed, c] / wsum[is_seed]
             for ring, g in grow:  # p += box5(p) * g
                 flat[ring] += cv2.boxFilter(p, -1, (5, 5), normalize=False, borderType=bc).reshape(-1)[ring] * g
             for _ in range(int(smooth_iters)):  # masked smoothing of the extended values (seeds fixed)
                 box = cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=bc).reshape(-1)[ext]
                 flat[ext] = flat[ext] * keep + box * smooth  # p * keep + box3(p) * smooth
-            off[:, c] = p[touched]
+            off[:, c] = flat[touched]
+            flat[seeds] = 0.0  # what the channel set: the seeds and the extended texels (the rings among them)
+            flat[ext] = 0.0
         off *= fall_t
-        sub[touched] = np.clip(np.rint(sub[touched].astype(np.float32) + off), 0, 255).astype(np.uint8)
+        flat_sub[touched] = np.clip(np.rint(flat_sub[touched].astype(np.float32) + off), 0, 255).astype(np.uint8)
         total += off
-    stats["texels_changed"] = int(np.count_nonzero(touched))
-    stats["mean_abs_offset"] = float(np.abs(total).mean()) if touched.any() else 0.0
+    stats["texels_changed"] = int(len(touched))
+    stats["mean_abs_offset"] = float(np.abs(total).mean()) if len(touched) else 0.0
     stats["time_s"] = time.perf_counter() - t0
     return out, stats
