@@ -214,7 +214,8 @@ def _map(fn, items, threads: int, name: str):
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(max_workers=threads, thread_name_prefix=name) as pool:
-        return list(pool.map(carried(fn), items))
+        futures = [pool.submit(carried(fn), it) for it in items]  # one carried context per task
+        return [f.result() for f in futures]
 
 
 def _image(views_images, v: int, cache: LRUCache) -> np.ndarray:
