@@ -53,7 +53,7 @@ from .bake import (bary_coefficients, edge_texels, gutter_owner, push_pull_fill,
 from .charts import build_charts
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
-from .packing import pack_charts
+from .packing import pack_charts_beside
 from .settings import TextureSettings, VisibilityLike
 from .textured_mesh import TexturedMesh
 
@@ -360,29 +360,13 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     cs = build_charts(verts, faces, normals, labels, fuv, visibility, adjacency, wpos=wpos,
                       merge_faces=int(s.merge_charts))
     t_charts = time.perf_counter()
-    step("pack")
-    pk = pack_charts(cs.uv, cs.faces, cs.face_chart, atlas_size=s.atlas_size, texels_per_pixel=s.texels_per_pixel,
-                     overflow=s.overflow, padding=int(s.padding), power_of_two=bool(s.power_of_two))
-    S, P = pk.size, pk.pages
-    H = P * S
-    ctxy = pk.txy.copy()
-    ctxy[:, 1] += pk.page * S  # pages stacked vertically
-    t_pack = time.perf_counter()
-    step("rasterize")
-    seen = labels >= 0
-    # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
-    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
-    eidx, eface = edge_texels(ctxy, cs.faces, None, H, S, free=owner == -1)  # slivers own the texels under their edges
-    owner[eidx] = -2 - eface.astype(np.int32)
-    del eidx, eface
     threads = _threads()
-    if s.padding > 0:
-        gidx, gface = gutter_owner(owner, H, S, float(s.padding) + 1.0, threads=threads)
-        owner[gidx] = -2 - gface.astype(np.int32)
-        del gidx, gface
-    release_free_memory()
-    t_raster = time.perf_counter()
+    # xatlas packs in a child process while the seam leveling is solved here (neither needs the other)
+    packing = pack_charts_beside(cs.uv, cs.faces, cs.face_chart, beside=threads > 1, atlas_size=s.atlas_size,
+                                 texels_per_pixel=s.texels_per_pixel, overflow=s.overflow, padding=int(s.padding),
+                                 power_of_two=bool(s.power_of_two))
     step("seam leveling")
+    seen = labels >= 0
     cache = LRUCache(default_cache_bytes())
     corner_mean, corner_point = _corner_pass(views_images, labels, fuv, cache, threads)
     lev_stats = corner_off = None
@@ -404,6 +388,25 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
     del corner_mean, corner_point
     t_level = time.perf_counter()
+    step("pack")
+    pk = packing.result()
+    S, P = pk.size, pk.pages
+    H = P * S
+    ctxy = pk.txy.copy()
+    ctxy[:, 1] += pk.page * S  # pages stacked vertically
+    t_pack = time.perf_counter()
+    step("rasterize")
+    # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
+    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    eidx, eface = edge_texels(ctxy, cs.faces, None, H, S, free=owner == -1)  # slivers own the texels under their edges
+    owner[eidx] = -2 - eface.astype(np.int32)
+    del eidx, eface
+    if s.padding > 0:
+        gidx, gface = gutter_owner(owner, H, S, float(s.padding) + 1.0, threads=threads)
+        owner[gidx] = -2 - gface.astype(np.int32)
+        del gidx, gface
+    release_free_memory()
+    t_raster = time.perf_counter()
     step("sample")
     tex = np.zeros((H, S, 3), dtype=np.uint8)
     _texel_pass(tex, owner, ctxy, cs.faces, labels, fuv, views_images,
@@ -456,8 +459,8 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         "fallback": s.fallback, "unseen_faces": n_unseen, "vertices_in": int(len(verts)),
         "vertices_out": int(len(cs.vertex_index)), "packer": "xatlas", "pack_log": list(pk.log),
         "xatlas_utilization": pk.utilization, "leveling": lev_stats, "local_leveling": local_stats,
-        "time_charts_s": t_charts - t0, "time_pack_s": t_pack - t_charts, "time_raster_s": t_raster - t_pack,
-        "time_leveling_s": t_level - t_raster, "time_sample_s": t_sample - t_level, "time_local_s": t_local - t_sample,
+        "time_charts_s": t_charts - t0, "time_leveling_s": t_level - t_charts, "time_pack_s": t_pack - t_level,
+        "time_raster_s": t_raster - t_pack, "time_sample_s": t_sample - t_raster, "time_local_s": t_local - t_sample,
         "time_fill_s": t_end - t_local, "time_total_s": t_end - t0,
     }
     logger.info("bake_texture: %d charts, %d page(s) of %dx%d at %.3g texels/pixel, coverage %.0f%%, %d -> %d vertices "

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,7 +41,7 @@ import numpy as np
 from ..errors import InputError, warn
 from .settings import TextureSettings
 
-__all__ = ["MAX_AUTO_ATLAS_SIZE", "Packing", "pack_charts"]
+__all__ = ["BESIDE_MIN_FACES", "MAX_AUTO_ATLAS_SIZE", "Packing", "pack_charts", "pack_charts_beside"]
 
 logger = logging.getLogger(__name__)
 
@@ -335,3 +336,138 @@ def pack_charts(
              f"{t / req:.3f} to {t:.3g}")
     logger.info("packing: %d pages of %dx%d at %.3g texels per pixel", a.atlas_count, N, N, t)
     return _result(a, pk, t, req, N)
+
+
+# --------------------------------------------------------------------------------------------
+# packing beside the caller: xatlas holds the GIL for its whole call, so a thread cannot run next to it; a child
+# process can (the bake solves the seam leveling meanwhile)
+
+#: charts' faces from which :func:`pack_charts_beside` packs in a child process (below, xatlas takes less time than
+#: starting one: about 0.15 s of interpreter and imports)
+BESIDE_MIN_FACES = 60_000
+
+
+class _Packed:
+    """A packing under way: :meth:`result` gives the :class:`Packing` (re-raising the packer's error, re-emitting its
+    warnings and log records here)."""
+
+    def __init__(self, run) -> None:
+        self._run = run
+        self._value = None
+
+    def result(self) -> Packing:
+        if self._value is None:
+            self._value = self._run()
+        return self._value
+
+
+def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, beside: bool = True,
+                       **options) -> _Packed:
+    """:func:`pack_charts`, started now and run in a child process while the caller goes on.
+
+    The same packing, byte for byte (the child runs :func:`pack_charts` on the same arrays). Inline (at
+    :meth:`result`) when ``beside`` is false (one thread asked for), for fewer than :data:`BESIDE_MIN_FACES`
+    faces, or when no child process can be started. The child dies with its parent (``PR_SET_PDEATHSIG``)
+    and is killed when the caller stops waiting for it (an error, Ctrl-C).
+
+    Returns
+    -------
+    an object with ``result() -> Packing``
+    """
+    import subprocess
+    import sys
+
+    def inline() -> Packing:
+        return pack_charts(uv, faces, chart, **options)
+
+    if not beside or len(faces) < BESIDE_MIN_FACES:
+        return _Packed(inline)
+    import pickle
+    import threading
+
+    payload = pickle.dumps((np.asarray(uv), np.asarray(faces), np.asarray(chart), options), protocol=5)
+    code = f"from {__name__} import _child; _child()"
+    try:
+        proc = subprocess.Popen([sys.executable, "-c", code, str(os.getpid())], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    except OSError as exc:
+        logger.debug("packing inline: no child process (%s)", exc)
+        return _Packed(inline)
+    out: dict = {}
+
+    def talk() -> None:
+        try:
+            out["stdout"], out["stderr"] = proc.communicate(payload)
+        except BaseException as exc:  # noqa: BLE001 - reported by result()
+            out["exc"] = exc
+
+    talker = threading.Thread(target=talk, name="o3d_seqcc-pack", daemon=True)
+    talker.start()
+
+    def result() -> Packing:
+        try:
+            talker.join()
+        except BaseException:
+            proc.kill()
+            raise
+        if "exc" in out or proc.returncode != 0 or not out.get("stdout"):
+            err = out.get("stderr", b"").decode("utf-8", "replace").strip().splitlines()
+            logger.debug("packing child failed (exit %s: %s): packing inline", proc.returncode, err[-1:] or out.get("exc"))
+            return inline()
+        status, value, notes, records = pickle.loads(out["stdout"])
+        for rec in records:
+            logger.handle(rec)
+        for msg in notes:
+            warn(msg)
+        if status == "error":
+            raise value
+        return value
+
+    return _Packed(result)
+
+
+def _child() -> None:
+    """The child of :func:`pack_charts_beside`: the pickled arrays on stdin, ``(status, value, warnings, log
+    records)`` pickled on stdout."""
+    import logging
+    import pickle
+    import sys
+    import warnings
+
+    _die_with_parent(int(sys.argv[1]))
+    uv, faces, chart, options = pickle.loads(sys.stdin.buffer.read())
+    records: list = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            record.msg, record.args = record.getMessage(), None
+            records.append(record)
+
+    logger.addHandler(Keep())
+    logger.setLevel(logging.DEBUG)
+    logger.propagate = False
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            res = ("ok", pack_charts(uv, faces, chart, **options))
+        except InputError as exc:
+            res = ("error", exc)
+    notes = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    sys.stdout.buffer.write(pickle.dumps((*res, notes, records), protocol=5))
+    sys.stdout.buffer.flush()
+
+
+def _die_with_parent(parent: int) -> None:
+    """Linux: this process gets SIGKILL when its parent ends (``prctl(PR_SET_PDEATHSIG)``); it exits now when the
+    parent has already gone."""
+    import ctypes
+    import ctypes.util
+    import signal
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:
+        os._exit(1)
