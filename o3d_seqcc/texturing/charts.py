@@ -153,9 +153,12 @@ def _shared_vertex_pairs(owner_a: np.ndarray, wf: np.ndarray, face_b: np.ndarray
     ``mask_b`` sharing ``count`` welded vertices (``wf`` (F, 3)), best first within each a."""
     na = int(owner_a.max()) + 2 if len(owner_a) else 1
     ka = np.unique(wf[mask_a].reshape(-1) * na + np.repeat(owner_a[mask_a], 3))
-    kb = np.unique(wf[mask_b].reshape(-1) * (n_b + 1) + np.repeat(face_b[mask_b], 3))
     va = np.stack([ka // na, ka % na], axis=1)
-    vb = np.stack([kb // (n_b + 1), kb % (n_b + 1)], axis=1)
+    if owner_a is face_b and mask_a is mask_b:  # the same (vertex, group) pairs, in the same (lexicographic) order
+        vb = va
+    else:
+        kb = np.unique(wf[mask_b].reshape(-1) * (n_b + 1) + np.repeat(face_b[mask_b], 3))
+        vb = np.stack([kb // (n_b + 1), kb % (n_b + 1)], axis=1)
     st = np.searchsorted(vb[:, 0], va[:, 0], "left")
     n = np.searchsorted(vb[:, 0], va[:, 0], "right") - st
     rep = np.repeat(np.arange(len(va)), n)

@@ -316,7 +316,10 @@ def local_seam_leveling(
         stats["time_s"] = time.perf_counter() - t0
         return tex, stats
     R = int(rows_used[-1]) + 1
-    S = tex.shape[1]
+    W = tex.shape[1]
+    # the planes below span the columns of the regions (+ a margin the splats and filters never reach past): beyond
+    # them every plane is 0 (no region), which is what the constant border of the filters reads
+    S = min(W, int(np.flatnonzero((region[:R] >= 0).any(axis=0))[-1]) + 9)
     cp, cq = _seam_edge_corners(wf, pairs)
     ea = txy[new_faces[pairs[:, 0:1], cp]]  # (E, 2 endpoints, 2 xy) in the texels of face p's chart
     eb = txy[new_faces[pairs[:, 1:2], cq]]
@@ -352,7 +355,7 @@ def local_seam_leveling(
     wsum = np.bincount(inv, weights=w, minlength=len(uniq))
     stats["seam_edges"] = int(len(pairs))
     # domain: texels of seen-chart regions minus a two-texel ring inside every region
-    reg = region[:R]
+    reg = region[:R, :S]
     edge = np.zeros((R, S), dtype=np.uint8)
     edge[1:] |= reg[1:] != reg[:-1]
     edge[:-1] |= reg[:-1] != reg[1:]
@@ -408,6 +411,7 @@ def local_seam_leveling(
     out = tex.copy()
     sub = out[:R]
     flat_sub = sub.reshape(-1, 3)
+    touched_w = touched // S * W + touched % S  # the texture's flat indices (its rows are W long)
     total = np.zeros((len(touched), 3), dtype=np.float32)
     seeds = uniq[is_seed]
     p = np.zeros((R, S), dtype=np.float32)  # one buffer for every channel and pass: set at the seeds, reset after
@@ -430,7 +434,7 @@ def local_seam_leveling(
             flat[seeds] = 0.0  # what the channel set: the seeds and the extended texels (the rings among them)
             flat[ext] = 0.0
         off *= fall_t
-        flat_sub[touched] = np.clip(np.rint(flat_sub[touched].astype(np.float32) + off), 0, 255).astype(np.uint8)
+        flat_sub[touched_w] = np.clip(np.rint(flat_sub[touched_w].astype(np.float32) + off), 0, 255).astype(np.uint8)
         total += off
     stats["texels_changed"] = int(len(touched))
     stats["mean_abs_offset"] = float(np.abs(total).mean()) if len(touched) else 0.0
