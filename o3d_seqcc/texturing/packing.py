@@ -131,11 +131,77 @@ class _Packer:
         big = want > 4.0
         return bool(np.any(got[big] < 0.97 * want[big]))
 
+    def largest_chart(self, t: float) -> float:
+        """An upper bound of the side of any chart's packed image at density ``t`` (texels: its extent, xatlas's
+        half-texel offset and padding on both sides, rounding)."""
+        if not hasattr(self, "_side"):
+            vc = self.vertex_chart
+            ok = vc >= 0
+            lo = np.full((self.n_charts, 2), np.inf)
+            hi = np.full((self.n_charts, 2), -np.inf)
+            np.minimum.at(lo, vc[ok], self.uv64[ok])
+            np.maximum.at(hi, vc[ok], self.uv64[ok])
+            span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+            self._side = float(span.max()) if span.size else 0.0
+            self._area = float(np.prod(span, axis=1).sum()) if span.size else 0.0
+        return self._side * t + 2 * (self.padding + 1) + 3
+
+    def unlimited(self, t: float):
+        """The charts at density ``t`` without a size limit: ``(atlas, width, height, R)`` or None.
+
+        xatlas given a page limit places every chart where it would without one, as long as no chart's search
+        reaches the limit (its random candidate positions are drawn up to the atlas's current extents plus one,
+        clamped to the limit minus the chart's size): packed on a power-of-two page ``R`` with room for the
+        unlimited packing's extents plus the largest chart, the placement is the unlimited one, and its texel
+        coordinates are exact (``uv * R``). ``width`` and ``height`` are the unlimited packing's extents (xatlas's
+        ``atlasSizes`` less the padding: the ceiling of its largest texel coordinates). None when R would have to
+        exceed 2**15 or the placement came close to the page's limit (the caller packs without a limit instead).
+        """
+        side = self.largest_chart(t)
+        est = math.sqrt(self._area * t * t + self.n_charts * side * 4 * (self.padding + 2)) + side
+        R = 1 << max(4, math.ceil(math.log2(max(2.0 * est, 1.0))))
+        if R > 2**15:
+            return None
+        a = self.pack(t, R)
+        if a.atlas_count != 1:
+            return None
+        _, _, uv = a[0]
+        page, _ = a.get_mesh_vertex_assignment(0)
+        tc = uv[page < _NONE].astype(np.float64) * R
+        if not len(tc):
+            return None
+        W, H = (int(math.ceil(float(v))) for v in tc.max(axis=0))
+        if max(W, H) + 1 + side > R:
+            return None
+        return a, W, H, R
+
     def attempt(self, t: float, size: int):
         a = self.pack(t, size)
         ok = a.atlas_count == 1 and not self.shrunk(a, t)
         self.log.append(f"t={t:.4f} S={size}: {a.atlas_count} page(s){'' if ok or a.atlas_count > 1 else ', chart shrunk'}")
         return a, ok
+
+
+class _OnPage:
+    """An xatlas packing made on a larger page ``R``, read as the same placement on a page of side ``size``: what
+    xatlas gives when it packs on that page (uv = texel coordinates / size in float32, utilization = the same count
+    of used texels over size^2)."""
+
+    def __init__(self, big, R: int, size: int) -> None:
+        self._big, self._R, self.width, self.height, self.atlas_count = big, int(R), int(size), int(size), 1
+        vmap, ind, uv = big[0]
+        tc = uv * np.float32(R)  # exact: R is a power of two
+        self._mesh = (vmap, ind, (tc / np.float32(size)).astype(np.float32))
+
+    def __getitem__(self, i: int):
+        return self._mesh
+
+    def get_mesh_vertex_assignment(self, i: int):
+        return self._big.get_mesh_vertex_assignment(i)
+
+    def get_utilization(self, i: int) -> float:
+        count = np.float32(self._big.get_utilization(i)) * np.float32(self._R * self._R)  # exact: R^2 a power of two
+        return float(count / np.float32(self.width * self.height))
 
 
 def _sizes(atlas_size: int, power_of_two: bool, side: float) -> list[int]:
@@ -281,9 +347,15 @@ def pack_charts(
         overflow = "pages"
     N = MAX_AUTO_ATLAS_SIZE if sized else int(atlas_size)
     pk = _Packer(uv, faces, chart, padding)
-    tight = pk.pack(req, 0)  # the charts at the asked density, without a size limit
-    area_1 = tight.width * tight.height / (req * req)  # atlas texels they take per unit density^2
-    pk.log.append(f"t={req:g}: {tight.width}x{tight.height} without a size limit")
+    # the charts at the asked density without a size limit (its placement serves any page it fits, see unlimited)
+    free = pk.unlimited(req)
+    if free is None:
+        tight = pk.pack(req, 0)
+        tw, th = tight.width, tight.height
+    else:
+        big, tw, th, R = free
+    area_1 = tw * th / (req * req)  # atlas texels they take per unit density^2
+    pk.log.append(f"t={req:g}: {tw}x{th} without a size limit")
     sizes = _sizes(N, power_of_two, math.sqrt(area_1) * req / 0.98)
     N = sizes[-1]  # the largest page allowed (a power of two by default)
 
@@ -295,7 +367,12 @@ def pack_charts(
     for _ in range(60):
         if t < req * 0.999 and k == len(sizes) - 1 and overflow == "pages":
             break
-        a, ok = pk.attempt(t, sizes[k])
+        if free is not None and t == req and max(tw, th) + 1 + pk.largest_chart(t) <= sizes[k]:
+            a = _OnPage(big, R, sizes[k])  # the placement xatlas makes on this page: the unlimited one
+            ok = not pk.shrunk(a, t)
+            pk.log.append(f"t={t:.4f} S={sizes[k]}: 1 page(s){'' if ok else ', chart shrunk'}")
+        else:
+            a, ok = pk.attempt(t, sizes[k])
         if ok:
             if t < req * 0.999:
                 msg = (f"the charts do not fit a {N}x{N} atlas at {req:g} texels per pixel: density scaled by "
