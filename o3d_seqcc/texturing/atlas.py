@@ -177,7 +177,8 @@ def _threads() -> int:
     return ex.threads() if isinstance(ex, LocalExecutor) else 1
 
 
-def _corner_pass(views_images, labels: np.ndarray, fuv: np.ndarray, cache: LRUCache, threads: int = 1):
+def _corner_pass(views_images, faces: np.ndarray, labels: np.ndarray, fuv: np.ndarray, cache: LRUCache,
+                 threads: int = 1):
     """Every seen face's corner colours in its view (the leveling's means and the point values), one task per view.
 
     Returns ``corner_mean``, ``corner_point`` (F, 3, 3) float64, NaN for unseen faces; the uint8 images read go
@@ -199,7 +200,10 @@ def _corner_pass(views_images, labels: np.ndarray, fuv: np.ndarray, cache: LRUCa
             bad = fs[out.any(axis=1)]
             raise InputError(f"{len(bad)} faces (e.g. {bad[:5].tolist()}) are assigned to view {v}, in which "
                              "they project outside the image: select only usable views (select_views does)")
-        return corner_colors(img, p.reshape(-1, 2))
+        # a vertex's corners in one view are one projection: sampled once (the same numbers for each of its faces)
+        _, first, back = np.unique(faces[fs].reshape(-1), return_index=True, return_inverse=True)
+        m, pt = corner_colors(img, p.reshape(-1, 2)[first])
+        return m[back.reshape(-1)], pt[back.reshape(-1)]
 
     for (v, fs), (m, pt) in zip(tasks, _map(one, tasks, threads, "o3d_seqcc-corners")):
         corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
@@ -368,7 +372,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     step("seam leveling")
     seen = labels >= 0
     cache = LRUCache(default_cache_bytes())
-    corner_mean, corner_point = _corner_pass(views_images, labels, fuv, cache, threads)
+    corner_mean, corner_point = _corner_pass(views_images, faces, labels, fuv, cache, threads)
     lev_stats = corner_off = None
     if s.leveling:
         corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, cs.level_chart,
