@@ -228,10 +228,11 @@ def _image(views_images, v: int, cache: LRUCache) -> np.ndarray:
 
 
 def _regions(owner: np.ndarray, face_chart: np.ndarray, n_image: int) -> np.ndarray:
-    """(texels,) int32 image chart of every written texel's face (the local leveling's regions), -1 elsewhere
-    (free texels, the fallback region), in bands of :data:`_BAND_TEXELS`."""
-    region = np.full(len(owner), -1, dtype=np.int32)
-    chart = np.where(face_chart < n_image, face_chart, -1).astype(np.int32)
+    """(texels,) image chart of every written texel's face (the local leveling's regions), -1 elsewhere (free
+    texels, the fallback region), in bands of :data:`_BAND_TEXELS`; int16 while the charts' ids fit it."""
+    dtype = np.int16 if n_image < 2**15 else np.int32
+    region = np.full(len(owner), -1, dtype=dtype)
+    chart = np.where(face_chart < n_image, face_chart, -1).astype(dtype)
     for a in range(0, len(owner), _BAND_TEXELS):
         codes = owner[a:a + _BAND_TEXELS]
         loc = np.flatnonzero(codes != -1)
@@ -428,7 +429,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         region = _regions(owner, cs.face_chart, cs.n_image)
         del owner
         tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
-                                               adjacency, wf, band=int(s.local_band))
+                                               adjacency, wf, band=int(s.local_band), copy=False)
         del region
         logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
                     local_stats["seam_edges"], local_stats["mean_abs_diff"], local_stats["texels_changed"],

@@ -279,10 +279,35 @@ def _reciprocal(box: np.ndarray) -> np.ndarray:
     return cv2.divide(np.ones_like(b), cv2.max(b, 1e-3)).reshape(-1)
 
 
+#: rows per band of :func:`_box_at`'s box filters
+BOX_BAND_ROWS = 512
+
+
+def _box_at(plane: np.ndarray, k: int, idx: np.ndarray) -> np.ndarray:
+    """``cv2.boxFilter(plane, -1, (k, k), normalize=False, borderType=BORDER_CONSTANT)`` at the ascending flat
+    indices ``idx`` only, filtered in bands of :data:`BOX_BAND_ROWS` rows with ``k // 2`` rows of the plane
+    above and below each (a box sum reads its k x k neighbourhood only: the whole plane's values, without an
+    atlas-sized output plane)."""
+    import cv2
+
+    R, S = plane.shape
+    h = k // 2
+    out = np.empty(len(idx), dtype=plane.dtype)
+    cuts = np.searchsorted(idx, np.arange(0, R + BOX_BAND_ROWS, BOX_BAND_ROWS) * S)
+    for b, r0 in enumerate(range(0, R, BOX_BAND_ROWS)):
+        i0, i1 = cuts[b], cuts[b + 1]
+        if i0 == i1:
+            continue
+        a, z = max(0, r0 - h), min(R, r0 + BOX_BAND_ROWS + h)
+        box = cv2.boxFilter(plane[a:z], -1, (k, k), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        out[i0:i1] = box.reshape(-1)[idx[i0:i1] - a * S]
+    return out
+
+
 def local_seam_leveling(
     tex: np.ndarray, region: np.ndarray, txy: np.ndarray, new_faces: np.ndarray, face_chart: np.ndarray,
     labels: np.ndarray, adjacency: np.ndarray, wf: np.ndarray, *, band: int, smooth_iters: int = 1,
-    step: float = 0.5, inset: float = 0.5, passes: int = 2,
+    step: float = 0.5, inset: float = 0.5, passes: int = 2, copy: bool = True,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Local seam leveling (after Waechter et al. 2014, simplified); see :func:`o3d_seqcc.texturing.bake_texture`.
 
@@ -300,7 +325,8 @@ def local_seam_leveling(
     (where a thin chart has seams with several charts the seeds of one pass are averaged; a
     second pass removes most of what is left; the geometry is computed once). Whole-atlas OpenCV
     filters, no per-texel Python. ``region`` holds the chart of every texel to level (faces and
-    their gutters), -1 elsewhere.
+    their gutters), -1 elsewhere. The texture is changed in a copy (``copy=False``: in place, for a
+    caller that drops the original).
     """
     import cv2
 
@@ -408,7 +434,7 @@ def local_seam_leveling(
     touched = kidx[pos]  # ascending flat indices
     fall_t = fall[pos].astype(np.float32, copy=False)[:, None]
     del kidx, fall, pos
-    out = tex.copy()
+    out = tex.copy() if copy else tex
     sub = out[:R]
     flat_sub = sub.reshape(-1, 3)
     touched_w = touched // S * W + touched % S  # the texture's flat indices (its rows are W long)
@@ -426,9 +452,9 @@ def local_seam_leveling(
         for c in range(3):  # one channel at a time (single-channel factors, no merges)
             flat[seeds] = vals[is_seed, c] / wsum[is_seed]
             for ring, g in grow:  # p += box5(p) * g
-                flat[ring] += cv2.boxFilter(p, -1, (5, 5), normalize=False, borderType=bc).reshape(-1)[ring] * g
+                flat[ring] += _box_at(p, 5, ring) * g
             for _ in range(int(smooth_iters)):  # masked smoothing of the extended values (seeds fixed)
-                box = cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=bc).reshape(-1)[ext]
+                box = _box_at(p, 3, ext)
                 flat[ext] = flat[ext] * keep + box * smooth  # p * keep + box3(p) * smooth
             off[:, c] = flat[touched]
             flat[seeds] = 0.0  # what the channel set: the seeds and the extended texels (the rings among them)
