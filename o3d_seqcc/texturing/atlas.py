@@ -440,10 +440,8 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     release_free_memory()
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
-        if P == 1:  # (the same pixels as the concatenation of one page, without its copy)
-            tex = push_pull_fill(tex, w2)
-        else:
-            tex = np.concatenate([push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S]) for p in range(P)])
+        for p in range(P):  # page by page, in place
+            push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S], copy=False)
     t_end = time.perf_counter()
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])

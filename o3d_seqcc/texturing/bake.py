@@ -535,7 +535,7 @@ def _as_uint8(values: np.ndarray) -> np.ndarray:
     return cv2.convertScaleAbs(np.ascontiguousarray(values)).reshape(values.shape)
 
 
-def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True) -> np.ndarray:
     """Fill texels outside ``mask`` with smooth colours from the masked ones (pull-push).
 
     Pull: area-averaged pyramid of colour x coverage and coverage. Push: from the coarsest
@@ -553,10 +553,13 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     mask : (H, W) bool
         Texels to keep.
 
+    copy : bool, default True
+        Fill a copy; False fills ``img`` itself (for a caller that drops the unfilled image).
+
     Returns
     -------
     (H, W, 3) uint8
-        A new image.
+        A new image (``img`` with ``copy=False``).
     """
     import cv2
 
@@ -586,7 +589,7 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
         m = cv2.resize(m, (ww, hh), interpolation=cv2.INTER_AREA)
         levels.append((c, m))
     if not levels:
-        return img.copy()
+        return img.copy() if copy else img
     c, m = levels[-1]
     filled = c / np.maximum(m, 1e-12)[..., None]
     for c, m in reversed(levels[:-1]):
@@ -598,7 +601,7 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
         filled = up
         del wgt
     del levels, c, m
-    out = img.copy()
+    out = img.copy() if copy else img
     if not banded:
         up = cv2.resize(filled, (W, H), interpolation=cv2.INTER_LINEAR)
         np.copyto(out, _as_uint8(up), where=~mask[..., None])
