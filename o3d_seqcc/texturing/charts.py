@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .._shared.sets import unique
 from ..geometry.meshops import weld_vertices
 from .settings import VisibilityLike
 
@@ -152,12 +153,12 @@ def _shared_vertex_pairs(owner_a: np.ndarray, wf: np.ndarray, face_b: np.ndarray
     """(a, b, count): groups ``owner_a`` of the faces in ``mask_a`` and charts ``face_b`` of the faces in
     ``mask_b`` sharing ``count`` welded vertices (``wf`` (F, 3)), best first within each a."""
     na = int(owner_a.max()) + 2 if len(owner_a) else 1
-    ka = np.unique(wf[mask_a].reshape(-1) * na + np.repeat(owner_a[mask_a], 3))
+    ka = unique(wf[mask_a].reshape(-1) * na + np.repeat(owner_a[mask_a], 3))
     va = np.stack([ka // na, ka % na], axis=1)
     if owner_a is face_b and mask_a is mask_b:  # the same (vertex, group) pairs, in the same (lexicographic) order
         vb = va
     else:
-        kb = np.unique(wf[mask_b].reshape(-1) * (n_b + 1) + np.repeat(face_b[mask_b], 3))
+        kb = unique(wf[mask_b].reshape(-1) * (n_b + 1) + np.repeat(face_b[mask_b], 3))
         vb = np.stack([kb // (n_b + 1), kb % (n_b + 1)], axis=1)
     st = np.searchsorted(vb[:, 0], va[:, 0], "left")
     n = np.searchsorted(vb[:, 0], va[:, 0], "right") - st

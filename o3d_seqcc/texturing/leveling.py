@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .._shared.sets import unique
 from ..imaging.arrays import sample_bilinear
 from .settings import LEVELING_SMOOTHNESS
 
@@ -141,7 +142,7 @@ def seam_leveling_offsets(
     e = np.concatenate([fm[:, [0, 1]], fm[:, [1, 2]], fm[:, [2, 0]]])
     e.sort(axis=1)
     e = e[e[:, 0] != e[:, 1]]
-    key = np.unique(e[:, 0] * np.int64(max(M, 1)) + e[:, 1])  # the unique rows in their lexicographic order
+    key = unique(e[:, 0] * np.int64(max(M, 1)) + e[:, 1])  # the unique rows in their lexicographic order
     e = np.stack([key // max(M, 1), key % max(M, 1)], axis=1)
     ii = np.r_[pairs[:, 0], e[:, 0]]
     jj = np.r_[pairs[:, 1], e[:, 1]]
