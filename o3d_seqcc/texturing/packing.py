@@ -493,7 +493,8 @@ def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, 
             return inline()
         status, value, notes, records = pickle.loads(out["stdout"])
         for rec in records:
-            logger.handle(rec)
+            if logger.isEnabledFor(rec.levelno):  # the level check logging makes before a record exists
+                logger.handle(rec)
         for msg in notes:
             warn(msg)
         if status == "error":
