@@ -192,3 +192,22 @@ def test_the_bake_in_bands_on_threads_with_direct_pixel_reads_equals_the_plain_o
     assert none == 0 and direct > 0.9 * (fast.face_view >= 0).sum()  # nearly every seen face read directly
     assert np.array_equal(plain.texture, fast.texture) and np.array_equal(plain.uv, fast.uv)
     assert plain.stats["unseen_faces"] > 0 and plain.stats["texels_per_pixel"] == 1.0
+
+
+def test_the_childs_warnings_and_log_records_reach_this_process_as_its_own(rng, monkeypatch, caplog):
+    import logging
+    import warnings
+
+    from o3d_seqcc.errors import O3dSeqccWarning
+
+    uv, faces, chart = _charts(rng, 120)
+    monkeypatch.setattr(packing, "BESIDE_MIN_FACES", 0)
+    with caplog.at_level(logging.WARNING, logger=packing.logger.name), warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=512).result()  # too small: scaled
+    assert res.scale < 1
+    assert any(issubclass(x.category, O3dSeqccWarning) and "density scaled" in str(x.message) for x in w)
+    levels = {r.levelname for r in caplog.records if r.name == packing.logger.name}
+    assert "WARNING" in levels and "INFO" not in levels  # the INFO line is below this process's level
+    with pytest.raises(packing.InputError, match="could not pack"):
+        packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=8, padding=8).result()
