@@ -204,7 +204,7 @@ def test_the_childs_warnings_and_log_records_reach_this_process_as_its_own(rng, 
     monkeypatch.setattr(packing, "BESIDE_MIN_FACES", 0)
     with caplog.at_level(logging.WARNING, logger=packing.logger.name), warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
-        res = packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=512).result()  # too small: scaled
+        res = packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=256).result()  # too small: scaled
     assert res.scale < 1
     assert any(issubclass(x.category, O3dSeqccWarning) and "density scaled" in str(x.message) for x in w)
     levels = {r.levelname for r in caplog.records if r.name == packing.logger.name}
