@@ -62,16 +62,53 @@ class Bisection:
         return int(len(self.edge_vertices))
 
 
-def _edges(faces: np.ndarray, welded: np.ndarray):
-    """Unique undirected edges of the faces (by welded ids): per face corner j the edge
-    (j, j+1) -> (F, 3) edge ids, and per edge a representative (face, corner)."""
-    wf = welded[faces]
+def _edges(faces: np.ndarray, wf: np.ndarray, n: int):
+    """Unique undirected edges of the faces (by their welded corners ``wf``, ids below ``n``): per face
+    corner j the edge (j, j+1) -> (F, 3) edge ids in the order of the edges' keys, and per edge its first
+    (face, corner) in the faces' order."""
     a, b = wf, np.roll(wf, -1, axis=1)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    n = int(welded.max()) + 1 if len(welded) else 1
     key = lo.astype(np.int64) * n + hi.astype(np.int64)
     uniq, first, eid = np.unique(key.reshape(-1), return_index=True, return_inverse=True)
     return eid.reshape(-1, 3), first
+
+
+def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum: float, n: int) -> dict:
+    """The longest-edge closure of the marked faces ``mk`` among the faces ``f`` (welded corners ``wf``).
+
+    Exact for every face whose edges have all their faces among ``f`` (:func:`bisect`'s region):
+    an edge's length is taken at its first (face, corner), its rank is (length in :data:`LENGTH_TIE`
+    quanta, key), both as over the whole mesh.
+    """
+    eid, first = _edges(f, wf, n)
+    ef, ec = np.divmod(first, 3)  # representative face and corner of every edge
+    p, q = f[ef, ec], f[ef, (ec + 1) % 3]
+    length = np.linalg.norm(X[p] - X[q], axis=1)
+    rank = np.empty(len(length), dtype=np.int64)
+    rank[np.lexsort((np.arange(len(length)), np.rint(length / quantum)))] = np.arange(len(length))  # (length, id)
+    longest = np.argmax(rank[eid], axis=1)  # local edge j = corners (j, j+1)
+    # faces with two welded corners equal have no area: never split (an edge of theirs may be split by a neighbour)
+    flat = (wf[:, 0] == wf[:, 1]) | (wf[:, 1] == wf[:, 2]) | (wf[:, 2] == wf[:, 0])
+    mk = mk & ~flat
+    split = np.zeros(len(length), dtype=bool)
+    split[eid[mk, longest[mk]]] = True
+    while True:  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)
+        has = split[eid].any(axis=1) & ~flat
+        need = eid[has, longest[has]]
+        new = ~split[need]
+        if not new.any():
+            break
+        split[need[new]] = True
+    return {"eid": eid, "p": p, "q": q, "longest": longest, "flat": flat, "split": split, "involved": has | mk}
+
+
+#: children of a face per pattern (1 + split edge BC + 2 * split edge CA; 0 = unsplit)
+_N_KIDS = np.array([1, 2, 3, 3, 4], dtype=np.int64)
+
+
+def _region(wf: np.ndarray, touch: np.ndarray) -> np.ndarray:
+    """Ascending ids of the faces with a welded corner in ``touch``."""
+    return np.flatnonzero(touch[wf].any(axis=1))
 
 
 def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
@@ -93,6 +130,17 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
     -------
     Bisection
         Does not modify the inputs.
+
+    Notes
+    -----
+    The work follows the faces split, not the mesh: the closure runs on a *region*, the faces
+    with a corner in a set ``T`` of welded vertices (first the corners of the marked faces and of
+    their neighbours). A face whose corners are all in ``T`` has every face across its edges in the
+    region, so its edges' lengths, ranks and first (face, corner) are those of the whole mesh; while
+    the closure reaches a face that is not such (marked, or with a split edge), its corners join
+    ``T`` and the region grows. The result is the whole mesh's closure (every face with a split
+    edge is in the region, and the closure is closed there), at the cost of a few passes of
+    elementwise work over the faces.
     """
     X = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
@@ -103,51 +151,48 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
         vn = None if vertex_normals is None else np.asarray(vertex_normals, dtype=np.float64)
         return Bisection(X, f.copy(), np.arange(F, dtype=np.int64), vn, np.zeros((0, 2), np.int64))
     w = weld_vertices(X) if welded is None else np.asarray(welded, dtype=np.int64)
-    eid, first = _edges(f, w)
-    ef, ec = np.divmod(first, 3)  # representative face and corner of every edge
-    p, q = f[ef, ec], f[ef, (ec + 1) % 3]
-    length = np.linalg.norm(X[p] - X[q], axis=1)
     # lengths equal to 1e-6 of the mesh's size are ties (broken by edge id): the same choices wherever the
     # mesh lies (1e7 m from the origin, float64 rounding makes equal edges differ by ~1e-9 m)
     quantum = LENGTH_TIE * max(float(np.ptp(X, axis=0).max()) if len(X) else 1.0, 1e-300)
-    rank = np.empty(len(length), dtype=np.int64)
-    rank[np.lexsort((np.arange(len(length)), np.rint(length / quantum)))] = np.arange(len(length))  # (length, id)
-    longest = np.argmax(rank[eid], axis=1)  # local edge j = corners (j, j+1)
-    rows = np.arange(F)
-    # faces with two welded corners equal have no area: never split (an edge of theirs may be split by a neighbour)
-    flat = (w[f][:, 0] == w[f][:, 1]) | (w[f][:, 1] == w[f][:, 2]) | (w[f][:, 2] == w[f][:, 0])
-    mk &= ~flat
-    split = np.zeros(len(length), dtype=bool)
-    split[eid[mk, longest[mk]]] = True
-    while True:  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)
-        has = split[eid].any(axis=1) & ~flat
-        need = eid[has, longest[has]]
-        new = ~split[need]
-        if not new.any():
+    n = int(w.max()) + 1 if len(w) else 1
+    wf = w[f]
+    touch = np.zeros(n, dtype=bool)
+    touch[wf[mk]] = True
+    touch[wf[_region(wf, touch)]] = True  # the marked faces and their neighbours: whole-mesh edges
+    while True:
+        reg = _region(wf, touch)
+        c = _close(X, f[reg], wf[reg], mk[reg], quantum, n)
+        loose = c["involved"] & ~touch[wf[reg]].all(axis=1)  # edges maybe not all in the region: grow it
+        if not loose.any():
             break
-        split[need[new]] = True
-    new_id = np.full(len(length), -1, dtype=np.int64)
-    se = np.flatnonzero(split)
+        touch[wf[reg[loose]]] = True
+    eid, split, flat, r = c["eid"], c["split"], c["flat"], c["longest"]
+    new_id = np.full(len(split), -1, dtype=np.int64)
+    se = np.flatnonzero(split)  # in the order of the edges' keys, as over the whole mesh
     new_id[se] = len(X) + np.arange(len(se))
-    mids = 0.5 * (X[p[se]] + X[q[se]])
+    p, q = c["p"][se], c["q"][se]
+    mids = 0.5 * (X[p] + X[q])
     vn_out = None
     if vertex_normals is not None:
         vn = np.asarray(vertex_normals, dtype=np.float64)
-        s = vn[p[se]] + vn[q[se]]
+        s = vn[p] + vn[q]
         nrm = np.linalg.norm(s, axis=1, keepdims=True)
-        s = np.where(nrm > 1e-12, s / np.maximum(nrm, 1e-300), vn[p[se]])
+        s = np.where(nrm > 1e-12, s / np.maximum(nrm, 1e-300), vn[p])
         vn_out = np.concatenate([vn, s])
     # corners rotated so that the longest edge is A -> B and C is opposite
-    r = longest
-    A, B, C = f[rows, r], f[rows, (r + 1) % 3], f[rows, (r + 2) % 3]
+    fr = f[reg]
+    rows = np.arange(len(reg))
+    A, B, C = fr[rows, r], fr[rows, (r + 1) % 3], fr[rows, (r + 2) % 3]
     e_bc, e_ca = eid[rows, (r + 1) % 3], eid[rows, (r + 2) % 3]
     m = new_id[eid[rows, r]]
     cut = split[eid[rows, r]] & ~flat  # closure: a face with any split edge has its longest one split
     bc, ca = split[e_bc], split[e_ca]
     mbc, mca = new_id[e_bc], new_id[e_ca]
     pattern = np.where(cut, 1 + bc.astype(np.int64) + 2 * ca.astype(np.int64), 0)
-    parts_f, parts_p, parts_k = [f[pattern == 0]], [np.flatnonzero(pattern == 0)], [np.zeros(int((pattern == 0).sum()),
-                                                                                              np.int64)]
+    count = np.ones(F, dtype=np.int64)
+    count[reg] = _N_KIDS[pattern]
+    start = np.cumsum(count) - count  # the children of a face take its place, in the order below
+    nf = np.repeat(f, count, axis=0)  # unsplit faces as they were
     cases = {  # pattern -> children as (corner arrays); windings follow the parent's (A, B, C)
         1: ((A, m, C), (m, B, C)),
         2: ((A, m, C), (m, B, mbc), (m, mbc, C)),
@@ -158,13 +203,8 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
         sel = np.flatnonzero(pattern == code)
         if not len(sel):
             continue
+        at = start[reg[sel]]
         for k, (x, y, z) in enumerate(kids):
-            parts_f.append(np.stack([x[sel], y[sel], z[sel]], axis=1))
-            parts_p.append(sel)
-            parts_k.append(np.full(len(sel), k, dtype=np.int64))
-    nf = np.concatenate(parts_f)
-    par = np.concatenate(parts_p)
-    kid = np.concatenate(parts_k)
-    order = np.lexsort((kid, par))
-    return Bisection(vertices=np.concatenate([X, mids]), faces=nf[order], parent=par[order], vertex_normals=vn_out,
-                     edge_vertices=np.stack([p[se], q[se]], axis=1))
+            nf[at + k] = np.stack([x[sel], y[sel], z[sel]], axis=1)
+    return Bisection(vertices=np.concatenate([X, mids]), faces=nf, parent=np.repeat(np.arange(F, dtype=np.int64), count),
+                     vertex_normals=vn_out, edge_vertices=np.stack([p, q], axis=1))

@@ -105,6 +105,64 @@ def _part1by2(x: np.ndarray) -> np.ndarray:
     return (x | (x << 2)) & np.uint32(0x09249249)
 
 
+def morton_chunks(tri: np.ndarray, cen: np.ndarray, ptr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces grouped into chunks along a Morton curve of their centroids, and the chunks' boxes.
+
+    Parameters
+    ----------
+    tri : (F, 3, 3) float64
+        The faces' corners.
+    cen : (F, 3) float64
+        Their centroids.
+    ptr : (C+1,) int
+        Chunk ``c`` holds the faces ``perm[ptr[c]:ptr[c+1]]``.
+
+    Returns
+    -------
+    perm : (F,) int64
+        The faces in curve order (stable for equal codes).
+    corners : (C, 8, 3) float64
+        The eight corners of every chunk's bounding box.
+    """
+    lo, hi = cen.min(axis=0), cen.max(axis=0)
+    q = np.clip((cen - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint32)
+    code = _part1by2(q[:, 0]) | (_part1by2(q[:, 1]) << np.uint32(1)) | (_part1by2(q[:, 2]) << np.uint32(2))
+    perm = np.argsort(code, kind="stable")
+    starts = ptr[:-1]
+    box_lo = np.minimum.reduceat(tri.min(axis=1)[perm], starts)  # (C, 3)
+    box_hi = np.maximum.reduceat(tri.max(axis=1)[perm], starts)
+    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(8, 3)
+    return perm.astype(np.int64), np.where(corners[None, :, :] == 0, box_lo[:, None, :], box_hi[:, None, :])
+
+
+def frustum_chunks(corners: np.ndarray, view) -> np.ndarray:
+    """(C,) bool: the chunks (boxes' ``corners`` (C, 8, 3)) not wholly beyond one of the view's frustum planes.
+
+    A box is dropped only when all its corners lie beyond one plane (``u >= -0.5``, ``u < W - 0.5``,
+    ``v >= -0.5``, ``v < H - 0.5``, ``z > 0``) by a relative margin far above rounding, so no face
+    inside it can have a corner inside the image.
+    """
+    K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
+    pc = corners @ E[:3, :3].T + E[:3, 3]  # (C, 8, 3) camera frame
+    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    W, H = view.width, view.height
+    planes = np.array([
+        [fx, s, cx + 0.5],  # u >= -0.5
+        [-fx, -s, W - 0.5 - cx],  # u < W - 0.5
+        [0.0, fy, cy + 0.5],  # v >= -0.5
+        [0.0, -fy, H - 0.5 - cy],  # v < H - 0.5
+        [0.0, 0.0, 1.0],  # z > 0
+    ])
+    vals = pc @ planes.T  # (C, 8, 5)
+    margin = 1e-9 * np.abs(pc).max(axis=(1, 2))[:, None] * np.abs(planes).sum(axis=1)[None, :] + 1e-300
+    return ~(vals.max(axis=1) < -margin).any(axis=1)
+
+
+def chunk_members(perm: np.ndarray, ptr: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Ascending ids of the faces in the chunks ``keep`` ((C,) bool) of :func:`morton_chunks`."""
+    return np.sort(perm[np.repeat(keep, ptr[1:] - ptr[:-1])])
+
+
 class VisibilityJob:
     """What every view's visibility task shares (see the module docstring).
 
@@ -140,11 +198,12 @@ class VisibilityJob:
         self.faces = f
         self.XT = np.ascontiguousarray(X.T)
         self.f0, self.f1, self.f2 = (np.ascontiguousarray(f[:, i]) for i in range(3))
-        cen = X[f].mean(axis=1)
+        tri = X[f]
+        cen = tri.mean(axis=1)
         self.cen = [np.ascontiguousarray(cen[:, i]) for i in range(3)]
         self.fn = [np.ascontiguousarray(normals[:, i]) for i in range(3)]
         self.degenerate = np.asarray(degenerate, dtype=bool)
-        self._chunk(cen)
+        self._chunk(tri, cen)
         self._rs = None
         self._lock = threading.Lock()
         need = sum(8 * int(v.width) * int(v.height) for v in self.views if v.has_depth)  # float64 depth images
@@ -158,54 +217,24 @@ class VisibilityJob:
             return self.occluder.depth(i)
         return self._depths.get(i, lambda: _depth_image(self.views[i], self.opts))
 
-    def _chunk(self, cen: np.ndarray) -> None:
+    def _chunk(self, tri: np.ndarray, cen: np.ndarray) -> None:
         F = len(self.faces)
         self.chunk_ptr = np.arange(0, F + CHUNK_FACES, CHUNK_FACES).clip(max=F)
         if F <= 4 * CHUNK_FACES:  # small meshes: no culling
             self.chunk_perm = None
             return
-        lo, hi = cen.min(axis=0), cen.max(axis=0)
-        q = np.clip((cen - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint32)
-        code = _part1by2(q[:, 0]) | (_part1by2(q[:, 1]) << np.uint32(1)) | (_part1by2(q[:, 2]) << np.uint32(2))
-        perm = np.argsort(code, kind="stable")
-        starts = self.chunk_ptr[:-1]
-        box_lo = np.empty((len(starts), 3))
-        box_hi = np.empty((len(starts), 3))
-        fp = self.faces[perm]
-        for a in range(3):
-            vals = self.X[fp, a]  # (F, 3) coordinate a of the corners, chunk order
-            box_lo[:, a] = np.minimum.reduceat(vals.min(axis=1), starts)
-            box_hi[:, a] = np.maximum.reduceat(vals.max(axis=1), starts)
-        self.chunk_perm = perm.astype(np.int64)
-        corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(8, 3)
-        self.chunk_corners = np.where(corners[None, :, :] == 0, box_lo[:, None, :], box_hi[:, None, :])  # (C, 8, 3)
+        self.chunk_perm, self.chunk_corners = morton_chunks(tri, cen, self.chunk_ptr)
 
     def candidates(self, view) -> np.ndarray | None:
         """Ascending ids of the faces in chunks that meet the view's frustum; None = all faces."""
         if self.chunk_perm is None:
             return None
-        K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
-        pc = self.chunk_corners @ E[:3, :3].T + E[:3, 3]  # (C, 8, 3) camera frame
-        fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
-        W, H = view.width, view.height
-        planes = np.array([
-            [fx, s, cx + 0.5],  # u >= -0.5
-            [-fx, -s, W - 0.5 - cx],  # u < W - 0.5
-            [0.0, fy, cy + 0.5],  # v >= -0.5
-            [0.0, -fy, H - 0.5 - cy],  # v < H - 0.5
-            [0.0, 0.0, 1.0],  # z > 0
-        ])
-        vals = pc @ planes.T  # (C, 8, 5)
-        margin = 1e-9 * np.abs(pc).max(axis=(1, 2))[:, None] * np.abs(planes).sum(axis=1)[None, :] + 1e-300
-        keep = ~(vals.max(axis=1) < -margin).any(axis=1)
+        keep = frustum_chunks(self.chunk_corners, view)
         ptr = self.chunk_ptr
         n_keep = int((ptr[1:] - ptr[:-1])[keep].sum())
         if n_keep >= 0.5 * len(self.faces):
             return None
-        ks = np.flatnonzero(keep)
-        if not len(ks):
-            return np.zeros(0, np.int64)
-        return np.sort(np.concatenate([self.chunk_perm[ptr[c]:ptr[c + 1]] for c in ks]))
+        return chunk_members(self.chunk_perm, ptr, keep)
 
     def raycaster(self):
         """Open3D's ``RaycastingScene`` of the mesh (of :attr:`occluder`'s, when given) in the local frame

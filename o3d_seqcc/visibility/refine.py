@@ -35,13 +35,16 @@ from ..geometry.camera import project_columns
 from ..geometry.meshops import face_normals, weld_vertices
 from ..geometry.meshsplit import bisect
 from .occlusion import _hidden, _rays_to, bary_grid
-from .per_view import DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, view_record
+from .per_view import (DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, chunk_members, frustum_chunks,
+                       morton_chunks, view_record)
 
 __all__ = ["PROBE_SPACING", "Refinement", "coverage", "distortion", "refine_visibility"]
 
 #: spacing in pixels of the test points of a candidate face in :func:`probe_view`
 PROBE_SPACING = 16.0
 _MAX_PROBE_LEVEL = 16
+#: candidates per spatial chunk of a probe's frustum culling
+PROBE_CHUNK = 256
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,33 +78,50 @@ class Refinement:
 
 
 class ProbeJob:
-    """What every view's probe shares: the candidates' corners (c, 3, 3) and normals (c, 3), the base job."""
+    """What every view's probe shares: the candidates' corners (c, 3, 3) and normals (c, 3), the base job.
+
+    Many candidates (more than ``4 * PROBE_CHUNK``) are grouped into chunks along a Morton curve
+    (:func:`~o3d_seqcc.visibility.per_view.morton_chunks`), so that a view's probe looks only at
+    those in chunks that meet its frustum (the others are outside it: never partly seen).
+    """
 
     def __init__(self, base: VisibilityJob, tri: np.ndarray, normals: np.ndarray, min_px: float) -> None:
         self.base = base
         self.tri = np.asarray(tri, dtype=np.float64)
         self.normals = np.asarray(normals, dtype=np.float64)
         self.min_px = float(min_px)
+        c = len(self.tri)
+        self.chunk_ptr = np.arange(0, c + PROBE_CHUNK, PROBE_CHUNK).clip(max=c)
+        self.chunk_perm = self.chunk_corners = None
+        if c > 4 * PROBE_CHUNK:
+            self.chunk_perm, self.chunk_corners = morton_chunks(self.tri, self.tri.mean(axis=1), self.chunk_ptr)
+
+    def candidates(self, view) -> np.ndarray | None:
+        """Ascending indices of the candidates in chunks that meet the view's frustum; None = all of them."""
+        if self.chunk_perm is None:
+            return None
+        return chunk_members(self.chunk_perm, self.chunk_ptr, frustum_chunks(self.chunk_corners, view))
 
 
 def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     """(c,) bool: the candidates partly seen in view ``i`` and larger than ``min_px`` there (module docstring)."""
     base, opts = job.base, job.base.opts
     view = base.views[i]
-    c = len(job.tri)
-    out = np.zeros(c, dtype=bool)
+    out = np.zeros(len(job.tri), dtype=bool)
+    sub = job.candidates(view)
+    tri, n = (job.tri, job.normals) if sub is None else (job.tri[sub], job.normals[sub])
+    c = len(tri)
     if not c:
         return out
     K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
     W, H = view.width, view.height
-    pc = job.tri @ E[:3, :3].T + E[:3, 3]  # (c, 3, 3) camera frame
+    pc = tri @ E[:3, :3].T + E[:3, 3]  # (c, 3, 3) camera frame
     fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
     planes = np.array([[fx, s, cx + 0.5], [-fx, -s, W - 0.5 - cx], [0.0, fy, cy + 0.5], [0.0, -fy, H - 0.5 - cy],
                        [0.0, 0.0, 1.0]])
     outside = ((pc @ planes.T).max(axis=1) <= 0).any(axis=1)  # every corner beyond one plane
     C = view.center
-    n = job.normals
-    facing = np.einsum("ij,ij->i", n, C - job.tri[:, 0])
+    facing = np.einsum("ij,ij->i", n, C - tri[:, 0])
     front = np.ones(c, bool) if opts["two_sided"] else facing > 0
     z = pc[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -117,7 +137,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     for L in np.unique(level):  # at most 15 groups
         sel = keep[level == L]
         w = bary_grid(int(L), interior_only=False)  # (m, 3), the corners included
-        pts.append(np.einsum("mj,kjc->kmc", w, job.tri[sel]).reshape(-1, 3))
+        pts.append(np.einsum("mj,kjc->kmc", w, tri[sel]).reshape(-1, 3))
         own.append(np.repeat(sel, len(w)))
     P, owner = np.concatenate(pts), np.concatenate(own)
     pu, pv, pz = project_columns(np.ascontiguousarray(P.T), K, E)
@@ -142,7 +162,8 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     if len(idx) and "occlusion" in opts["filters"]:
         rays = _rays_to(C, P[idx], float(opts["occlusion_tol"]), float(opts["occlusion_atol"]), base.origin)
         idx = idx[~_hidden(base.raycaster(), rays)]
-    out[np.unique(owner[idx])] = True
+    seen = np.unique(owner[idx])
+    out[seen if sub is None else sub[seen]] = True
     return out
 
 
@@ -157,26 +178,29 @@ def distortion(vertices: np.ndarray, faces: np.ndarray, records: list, views, am
     interpolates them linearly over the face, while the photo maps the face projectively: inside
     a face that spans a large range of depths the two differ (the texture slides). The error is
     measured at the centroid and the edge midpoints, in the view where the face's projection is
-    largest among those where it is usable (the one the selection favours); 0 for faces not in
-    ``among`` ((F,) bool) or usable nowhere.
+    largest among those where it is usable (the one the selection favours; the first such view
+    on a tie); 0 for faces not in ``among`` ((F,) bool) or usable nowhere.
     """
+    return _distortion(vertices, faces, records, None, views, among)
+
+
+def _distortion(vertices: np.ndarray, faces: np.ndarray, records: list, ids: np.ndarray | None, views,
+                among: np.ndarray) -> np.ndarray:
+    """:func:`distortion` from records over some of the faces: ``ids`` maps their face ids to ``faces``' (None:
+    the same ids)."""
     F = len(faces)
     out = np.zeros(F)
-    vv, ff, aa = [], [], []
-    for v, r in enumerate(records):
-        k = (r.flags == 0) & among[r.faces]
-        vv.append(np.full(int(k.sum()), v, np.int64))
-        ff.append(r.faces[k].astype(np.int64))
-        aa.append(r.area[k])
-    if not vv:
-        return out
-    vv, ff, aa = np.concatenate(vv), np.concatenate(ff), np.concatenate(aa)
-    if not len(ff):
-        return out
-    order = np.lexsort((-aa, ff))
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = ff[order][1:] != ff[order][:-1]
-    best_v, best_f = vv[order][first], ff[order][first]
+    best = np.full(F, -np.inf, dtype=np.float32)
+    best_v = np.full(F, -1, dtype=np.int64)
+    for v, r in enumerate(records):  # the largest usable area, the first view on a tie
+        fs = r.faces if ids is None else ids[r.faces]
+        k = (r.flags == 0) & among[fs]
+        fs, a = fs[k], r.area[k]
+        up = a > best[fs]
+        best[fs[up]] = a[up]
+        best_v[fs[up]] = v
+    best_f = np.flatnonzero(best_v >= 0)
+    best_v = best_v[best_f]
     X = np.asarray(vertices, dtype=np.float64)
     for v in np.unique(best_v):
         fs = best_f[best_v == v]
@@ -191,21 +215,62 @@ def distortion(vertices: np.ndarray, faces: np.ndarray, records: list, views, am
     return out
 
 
-def _merge(old: ViewRecord, new: ViewRecord, old_to_new: np.ndarray, new_ids: np.ndarray) -> ViewRecord:
-    """One view's record over the refined faces: the unsplit faces' entries renumbered, the parts' added."""
-    keep = old_to_new[old.faces] >= 0
-    faces = np.concatenate([old_to_new[old.faces[keep]], new_ids[new.faces]])
-    order = np.argsort(faces, kind="stable")
-    flags = np.concatenate([old.flags[keep], new.flags])[order]
-    info = dict(old.info)
-    info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
-                depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
-                oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
-    secs = {k: old.seconds.get(k, 0.0) + new.seconds.get(k, 0.0) for k in set(old.seconds) | set(new.seconds)}
-    return ViewRecord(faces=faces[order].astype(np.int32), flags=flags,
-                      area=np.concatenate([old.area[keep], new.area])[order],
-                      cos_angle=np.concatenate([old.cos_angle[keep], new.cos_angle])[order], info=info,
-                      n_rays=old.n_rays + new.n_rays, n_known=old.n_known, seconds=secs)
+class _Records:
+    """The views' records over faces renumbered every round, renumbered once at the end.
+
+    Holds pieces: the input records and the records of every round's new faces, each with the
+    current id of its faces (-1: split or merged since). A round renumbers the ids (a gather per
+    piece), not the records; :meth:`records` merges the pieces into one record per view.
+    """
+
+    def __init__(self, records: list, n_faces: int) -> None:
+        self.pieces = [(list(records), np.arange(n_faces, dtype=np.int64))]
+        self.usable_any = np.zeros(n_faces, dtype=bool)
+        self._mark(records, None)
+
+    def _mark(self, records: list, ids: np.ndarray | None) -> None:
+        for r in records:
+            u = r.faces[r.flags == 0]
+            self.usable_any[u if ids is None else ids[u]] = True
+
+    def renumber(self, old_to_new: np.ndarray, n_faces: int) -> None:
+        """Faces renumbered (``old_to_new``: (F_old,) new id or -1), ``n_faces`` of them now."""
+        self.pieces = [(recs, np.where(cur >= 0, old_to_new[cur], -1)) for recs, cur in self.pieces]
+        ua = np.zeros(n_faces, dtype=bool)
+        kept = old_to_new >= 0
+        ua[old_to_new[kept]] = self.usable_any[kept]
+        self.usable_any = ua
+
+    def add(self, records: list, ids: np.ndarray) -> None:
+        """The records of new faces: their face ``j`` is the current face ``ids[j]``."""
+        self.pieces.append((list(records), np.asarray(ids, dtype=np.int64)))
+        self._mark(records, ids)
+
+    def records(self) -> list:
+        """One :class:`ViewRecord` per view over the current faces (ascending ids)."""
+        out = []
+        for v, base in enumerate(self.pieces[0][0]):
+            parts = [(recs[v], cur[recs[v].faces]) for recs, cur in self.pieces]
+            keep = [ids >= 0 for _, ids in parts]
+            faces = np.concatenate([ids[k] for (_, ids), k in zip(parts, keep)])
+            order = np.argsort(faces, kind="stable")
+
+            def cat(name: str) -> np.ndarray:
+                return np.concatenate([getattr(r, name)[k] for (r, _), k in zip(parts, keep)])[order]
+
+            flags = cat("flags")
+            info = dict(base.info)
+            info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
+                        depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
+                        oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
+            secs: dict = {}
+            for r, _ in parts:
+                for k, t in r.seconds.items():
+                    secs[k] = secs.get(k, 0.0) + t
+            out.append(ViewRecord(faces=faces[order].astype(np.int32), flags=flags, area=cat("area"),
+                                  cos_angle=cat("cos_angle"), info=info, n_rays=int(sum(r.n_rays for r, _ in parts)),
+                                  n_known=base.n_known, seconds=secs))
+        return out
 
 
 def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: np.ndarray, min_px: float = 4.0,
@@ -245,8 +310,10 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
     welded = ends = None
     V = len(job.views)
     stats = {"rounds": 0, "probed": 0, "distorted": 0, "merged_back": 0}
+    book = _Records(records, F0)
+    latest, latest_ids = list(records), None  # the records of the fresh faces
     for _ in range(int(max_rounds)):
-        usable_any = _usable_any(records, len(f))
+        usable_any = book.usable_any
         cand = np.flatnonzero(fresh & ~usable_any & ~deg)
         if not V:
             break
@@ -257,7 +324,8 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
                           desc="split faces", unit="view")
             marked = cand[np.logical_or.reduce(seen)]
         if np.isfinite(max_distortion):
-            bent = np.flatnonzero(distortion(X, f, records, job.views, fresh & usable_any & ~deg) > max_distortion)
+            bent = np.flatnonzero(_distortion(X, f, latest, latest_ids, job.views, fresh & usable_any & ~deg)
+                                  > max_distortion)
             stats["distorted"] = stats.get("distorted", 0) + int(len(bent))
             marked = np.union1d(marked, bent)
         if not len(marked):
@@ -268,7 +336,9 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
             ends = np.full((len(X), 2), -1, dtype=np.int64)
         b1 = bisect(X, f, marked, vertex_normals=vn, welded=welded)
         w1 = np.concatenate([welded, welded.max() + 1 + np.arange(b1.n_new_vertices)])
-        twice = np.flatnonzero(np.isin(b1.parent, marked))
+        once = np.zeros(len(f), dtype=bool)
+        once[marked] = True
+        twice = np.flatnonzero(once[b1.parent])
         b2 = bisect(b1.vertices, b1.faces, twice, vertex_normals=b1.vertex_normals, welded=w1)
         welded = np.concatenate([w1, w1.max() + 1 + np.arange(b2.n_new_vertices)])
         ends = np.concatenate([ends, b1.edge_vertices, b2.edge_vertices])  # what every new vertex is the midpoint of
@@ -282,25 +352,29 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
         new = np.flatnonzero(~unsplit)
         fn, deg, parent = fn[up], deg[up].copy(), parent[up]
         deg[new] = face_normals(X, f[new], rel_tol=1e-12)[1]  # rel_tol of oriented_face_normals, whole-mesh extent
-        records = _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new)
+        latest, latest_ids = _new_face_records(job, ex, X, f, fn, deg, new), new
+        book.renumber(old_to_new, len(f))
+        book.add(latest, new)
         fresh = np.zeros(len(f), dtype=bool)
         fresh[new] = True
     if stats["rounds"]:  # parts no view can use, all of one bisection: merged back (fewer unseen faces)
-        f2, origin, rep = _coarsen(f, welded, ends, ~_usable_any(records, len(f)))
+        f2, origin, rep = _coarsen(f, welded, ends, ~book.usable_any)
         if (origin < 0).any():
             n_old = len(f)
             old_to_new = np.full(n_old, -1, dtype=np.int64)
             old_to_new[origin[origin >= 0]] = np.flatnonzero(origin >= 0)
             parent, fn = parent[rep], fn[rep]
-            used = np.unique(f2)
-            remap = np.full(len(X), -1, dtype=np.int64)
-            remap[used] = np.arange(len(used))
+            used = np.zeros(len(X), dtype=bool)
+            used[f2.reshape(-1)] = True
+            remap = np.cumsum(used) - 1
             X, vn, f = X[used], vn[used], remap[f2]
             new = np.flatnonzero(origin < 0)
             deg = deg[rep].copy()
             deg[new] = face_normals(X, f[new], rel_tol=1e-12)[1]
-            records = _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new)
+            book.renumber(old_to_new, len(f))
+            book.add(_new_face_records(job, ex, X, f, fn, deg, new), new)
             stats["merged_back"] = int(n_old - len(f))
+        records = book.records()
     split = np.bincount(parent, minlength=F0) > 1
     stats.update(input_faces=int(F0), faces_split=int(split.sum()), faces_added=int(len(f) - F0))
     return Refinement(vertices=X, faces=f, vertex_normals=vn, normals=fn, degenerate=deg, parent=parent,
@@ -385,21 +459,13 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
     return cur[order], origin[order], rep[order]
 
 
-def _usable_any(records: list, n: int) -> np.ndarray:
-    out = np.zeros(n, dtype=bool)
-    for r in records:
-        out[r.faces[r.flags == 0]] = True
-    return out
-
-
-def _with_new_faces(job, ex, records, X, f, fn, deg, old_to_new, new) -> list:
-    """Every view's record over the current faces: the kept faces' entries renumbered, the new faces' computed."""
+def _new_face_records(job: VisibilityJob, ex, X, f, fn, deg, new) -> list:
+    """Every view's record of the faces ``new`` (ids into ``f``; a record's face ``j`` is ``new[j]``)."""
     used = np.unique(f[new])
     local = np.empty(len(X), dtype=np.int64)
     local[used] = np.arange(len(used))
     part_job = VisibilityJob(job.views, X[used], local[f[new]], fn[new], deg[new], job.opts, occluder=job)
-    parts = ex.map(view_record, range(len(job.views)), ex.share(part_job), desc="split faces", unit="view")
-    return [_merge(o, p, old_to_new, new) for o, p in zip(records, parts)]
+    return ex.map(view_record, range(len(job.views)), ex.share(part_job), desc="split faces", unit="view")
 
 
 def coverage(vis, labels: np.ndarray) -> dict:
