@@ -103,33 +103,56 @@ class ProbeJob:
         return chunk_members(self.chunk_perm, self.chunk_ptr, frustum_chunks(self.chunk_corners, view))
 
 
+#: rows per block of :func:`_row_product`: OpenBLAS multiplies a block this small on the calling thread
+_PRODUCT_ROWS = 4096
+
+
+def _row_product(a: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``a @ m`` for (n, 3) rows ``a`` and a (3, k) matrix, in blocks of :data:`_PRODUCT_ROWS` rows.
+
+    Each row's values are those of the row alone (the same product kernel, the same values as
+    the (n/3, 3, 3) stack of per-face products, which costs a matrix call per face), and no
+    block is large enough for OpenBLAS to start its threads (which spin: the per-view tasks
+    keep the cores busy already).
+    """
+    out = np.empty((len(a), m.shape[1]))
+    for s in range(0, len(a), _PRODUCT_ROWS):
+        np.matmul(a[s:s + _PRODUCT_ROWS], m, out=out[s:s + _PRODUCT_ROWS])
+    return out
+
+
 def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     """(c,) bool: the candidates partly seen in view ``i`` and larger than ``min_px`` there (module docstring)."""
     base, opts = job.base, job.base.opts
     view = base.views[i]
     out = np.zeros(len(job.tri), dtype=bool)
-    sub = job.candidates(view)
+    C = view.center
+    sub = job.candidates(view)  # those in chunks that meet the frustum, then those facing the camera
+    if not opts["two_sided"]:
+        tri0, nrm = (job.tri[:, 0], job.normals) if sub is None else (job.tri[sub, 0], job.normals[sub])
+        front = np.flatnonzero(np.einsum("ij,ij->i", nrm, C - tri0) > 0)
+        sub = front if sub is None else sub[front]
     tri, n = (job.tri, job.normals) if sub is None else (job.tri[sub], job.normals[sub])
     c = len(tri)
     if not c:
         return out
     K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
     W, H = view.width, view.height
-    pc = tri @ E[:3, :3].T + E[:3, 3]  # (c, 3, 3) camera frame
+    pc = (_row_product(tri.reshape(-1, 3), E[:3, :3].T) + E[:3, 3]).reshape(c, 3, 3)  # camera frame
     fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
     planes = np.array([[fx, s, cx + 0.5], [-fx, -s, W - 0.5 - cx], [0.0, fy, cy + 0.5], [0.0, -fy, H - 0.5 - cy],
                        [0.0, 0.0, 1.0]])
-    outside = ((pc @ planes.T).max(axis=1) <= 0).any(axis=1)  # every corner beyond one plane
-    C = view.center
-    facing = np.einsum("ij,ij->i", n, C - tri[:, 0])
-    front = np.ones(c, bool) if opts["two_sided"] else facing > 0
+    side = _row_product(pc.reshape(-1, 3), planes.T).reshape(c, 3, 5)
+    outside = (np.maximum(np.maximum(side[:, 0], side[:, 1]), side[:, 2]) <= 0).any(axis=1)  # all corners beyond a plane
     z = pc[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         u = np.where(z > 0, (fx * pc[..., 0] + s * pc[..., 1]) / z + cx, np.nan)
         v = np.where(z > 0, fy * pc[..., 1] / z + cy, np.nan)
-    edge = np.sqrt((u - np.roll(u, -1, axis=1)) ** 2 + (v - np.roll(v, -1, axis=1)) ** 2).max(axis=1)
-    edge = np.where((z > 0).all(axis=1), edge, np.inf)
-    keep = np.flatnonzero(~outside & front & (edge > job.min_px))
+    nxt = [1, 2, 0]
+    side = np.sqrt((u - u[:, nxt]) ** 2 + (v - v[:, nxt]) ** 2)  # (c, 3) edge lengths in pixels
+    edge = np.maximum(np.maximum(side[:, 0], side[:, 1]), side[:, 2])
+    edge = np.where((z[:, 0] > 0) & (z[:, 1] > 0) & (z[:, 2] > 0), edge, np.inf)
+    keep = np.flatnonzero(~outside & (edge > job.min_px))
     if not len(keep):
         return out
     level = np.clip(np.ceil(np.minimum(edge[keep], 1e9) / PROBE_SPACING), 2, _MAX_PROBE_LEVEL).astype(np.int64)
