@@ -62,15 +62,28 @@ class Bisection:
         return int(len(self.edge_vertices))
 
 
-def _edges(faces: np.ndarray, wf: np.ndarray, n: int):
-    """Unique undirected edges of the faces (by their welded corners ``wf``, ids below ``n``): per face
-    corner j the edge (j, j+1) -> (F, 3) edge ids in the order of the edges' keys, and per edge its first
-    (face, corner) in the faces' order."""
+def _edges(wf: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Unique undirected edges of faces with welded corners ``wf`` (ids below ``n``).
+
+    Returns
+    -------
+    eid : (F, 3) int64
+        The edge (j, j+1) of every face corner j; edges numbered in the order of their keys.
+    first : (E,) int64
+        Every edge's first (face, corner), as ``3 * face + corner``, in the faces' order.
+    perm, ptr : (3F,) int64, (E+1,) int64
+        The corners of edge ``e`` are ``perm[ptr[e]:ptr[e+1]]`` (ascending).
+    """
     a, b = wf, np.roll(wf, -1, axis=1)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo.astype(np.int64) * n + hi.astype(np.int64)
-    uniq, first, eid = np.unique(key.reshape(-1), return_index=True, return_inverse=True)
-    return eid.reshape(-1, 3), first
+    key = (np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b).astype(np.int64)).reshape(-1)
+    perm = np.argsort(key, kind="stable")
+    sk = key[perm]
+    new = np.ones(len(sk), dtype=bool)
+    new[1:] = sk[1:] != sk[:-1]
+    ptr = np.append(np.flatnonzero(new), len(sk))
+    eid = np.empty(len(sk), dtype=np.int64)
+    eid[perm] = np.cumsum(new) - 1
+    return eid.reshape(-1, 3), perm[ptr[:-1]], perm, ptr
 
 
 def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum: float, n: int) -> dict:
@@ -78,9 +91,10 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
 
     Exact for every face whose edges have all their faces among ``f`` (:func:`bisect`'s region):
     an edge's length is taken at its first (face, corner), its rank is (length in :data:`LENGTH_TIE`
-    quanta, key), both as over the whole mesh.
+    quanta, key), both as over the whole mesh. The closure follows the newly split edges to the
+    faces around them (the faces of an edge from its corners), not every face at each step.
     """
-    eid, first = _edges(f, wf, n)
+    eid, first, perm, ptr = _edges(wf, n)
     ef, ec = np.divmod(first, 3)  # representative face and corner of every edge
     p, q = f[ef, ec], f[ef, (ec + 1) % 3]
     length = np.linalg.norm(X[p] - X[q], axis=1)
@@ -91,14 +105,17 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
     flat = (wf[:, 0] == wf[:, 1]) | (wf[:, 1] == wf[:, 2]) | (wf[:, 2] == wf[:, 0])
     mk = mk & ~flat
     split = np.zeros(len(length), dtype=bool)
-    split[eid[mk, longest[mk]]] = True
-    while True:  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)
-        has = split[eid].any(axis=1) & ~flat
-        need = eid[has, longest[has]]
-        new = ~split[need]
-        if not new.any():
-            break
-        split[need[new]] = True
+    front = np.unique(eid[mk, longest[mk]])
+    split[front] = True
+    while len(front):  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)
+        cnt = ptr[front + 1] - ptr[front]
+        at = np.repeat(ptr[front] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+        fc = perm[at] // 3  # the faces around the edges split last
+        fc = fc[~flat[fc]]
+        need = eid[fc, longest[fc]]
+        front = np.unique(need[~split[need]])
+        split[front] = True
+    has = split[eid].any(axis=1) & ~flat
     return {"eid": eid, "p": p, "q": q, "longest": longest, "flat": flat, "split": split, "involved": has | mk}
 
 
@@ -106,9 +123,20 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
 _N_KIDS = np.array([1, 2, 3, 3, 4], dtype=np.int64)
 
 
+#: rings of faces added around the faces that need a whole-mesh neighbourhood (fewer regrowths of the region)
+_RINGS = 2
+
+
 def _region(wf: np.ndarray, touch: np.ndarray) -> np.ndarray:
     """Ascending ids of the faces with a welded corner in ``touch``."""
-    return np.flatnonzero(touch[wf].any(axis=1))
+    return np.flatnonzero(touch[wf[:, 0]] | touch[wf[:, 1]] | touch[wf[:, 2]])
+
+
+def _grow(wf: np.ndarray, touch: np.ndarray, faces: np.ndarray) -> None:
+    """Add the corners of ``faces`` and of :data:`_RINGS` rings of faces around them to ``touch``."""
+    touch[wf[faces]] = True
+    for _ in range(_RINGS):
+        touch[wf[_region(wf, touch)]] = True
 
 
 def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
@@ -157,15 +185,14 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
     n = int(w.max()) + 1 if len(w) else 1
     wf = w[f]
     touch = np.zeros(n, dtype=bool)
-    touch[wf[mk]] = True
-    touch[wf[_region(wf, touch)]] = True  # the marked faces and their neighbours: whole-mesh edges
+    _grow(wf, touch, mk)  # the marked faces and rings around them: their edges' faces all in the region
     while True:
         reg = _region(wf, touch)
         c = _close(X, f[reg], wf[reg], mk[reg], quantum, n)
         loose = c["involved"] & ~touch[wf[reg]].all(axis=1)  # edges maybe not all in the region: grow it
         if not loose.any():
             break
-        touch[wf[reg[loose]]] = True
+        _grow(wf, touch, reg[loose])
     eid, split, flat, r = c["eid"], c["split"], c["flat"], c["longest"]
     new_id = np.full(len(split), -1, dtype=np.int64)
     se = np.flatnonzero(split)  # in the order of the edges' keys, as over the whole mesh

@@ -94,11 +94,19 @@ def _unwelded(rng, X, f, noise: float):
     return Xu, np.arange(f.size).reshape(-1, 3)
 
 
+@pytest.mark.parametrize("rings", [0, 2])
 @pytest.mark.parametrize("case", ["grid", "jittered", "unwelded", "degenerate"])
-def test_bisect_equals_the_whole_mesh_algorithm_over_rounds(rng, case):
+def test_bisect_equals_the_whole_mesh_algorithm_over_rounds(rng, monkeypatch, case, rings):
     """Rounds of random marks (few, so the region is local; many, so it is most of the mesh), ties in edge
     length (a regular grid), unwelded copies that differ in their last bits, zero-area faces: the same vertices,
-    faces, parents, normals and midpoint ends as the whole-mesh algorithm."""
+    faces, parents, normals and midpoint ends as the whole-mesh algorithm; also with no rings around the marked
+    faces, so that the closure leaves the first region and the region grows (counted)."""
+    import o3d_seqcc.geometry.meshsplit as meshsplit
+
+    monkeypatch.setattr(meshsplit, "_RINGS", rings)
+    closes = []
+    close = meshsplit._close
+    monkeypatch.setattr(meshsplit, "_close", lambda *a: closes.append(1) or close(*a))
     X, f = _terrain(rng, 30, 0.0 if case == "grid" else 0.2)
     if case == "unwelded":
         X, f = _unwelded(rng, X, f, 1e-14)
@@ -115,3 +123,4 @@ def test_bisect_equals_the_whole_mesh_algorithm_over_rounds(rng, case):
             assert a.dtype == b.dtype
         X, f, vn = got.vertices, got.faces, got.vertex_normals
         welded = np.concatenate([welded, welded.max() + 1 + np.arange(got.n_new_vertices)])
+    assert (len(closes) > 5) == (rings == 0)  # without rings the region had to grow
