@@ -411,7 +411,9 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
     face around it is unseen and they pair up, per apex ``C``, as the two halves ``(A, m, C)`` and
     ``(m, B, C)`` of a face ``(A, B, C)`` with ``{A, B} = {p, q}`` (welded ids): on both sides of
     the edge at once, so the mesh stays conforming. The newest midpoints go first, repeatedly,
-    until none qualifies.
+    until none qualifies. After the first pass only the midpoints whose faces changed (corners of
+    a merged face) or that lost a face to a newer one are looked at again: the others' faces are as
+    they were, so they still do not qualify.
 
     Returns
     -------
@@ -429,8 +431,10 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
     pos = origin.astype(np.float64)
     dark = np.asarray(unseen, dtype=bool).copy()
     is_mid = ends[:, 0] >= 0
+    active = is_mid.copy()
+    nm, span = len(w), int(w.max()) + 1
     while True:
-        fi, j = np.nonzero(is_mid[cur])
+        fi, j = np.nonzero(active[cur])
         if not len(fi):
             break
         m = cur[fi, j]
@@ -442,15 +446,14 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
         ok = dark[fi] & (follow ^ precede)
         apex = np.where(follow, o2, o1)
         end = np.where(follow, o1, o2)
-        nm = len(w)
-        key = m * (int(w.max()) + 1) + w[apex]
+        key = m * span + w[apex]
         uk, g = np.unique(key, return_inverse=True)
         n_pre = np.bincount(g, weights=precede & ok, minlength=len(uk))
         n_fol = np.bincount(g, weights=follow & ok, minlength=len(uk))
         n_all = np.bincount(g, minlength=len(uk))
         good_g = (n_pre == 1) & (n_fol == 1) & (n_all == 2)
         bad_m = np.bincount(m, weights=~good_g[g], minlength=nm) > 0
-        n_groups = np.bincount(uk // (int(w.max()) + 1), minlength=nm)
+        n_groups = np.bincount(uk // span, minlength=nm)
         cand = ~bad_m & (n_groups >= 1) & (n_groups <= 2)
         cand_pair = cand[m]
         if not cand_pair.any():
@@ -478,6 +481,10 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
         rep = np.concatenate([rep[alive], rep[halves[:, 0]]])
         pos = np.concatenate([pos[alive], pos[halves].min(axis=1)])
         dark = np.concatenate([dark[alive], np.ones(len(merged), dtype=bool)])
+        active = np.zeros(nm, dtype=bool)
+        active[merged.reshape(-1)] = True
+        active[m[cand_pair & ~take]] = True
+        active &= is_mid
     order = np.argsort(pos, kind="stable")
     return cur[order], origin[order], rep[order]
 
