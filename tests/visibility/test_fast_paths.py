@@ -1,4 +1,4 @@
-"""The split's bookkeeping and culling give what the whole-mesh, every-round computations gave."""
+"""The visibility's fast paths (split bookkeeping, culling, rays) give what the former computations gave, bit for bit."""
 
 from __future__ import annotations
 
@@ -219,3 +219,24 @@ def test_probe_culling_keeps_the_split(tmp_path, monkeypatch):
     for a, b in zip(whole.records, culled.records):
         for name in ("faces", "flags", "area", "cos_angle"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_rays_are_the_float64_rays_rounded(rng):
+    """Points at every scale around a camera far from the origin, some at the camera itself: the rays' bits equal
+    those of the float64 rays (np.linalg.norm distances) rounded to float32 at the end."""
+    from o3d_seqcc.visibility.occlusion import _rays_to
+
+    C = rng.normal(size=3) * 1e6
+    P = C + rng.normal(size=(20000, 3)) * 10.0 ** rng.uniform(-4, 3, size=(20000, 1))
+    P[:30] = C
+    origin = C + rng.normal(size=3)
+    for tol, atol, o in ((1e-3, 1e-6, origin), (0.0, 0.0, None), (0.05, 2.0, origin)):
+        d = P - C
+        dist = np.linalg.norm(d, axis=1, keepdims=True)
+        reach = np.maximum(dist * (1.0 - tol) - atol, 0.0)
+        d = d * np.divide(reach, dist, out=np.zeros_like(dist), where=dist > 0)
+        c = C if o is None else C - o
+        ref = np.concatenate([np.broadcast_to(c, d.shape), d], axis=1).astype(np.float32)
+        got = _rays_to(C, P, tol, atol, o)
+        assert got.dtype == np.float32 and got.shape == ref.shape
+        np.testing.assert_array_equal(got.view(np.uint32), ref.view(np.uint32))
