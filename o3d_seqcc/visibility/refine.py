@@ -78,18 +78,32 @@ class Refinement:
 
 
 class ProbeJob:
-    """What every view's probe shares: the candidates' corners (c, 3, 3) and normals (c, 3), the base job.
+    """What every view's task of a round shares: the candidates' corners (c, 3, 3) and normals (c, 3), the base job,
+    and the corners of the faces whose texture displacement each view measures (:func:`distortion`).
 
     Many candidates (more than ``4 * PROBE_CHUNK``) are grouped into chunks along a Morton curve
     (:func:`~o3d_seqcc.visibility.per_view.morton_chunks`), so that a view's probe looks only at
     those in chunks that meet its frustum (the others are outside it: never partly seen).
+
+    Parameters
+    ----------
+    base : VisibilityJob
+    tri : (c, 3, 3) float64
+    normals : (c, 3) float64
+    min_px : float
+    bent_tri : (m, 3, 3) float64, optional
+        Faces to measure, grouped by the view they are measured in: view ``i``'s are
+        ``bent_tri[bent_ptr[i]:bent_ptr[i+1]]``.
+    bent_ptr : (V+1,) int64, optional
     """
 
-    def __init__(self, base: VisibilityJob, tri: np.ndarray, normals: np.ndarray, min_px: float) -> None:
+    def __init__(self, base: VisibilityJob, tri: np.ndarray, normals: np.ndarray, min_px: float,
+                 bent_tri: np.ndarray | None = None, bent_ptr: np.ndarray | None = None) -> None:
         self.base = base
         self.tri = np.asarray(tri, dtype=np.float64)
         self.normals = np.asarray(normals, dtype=np.float64)
         self.min_px = float(min_px)
+        self.bent_tri, self.bent_ptr = bent_tri, bent_ptr
         c = len(self.tri)
         self.chunk_ptr = np.arange(0, c + PROBE_CHUNK, PROBE_CHUNK).clip(max=c)
         self.chunk_perm = self.chunk_corners = None
@@ -101,6 +115,16 @@ class ProbeJob:
         if self.chunk_perm is None:
             return None
         return chunk_members(self.chunk_perm, self.chunk_ptr, frustum_chunks(self.chunk_corners, view))
+
+
+def round_view(i: int, job: ProbeJob) -> tuple[np.ndarray, np.ndarray]:
+    """View ``i``'s task of a round: :func:`probe_view`, and the displacement (:func:`distortion`) of its faces
+    (``job.bent_tri``'s group ``i``; empty without)."""
+    seen = probe_view(i, job)
+    if job.bent_ptr is None:
+        return seen, np.zeros(0)
+    s0, s1 = int(job.bent_ptr[i]), int(job.bent_ptr[i + 1])
+    return seen, _displacement(job.bent_tri[s0:s1], job.base.views[i])
 
 
 #: rows per block of :func:`_row_product`: OpenBLAS multiplies a block this small on the calling thread
@@ -126,6 +150,8 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     base, opts = job.base, job.base.opts
     view = base.views[i]
     out = np.zeros(len(job.tri), dtype=bool)
+    if not len(job.tri):
+        return out
     C = view.center
     sub = job.candidates(view)  # those in chunks that meet the frustum, then those facing the camera
     if not opts["two_sided"]:
@@ -211,11 +237,21 @@ def _distortion(vertices: np.ndarray, faces: np.ndarray, records: list, ids: np.
                 among: np.ndarray) -> np.ndarray:
     """:func:`distortion` from records over some of the faces: ``ids`` maps their face ids to ``faces``' (None:
     the same ids)."""
-    F = len(faces)
-    out = np.zeros(F)
-    best = np.full(F, -np.inf, dtype=np.float32)
-    best_v = np.full(F, -1, dtype=np.int64)
-    for v, r in enumerate(records):  # the largest usable area, the first view on a tie
+    out = np.zeros(len(faces))
+    best_f, best_v = _best_views(records, ids, among)
+    X = np.asarray(vertices, dtype=np.float64)
+    for v in np.unique(best_v):
+        fs = best_f[best_v == v]
+        out[fs] = _displacement(X[faces[fs]], views[v])
+    return out
+
+
+def _best_views(records: list, ids: np.ndarray | None, among: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The faces in ``among`` ((F,) bool) usable in some view (ascending), and the view of each where its projected
+    area is largest (the first on a tie); ``ids`` as in :func:`_distortion`."""
+    best = np.full(len(among), -np.inf, dtype=np.float32)
+    best_v = np.full(len(among), -1, dtype=np.int64)
+    for v, r in enumerate(records):
         fs = r.faces if ids is None else ids[r.faces]
         k = (r.flags == 0) & among[fs]
         fs, a = fs[k], r.area[k]
@@ -223,19 +259,19 @@ def _distortion(vertices: np.ndarray, faces: np.ndarray, records: list, ids: np.
         best[fs[up]] = a[up]
         best_v[fs[up]] = v
     best_f = np.flatnonzero(best_v >= 0)
-    best_v = best_v[best_f]
-    X = np.asarray(vertices, dtype=np.float64)
-    for v in np.unique(best_v):
-        fs = best_f[best_v == v]
-        tri = X[faces[fs]]  # (m, 3, 3)
-        K, E = np.asarray(views[v].intrinsic, np.float64), np.asarray(views[v].extrinsic, np.float64)
-        pts = np.concatenate([tri, np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, tri)], axis=1)  # (m, 7, 3)
-        u, w, _ = project_columns(np.ascontiguousarray(pts.reshape(-1, 3).T), K, E)
-        uv = np.stack([u, w], axis=1).reshape(len(fs), 7, 2)
-        affine = np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, uv[:, :3])
-        err = np.linalg.norm(uv[:, 3:] - affine, axis=2).max(axis=1)
-        out[fs] = np.nan_to_num(err, nan=np.inf)
-    return out
+    return best_f, best_v[best_f]
+
+
+def _displacement(tri: np.ndarray, view) -> np.ndarray:
+    """(m,) float64: the texture displacement in pixels of faces ``tri`` (m, 3, 3) in ``view`` (inf where a point
+    projects to NaN)."""
+    K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
+    pts = np.concatenate([tri, np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, tri)], axis=1)  # (m, 7, 3)
+    u, w, _ = project_columns(np.ascontiguousarray(pts.reshape(-1, 3).T), K, E)
+    uv = np.stack([u, w], axis=1).reshape(len(tri), 7, 2)
+    affine = np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, uv[:, :3])
+    err = np.linalg.norm(uv[:, 3:] - affine, axis=2).max(axis=1)
+    return np.nan_to_num(err, nan=np.inf)
 
 
 class _Records:
@@ -341,16 +377,29 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
         if not V:
             break
         marked = np.zeros(0, dtype=np.int64)
-        if len(cand):
+        measure = np.isfinite(max_distortion)
+        bent_f, bent_ptr = np.zeros(0, dtype=np.int64), None
+        if measure:  # each face's displacement is measured by the task of its largest usable view
+            best_f, best_v = _best_views(latest, latest_ids, fresh & usable_any & ~deg)
+            order = np.argsort(best_v, kind="stable")
+            bent_f = best_f[order]
+            bent_ptr = np.concatenate([[0], np.cumsum(np.bincount(best_v, minlength=V))])
+        res = []
+        if len(cand) or len(bent_f):
             stats["probed"] += int(len(cand))
-            seen = ex.map(probe_view, range(V), ex.share(ProbeJob(job, X[f[cand]], fn[cand], min_px)),
-                          desc="split faces", unit="view")
-            marked = cand[np.logical_or.reduce(seen)]
-        if np.isfinite(max_distortion):
-            bent = np.flatnonzero(_distortion(X, f, latest, latest_ids, job.views, fresh & usable_any & ~deg)
-                                  > max_distortion)
+            rj = ProbeJob(job, X[f[cand]], fn[cand], min_px, X[f[bent_f]] if measure else None, bent_ptr)
+            res = ex.map(round_view, range(V), ex.share(rj), desc="split faces", unit="view")
+            del rj
+        if len(cand):
+            marked = cand[np.logical_or.reduce([r[0] for r in res])]
+        if measure:
+            out = np.zeros(len(f))
+            if len(bent_f):
+                out[bent_f] = np.concatenate([r[1] for r in res])
+            bent = np.flatnonzero(out > max_distortion)
             stats["distorted"] = stats.get("distorted", 0) + int(len(bent))
             marked = np.union1d(marked, bent)
+        del res
         if not len(marked):
             break
         stats["rounds"] += 1
