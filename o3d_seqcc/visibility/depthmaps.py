@@ -2,7 +2,8 @@
 
 :func:`depth_from_point_cloud` renders a view's partial point cloud to a depth image (nearest
 point per pixel) and fills its small holes with OpenCV's Navier-Stokes inpainting, as the paper
-does; :func:`depth_edges` marks the pixels near depth discontinuities.
+does; :func:`depth_edges` marks the pixels near depth discontinuities. :class:`DepthImage` holds a
+view's depth image for the visibility's passes, as 16-bit counts when that is exact.
 """
 
 from __future__ import annotations
@@ -12,7 +13,65 @@ import numpy as np
 from ..geometry.camera import inside_image, pixel_index, project_points
 from .settings import VisibilitySettings
 
-__all__ = ["depth_edges", "depth_from_point_cloud"]
+__all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud"]
+
+#: rows per block of :class:`DepthImage`'s exactness check (its temporaries stay small)
+_CHECK_ROWS = 256
+
+
+class DepthImage:
+    """A view's depth image in metres, held as the 16-bit counts it was read from when they give it exactly.
+
+    A 16-bit depth map read with ``depth_scale`` is ``counts / depth_scale`` in float64; holding
+    the counts (2 bytes a pixel instead of 8) and dividing at each look-up gives the same values,
+    bit for bit (the same division). Any other image (a rendered point cloud, float maps, a scale
+    that does not reproduce it) is held as it is.
+
+    Parameters
+    ----------
+    depth : (H, W) float64
+        Metres, 0 = missing.
+    scale : float
+        The view's ``depth_scale`` (units per metre).
+    """
+
+    def __init__(self, depth: np.ndarray, scale: float) -> None:
+        D = np.asarray(depth)
+        self.shape = D.shape
+        self.scale = float(scale)
+        self.counts = _counts(D, self.scale)
+        self.depth = D if self.counts is None else None
+
+    @property
+    def nbytes(self) -> int:
+        return int((self.depth if self.counts is None else self.counts).nbytes)
+
+    def at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(n,) float64 depths at the pixels ``(rows, cols)``."""
+        if self.counts is None:
+            return self.depth[rows, cols]
+        return self.counts[rows, cols].astype(np.float64) / self.scale
+
+    def image(self) -> np.ndarray:
+        """(H, W) float64: the whole image."""
+        return self.depth if self.counts is None else self.counts.astype(np.float64) / self.scale
+
+
+def _counts(D: np.ndarray, scale: float) -> np.ndarray | None:
+    """(H, W) uint16 with ``counts / scale == D`` exactly (as float64), else None."""
+    if D.dtype != np.float64 or D.ndim != 2 or not (np.isfinite(scale) and scale > 0):
+        return None
+    out = np.empty(D.shape, dtype=np.uint16)
+    for s in range(0, D.shape[0], _CHECK_ROWS):
+        block = D[s:s + _CHECK_ROWS]
+        k = np.rint(block * scale)
+        with np.errstate(invalid="ignore"):
+            if not ((k >= 0) & (k <= 65535)).all():
+                return None
+        out[s:s + _CHECK_ROWS] = k
+        if not np.array_equal(out[s:s + _CHECK_ROWS].astype(np.float64) / scale, block):
+            return None
+    return out
 
 
 def depth_from_point_cloud(

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..geometry.camera import project_columns
 from ..geometry.meshops import local_origin
-from .depthmaps import depth_edges, depth_from_point_cloud
+from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
 from .occlusion import occluded_view
@@ -206,7 +206,7 @@ class VisibilityJob:
         self._chunk(tri, cen)
         self._rs = None
         self._lock = threading.Lock()
-        need = sum(8 * int(v.width) * int(v.height) for v in self.views if v.has_depth)  # float64 depth images
+        need = sum(_depth_bytes(v) for v in self.views)
         self._depths = LRUCache(max(DEPTH_CACHE_BYTES, need if need <= DEPTH_CACHE_MAX_BYTES else 0))
 
     def depth(self, i: int):
@@ -265,15 +265,25 @@ class VisibilityJob:
         self._lock = threading.Lock()
 
 
+def _depth_bytes(view) -> int:
+    """The bytes a view's :class:`~o3d_seqcc.visibility.depthmaps.DepthImage` is expected to hold: 2 a pixel for a
+    16-bit PNG depth map, 8 for any other depth (float maps, rendered point clouds), 0 without."""
+    if not view.has_depth:
+        return 0
+    png = view.depth_map is None and view.depth is not None and str(view.depth).lower().endswith(".png")
+    return (2 if png else 8) * int(view.width) * int(view.height)
+
+
 def _depth_image(view, opts: dict):
-    """(depth image or None, source name or None) of a view."""
+    """(depth image or None, source name or None) of a view: a :class:`~o3d_seqcc.visibility.depthmaps.DepthImage`
+    (16-bit counts when they give the map exactly)."""
     D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
     if D is not None:
-        return D, "depth"
+        return DepthImage(D, view.depth_scale), "depth"
     points = view.load_points()
     if points is not None:
-        return depth_from_point_cloud(points, view.intrinsic, view.extrinsic, view.width, view.height,
-                                      fill_radius=opts["fill_radius"]), "point_cloud"
+        return DepthImage(depth_from_point_cloud(points, view.intrinsic, view.extrinsic, view.width, view.height,
+                                                 fill_radius=opts["fill_radius"]), view.depth_scale), "point_cloud"
     return None, None
 
 
@@ -341,14 +351,14 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
             vid = np.flatnonzero(inside)
             c = np.clip(np.floor(u[vid] + 0.5), 0, W - 1).astype(np.intp)
             r = np.clip(np.floor(v[vid] + 0.5), 0, H - 1).astype(np.intp)
-            d = D[r, c]
+            d = D.at(r, c)
             known_v = np.zeros(len(u), dtype=bool)
             bad_v = np.zeros(len(u), dtype=bool)
             known_v[vid] = d > 0
             zi = z[vid]
             bad_v[vid] = (d > 0) & (np.abs(zi - d) > np.maximum(opts["depth_atol"], opts["depth_tol"] * zi))
             if int(opts["depth_edge_margin"]) > 0:
-                edge = depth_edges(D, int(opts["depth_edge_margin"]), opts["depth_atol"], opts["depth_tol"])
+                edge = depth_edges(D.image(), int(opts["depth_edge_margin"]), opts["depth_atol"], opts["depth_tol"])
                 near_v = np.zeros(len(u), dtype=bool)
                 near_v[vid] = edge[r, c]
     t1 = time.perf_counter()

@@ -204,7 +204,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
         if D is not None:
             col = np.clip(np.floor(pu[idx] + 0.5), 0, W - 1).astype(np.intp)
             row = np.clip(np.floor(pv[idx] + 0.5), 0, H - 1).astype(np.intp)
-            d = D[row, col]
+            d = D.at(row, col)
             zi = pz[idx]
             bad = (d > 0) & (np.abs(zi - d) > np.maximum(opts["depth_atol"], opts["depth_tol"] * zi))
             idx = idx[~bad]

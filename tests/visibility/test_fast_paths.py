@@ -240,3 +240,22 @@ def test_rays_are_the_float64_rays_rounded(rng):
         got = _rays_to(C, P, tol, atol, o)
         assert got.dtype == np.float32 and got.shape == ref.shape
         np.testing.assert_array_equal(got.view(np.uint32), ref.view(np.uint32))
+
+
+def test_depth_images_are_held_as_counts_only_when_exact(rng):
+    """A 16-bit map read with its scale is held as its counts (a quarter of the bytes) and looks up the same float64
+    bits; a rendered (float) map, a wrong scale, or NaN keeps the float image."""
+    from o3d_seqcc.visibility.depthmaps import DepthImage
+
+    k = rng.integers(0, 65536, size=(600, 70)).astype(np.uint16)
+    k[:40] = 0
+    D = k.astype(np.float64) / 1000.0
+    img = DepthImage(D, 1000.0)
+    assert img.counts is not None and img.nbytes == D.nbytes // 4
+    r, c = rng.integers(0, 600, 5000), rng.integers(0, 70, 5000)
+    np.testing.assert_array_equal(img.at(r, c).view(np.uint64), D[r, c].view(np.uint64))
+    np.testing.assert_array_equal(img.image().view(np.uint64), D.view(np.uint64))
+    for other, scale in ((D + 1e-7, 1000.0), (D, 999.0), (np.where(D > 60, np.nan, D), 1000.0), (D * 3.0, 1000.0)):
+        held = DepthImage(other, scale)
+        assert held.counts is None and held.nbytes == other.nbytes
+        np.testing.assert_array_equal(held.at(r, c), other[r, c])
