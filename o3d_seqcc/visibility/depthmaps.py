@@ -64,12 +64,13 @@ def _counts(D: np.ndarray, scale: float) -> np.ndarray | None:
     out = np.empty(D.shape, dtype=np.uint16)
     for s in range(0, D.shape[0], _CHECK_ROWS):
         block = D[s:s + _CHECK_ROWS]
-        k = np.rint(block * scale)
-        with np.errstate(invalid="ignore"):
-            if not ((k >= 0) & (k <= 65535)).all():
-                return None
-        out[s:s + _CHECK_ROWS] = k
-        if not np.array_equal(out[s:s + _CHECK_ROWS].astype(np.float64) / scale, block):
+        k = np.multiply(block, scale)
+        np.rint(k, out=k)
+        if not (k.min() >= 0 and k.max() <= 65535):  # NaN fails too
+            return None
+        counts = out[s:s + _CHECK_ROWS]
+        counts[...] = k
+        if not (np.divide(counts, scale) == block).all():  # the float64 division of the counts, as read
             return None
     return out
 

@@ -194,6 +194,8 @@ class VisibilityJob:
         self.opts = dict(opts)
         self.occluder = occluder
         self.origin = occluder.origin if occluder is not None else local_origin(X)
+        # the camera centres, solved once per job (View.center solves R c = -t at each call)
+        self.centers = occluder.centers if occluder is not None else np.array([v.center for v in self.views])
         self.X = X
         self.faces = f
         self.XT = np.ascontiguousarray(X.T)
@@ -325,7 +327,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     idx = np.flatnonzero(inside[l0] & inside[l1] & inside[l2] & ~degenerate)
     i0, i1, i2 = l0[idx], l1[idx], l2[idx]
     area = (0.5 * np.abs((u[i1] - u[i0]) * (v[i2] - v[i0]) - (v[i1] - v[i0]) * (u[i2] - u[i0]))).astype(np.float32)
-    C = view.center
+    C = job.centers[i]
     dx, dy, dz = C[0] - cen[0][idx], C[1] - cen[1][idx], C[2] - cen[2][idx]
     dist = np.sqrt(dx * dx + dy * dy + dz * dz)
     n0, n1, n2 = fn[0][idx], fn[1][idx], fn[2][idx]
@@ -367,7 +369,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     if "occlusion" in filters:
         front = np.flatnonzero(~back)
         ids = idx[front] if cand is None else cand[idx[front]]
-        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, view.center, ids, area[front], opts,
+        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, C, ids, area[front], opts,
                                                 origin=job.origin)
     t2 = time.perf_counter()
     depth_bad = np.zeros(len(idx), dtype=bool)

@@ -152,7 +152,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     out = np.zeros(len(job.tri), dtype=bool)
     if not len(job.tri):
         return out
-    C = view.center
+    C = base.centers[i]
     sub = job.candidates(view)  # those in chunks that meet the frustum, then those facing the camera
     if not opts["two_sided"]:
         tri0, nrm = (job.tri[:, 0], job.normals) if sub is None else (job.tri[sub, 0], job.normals[sub])
