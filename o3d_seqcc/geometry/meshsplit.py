@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .meshops import weld_vertices
+from .meshops import bounds, row_norms, weld_vertices
 
 __all__ = ["LENGTH_TIE", "Bisection", "bisect"]
 
@@ -97,7 +97,7 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
     eid, first, perm, ptr = _edges(wf, n)
     ef, ec = np.divmod(first, 3)  # representative face and corner of every edge
     p, q = f[ef, ec], f[ef, (ec + 1) % 3]
-    length = np.linalg.norm(X[p] - X[q], axis=1)
+    length = row_norms(X[p] - X[q])
     rank = np.empty(len(length), dtype=np.int64)
     rank[np.lexsort((np.arange(len(length)), np.rint(length / quantum)))] = np.arange(len(length))  # (length, id)
     longest = np.argmax(rank[eid], axis=1)  # local edge j = corners (j, j+1)
@@ -181,7 +181,8 @@ def bisect(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray, *,
     w = weld_vertices(X) if welded is None else np.asarray(welded, dtype=np.int64)
     # lengths equal to 1e-6 of the mesh's size are ties (broken by edge id): the same choices wherever the
     # mesh lies (1e7 m from the origin, float64 rounding makes equal edges differ by ~1e-9 m)
-    quantum = LENGTH_TIE * max(float(np.ptp(X, axis=0).max()) if len(X) else 1.0, 1e-300)
+    lo, hi = bounds(X) if len(X) else (np.zeros(1), np.ones(1))
+    quantum = LENGTH_TIE * max(float(np.max(hi - lo)), 1e-300)  # the largest extent (np.ptp)
     n = int(w.max()) + 1 if len(w) else 1
     wf = w[f]
     touch = np.zeros(n, dtype=bool)

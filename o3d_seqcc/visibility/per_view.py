@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.camera import project_columns
-from ..geometry.meshops import local_origin
+from ..geometry.meshops import bounds, corner_mean, local_origin
 from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
@@ -124,13 +124,13 @@ def morton_chunks(tri: np.ndarray, cen: np.ndarray, ptr: np.ndarray) -> tuple[np
     corners : (C, 8, 3) float64
         The eight corners of every chunk's bounding box.
     """
-    lo, hi = cen.min(axis=0), cen.max(axis=0)
+    lo, hi = bounds(cen)
     q = np.clip((cen - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint32)
     code = _part1by2(q[:, 0]) | (_part1by2(q[:, 1]) << np.uint32(1)) | (_part1by2(q[:, 2]) << np.uint32(2))
     perm = np.argsort(code, kind="stable")
     starts = ptr[:-1]
-    box_lo = np.minimum.reduceat(tri.min(axis=1)[perm], starts)  # (C, 3)
-    box_hi = np.maximum.reduceat(tri.max(axis=1)[perm], starts)
+    box_lo = np.minimum.reduceat(np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])[perm], starts)  # (C, 3)
+    box_hi = np.maximum.reduceat(np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])[perm], starts)
     corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(8, 3)
     return perm.astype(np.int64), np.where(corners[None, :, :] == 0, box_lo[:, None, :], box_hi[:, None, :])
 
@@ -201,7 +201,7 @@ class VisibilityJob:
         self.XT = np.ascontiguousarray(X.T)
         self.f0, self.f1, self.f2 = (np.ascontiguousarray(f[:, i]) for i in range(3))
         tri = X[f]
-        cen = tri.mean(axis=1)
+        cen = corner_mean(tri)
         self.cen = [np.ascontiguousarray(cen[:, i]) for i in range(3)]
         self.fn = [np.ascontiguousarray(normals[:, i]) for i in range(3)]
         self.degenerate = np.asarray(degenerate, dtype=bool)

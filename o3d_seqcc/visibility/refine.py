@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.camera import project_columns
-from ..geometry.meshops import face_normals, weld_vertices
+from ..geometry.meshops import corner_mean, face_normals, row_norms, weld_vertices
 from ..geometry.meshsplit import bisect
 from .occlusion import _hidden, _rays_to, bary_grid
 from .per_view import (DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, chunk_members, frustum_chunks,
@@ -108,7 +108,7 @@ class ProbeJob:
         self.chunk_ptr = np.arange(0, c + PROBE_CHUNK, PROBE_CHUNK).clip(max=c)
         self.chunk_perm = self.chunk_corners = None
         if c > 4 * PROBE_CHUNK:
-            self.chunk_perm, self.chunk_corners = morton_chunks(self.tri, self.tri.mean(axis=1), self.chunk_ptr)
+            self.chunk_perm, self.chunk_corners = morton_chunks(self.tri, corner_mean(self.tri), self.chunk_ptr)
 
     def candidates(self, view) -> np.ndarray | None:
         """Ascending indices of the candidates in chunks that meet the view's frustum; None = all of them."""
@@ -194,7 +194,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
         ok = (pz > 0) & (pu >= -0.5) & (pu < W - 0.5) & (pv >= -0.5) & (pv < H - 0.5)
     if "oblique" in opts["filters"]:
         d = C - P
-        dist = np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+        dist = np.maximum(row_norms(d), 1e-300)
         cos = np.einsum("ij,ij->i", n[owner], d) / dist if opts["oblique_reference"] == "ray" else n[owner] @ -view.axis
         cos = np.abs(cos) if opts["two_sided"] else cos
         ok &= cos >= math.cos(math.radians(opts["max_angle"]))
@@ -270,7 +270,8 @@ def _displacement(tri: np.ndarray, view) -> np.ndarray:
     u, w, _ = project_columns(np.ascontiguousarray(pts.reshape(-1, 3).T), K, E)
     uv = np.stack([u, w], axis=1).reshape(len(tri), 7, 2)
     affine = np.einsum("pj,mjc->mpc", _DISTORTION_POINTS, uv[:, :3])
-    err = np.linalg.norm(uv[:, 3:] - affine, axis=2).max(axis=1)
+    e = row_norms(uv[:, 3:] - affine)  # (m, 4)
+    err = np.maximum(np.maximum(e[:, 0], e[:, 1]), np.maximum(e[:, 2], e[:, 3]))
     return np.nan_to_num(err, nan=np.inf)
 
 
