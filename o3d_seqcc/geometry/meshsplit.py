@@ -72,18 +72,39 @@ def _edges(wf: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     first : (E,) int64
         Every edge's first (face, corner), as ``3 * face + corner``, in the faces' order.
     perm, ptr : (3F,) int64, (E+1,) int64
-        The corners of edge ``e`` are ``perm[ptr[e]:ptr[e+1]]`` (ascending).
+        The corners of edge ``e`` are ``perm[ptr[e]:ptr[e+1]]`` (in no particular order).
     """
     a, b = wf, np.roll(wf, -1, axis=1)
     key = (np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b).astype(np.int64)).reshape(-1)
-    perm = np.argsort(key, kind="stable")
+    perm = np.argsort(key)
     sk = key[perm]
     new = np.ones(len(sk), dtype=bool)
     new[1:] = sk[1:] != sk[:-1]
     ptr = np.append(np.flatnonzero(new), len(sk))
     eid = np.empty(len(sk), dtype=np.int64)
     eid[perm] = np.cumsum(new) - 1
-    return eid.reshape(-1, 3), perm[ptr[:-1]], perm, ptr
+    first = np.minimum.reduceat(perm, ptr[:-1]) if len(perm) else perm  # the first corner of each edge
+    return eid.reshape(-1, 3), first, perm, ptr
+
+
+def _longest(eid: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(F,) the local edge of every face that is largest by (length, edge id), the first on a tie (an edge twice).
+
+    The per-face comparison of the three edges of what ``argmax(rank[eid])`` gives for the edges'
+    ranks by (length, id); NaN lengths (rank last, then by id) are ranked through a sort.
+    """
+    if not np.isfinite(length).all():
+        rank = np.empty(len(length), dtype=np.int64)
+        rank[np.lexsort((np.arange(len(length)), length))] = np.arange(len(length))
+        return np.argmax(rank[eid], axis=1)
+    q = length[eid]
+    best = np.zeros(len(eid), dtype=np.int64)
+    bq, be = q[:, 0], eid[:, 0]
+    for j in (1, 2):
+        up = (q[:, j] > bq) | ((q[:, j] == bq) & (eid[:, j] > be))
+        best[up] = j
+        bq, be = np.where(up, q[:, j], bq), np.where(up, eid[:, j], be)
+    return best
 
 
 def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum: float, n: int) -> dict:
@@ -97,14 +118,12 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
     eid, first, perm, ptr = _edges(wf, n)
     ef, ec = np.divmod(first, 3)  # representative face and corner of every edge
     p, q = f[ef, ec], f[ef, (ec + 1) % 3]
-    length = row_norms(X[p] - X[q])
-    rank = np.empty(len(length), dtype=np.int64)
-    rank[np.lexsort((np.arange(len(length)), np.rint(length / quantum)))] = np.arange(len(length))  # (length, id)
-    longest = np.argmax(rank[eid], axis=1)  # local edge j = corners (j, j+1)
+    length = np.rint(row_norms(X[p] - X[q]) / quantum)  # in quanta: ties within LENGTH_TIE
+    longest = _longest(eid, length)  # local edge j = corners (j, j+1)
     # faces with two welded corners equal have no area: never split (an edge of theirs may be split by a neighbour)
     flat = (wf[:, 0] == wf[:, 1]) | (wf[:, 1] == wf[:, 2]) | (wf[:, 2] == wf[:, 0])
     mk = mk & ~flat
-    split = np.zeros(len(length), dtype=bool)
+    split = np.zeros(len(p), dtype=bool)
     front = np.unique(eid[mk, longest[mk]])
     split[front] = True
     while len(front):  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)

@@ -124,3 +124,20 @@ def test_bisect_equals_the_whole_mesh_algorithm_over_rounds(rng, monkeypatch, ca
         X, f, vn = got.vertices, got.faces, got.vertex_normals
         welded = np.concatenate([welded, welded.max() + 1 + np.arange(got.n_new_vertices)])
     assert (len(closes) > 5) == (rings == 0)  # without rings the region had to grow
+
+
+def test_longest_edge_by_face_equals_the_argmax_of_the_ranks(rng):
+    """Lengths with many ties, faces with an edge twice, and NaN lengths: the per-face comparison picks what the
+    argmax of the edges' (length, id) ranks picks."""
+    from o3d_seqcc.geometry.meshsplit import _longest
+
+    E = 500
+    eid = rng.integers(0, E, size=(4000, 3))
+    eid[:300, 1] = eid[:300, 0]
+    for nan in (False, True):
+        length = rng.integers(0, 6, size=E).astype(np.float64)
+        if nan:
+            length[rng.integers(0, E, 20)] = np.nan
+        rank = np.empty(E, dtype=np.int64)
+        rank[np.lexsort((np.arange(E), length))] = np.arange(E)
+        np.testing.assert_array_equal(_longest(eid, length), np.argmax(rank[eid], axis=1))
