@@ -40,9 +40,9 @@ from ..errors import InputError, warn
 from . import headers
 
 __all__ = ["IMAGE_SUFFIXES", "MAX_COORDINATE", "MAX_IMAGE_PIXELS", "atomic_path", "atomic_write_bytes",
-           "check_depth_file", "check_image_file", "default_mode", "encode_image", "find_file", "image_dtype",
-           "join_path", "open_regular", "parse_json", "read_depth", "read_image", "read_json", "read_view_images",
-           "set_max_image_pixels", "to_jsonable", "write_image", "write_json"]
+           "check_depth_file", "check_image_file", "default_mode", "depth_in_metres", "encode_image", "find_file",
+           "image_dtype", "join_path", "open_regular", "parse_json", "read_depth", "read_depth_stored", "read_image",
+           "read_json", "read_view_images", "set_max_image_pixels", "to_jsonable", "write_image", "write_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -488,7 +488,7 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
     -------
     numpy.ndarray
         (H, W) float64 depth in metres, 0 where missing (and where not finite or beyond
-        :data:`~o3d_seqcc.io.MAX_COORDINATE`).
+        :data:`~o3d_seqcc.io.MAX_COORDINATE`): :func:`depth_in_metres` of :func:`read_depth_stored`.
 
     Raises
     ------
@@ -496,6 +496,15 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
         Missing or not a regular file, a header declaring more pixels than the budget
         (:data:`~o3d_seqcc.io.files.MAX_IMAGE_PIXELS`, before decoding), truncated PNG, wrong
         size, channels or dtype.
+    """
+    return depth_in_metres(read_depth_stored(path, shape=shape), depth_scale)
+
+
+def read_depth_stored(path: str | os.PathLike, *, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a depth map as stored: (H, W) uint16 (a 16-bit PNG's counts), float32, float64 or int32.
+
+    The checks and errors of :func:`read_depth`, which is :func:`depth_in_metres` of this (a
+    reader that keeps a 16-bit map holds a quarter of the bytes).
     """
     path = Path(path)
     try:
@@ -520,7 +529,13 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
             f"depth map {path} is {d.shape[1]}x{d.shape[0]} but the view is {shape[1]}x{shape[0]}; "
             "register/resize the depth map to the colour image"
         )
-    out = d.astype(np.float64) / float(depth_scale)
+    return d
+
+
+def depth_in_metres(stored: np.ndarray, depth_scale: float) -> np.ndarray:
+    """float64 metres of depth values as stored (any shape): divided by ``depth_scale``, 0 where not finite,
+    negative or beyond :data:`MAX_COORDINATE`."""
+    out = np.asarray(stored).astype(np.float64) / float(depth_scale)
     out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
     return out
 

@@ -3,7 +3,7 @@
 :func:`depth_from_point_cloud` renders a view's partial point cloud to a depth image (nearest
 point per pixel) and fills its small holes with OpenCV's Navier-Stokes inpainting, as the paper
 does; :func:`depth_edges` marks the pixels near depth discontinuities. :class:`DepthImage` holds a
-view's depth image for the visibility's passes, as 16-bit counts when that is exact.
+view's depth image for the visibility's passes (a 16-bit map as its counts).
 """
 
 from __future__ import annotations
@@ -11,36 +11,36 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.camera import inside_image, pixel_index, project_points
+from ..io.files import depth_in_metres
 from .settings import VisibilitySettings
 
 __all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud"]
 
-#: rows per block of :class:`DepthImage`'s exactness check (its temporaries stay small)
-_CHECK_ROWS = 256
-
-
 class DepthImage:
-    """A view's depth image in metres, held as the 16-bit counts it was read from when they give it exactly.
+    """A view's depth image in metres; a 16-bit depth map is held as its counts.
 
-    A 16-bit depth map read with ``depth_scale`` is ``counts / depth_scale`` in float64; holding
-    the counts (2 bytes a pixel instead of 8) and dividing at each look-up gives the same values,
-    bit for bit (the same division). Any other image (a rendered point cloud, float maps, a scale
-    that does not reproduce it) is held as it is.
+    :func:`~o3d_seqcc.io.files.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
+    :data:`~o3d_seqcc.io.files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
+    and converting at each look-up (:func:`~o3d_seqcc.io.files.depth_in_metres`, elementwise) gives
+    the same values, bit for bit, without the float image.
 
     Parameters
     ----------
-    depth : (H, W) float64
+    depth : (H, W) float64, optional
         Metres, 0 = missing.
+    counts : (H, W) uint16, optional
+        Instead of ``depth``: a 16-bit map as stored, with its ``scale`` (units per metre).
     scale : float
-        The view's ``depth_scale`` (units per metre).
     """
 
-    def __init__(self, depth: np.ndarray, scale: float) -> None:
-        D = np.asarray(depth)
-        self.shape = D.shape
+    def __init__(self, depth: np.ndarray | None = None, *, counts: np.ndarray | None = None,
+                 scale: float = 1.0) -> None:
+        if (depth is None) == (counts is None):
+            raise ValueError("DepthImage takes depth or counts")
+        self.depth = None if depth is None else np.asarray(depth)
+        self.counts = None if counts is None else np.asarray(counts)
         self.scale = float(scale)
-        self.counts = _counts(D, self.scale)
-        self.depth = D if self.counts is None else None
+        self.shape = (self.depth if counts is None else self.counts).shape
 
     @property
     def nbytes(self) -> int:
@@ -50,29 +50,11 @@ class DepthImage:
         """(n,) float64 depths at the pixels ``(rows, cols)``."""
         if self.counts is None:
             return self.depth[rows, cols]
-        return self.counts[rows, cols].astype(np.float64) / self.scale
+        return depth_in_metres(self.counts[rows, cols], self.scale)
 
     def image(self) -> np.ndarray:
         """(H, W) float64: the whole image."""
-        return self.depth if self.counts is None else self.counts.astype(np.float64) / self.scale
-
-
-def _counts(D: np.ndarray, scale: float) -> np.ndarray | None:
-    """(H, W) uint16 with ``counts / scale == D`` exactly (as float64), else None."""
-    if D.dtype != np.float64 or D.ndim != 2 or not (np.isfinite(scale) and scale > 0):
-        return None
-    out = np.empty(D.shape, dtype=np.uint16)
-    for s in range(0, D.shape[0], _CHECK_ROWS):
-        block = D[s:s + _CHECK_ROWS]
-        k = np.multiply(block, scale)
-        np.rint(k, out=k)
-        if not (k.min() >= 0 and k.max() <= 65535):  # NaN fails too
-            return None
-        counts = out[s:s + _CHECK_ROWS]
-        counts[...] = k
-        if not (np.divide(counts, scale) == block).all():  # the float64 division of the counts, as read
-            return None
-    return out
+        return self.depth if self.counts is None else depth_in_metres(self.counts, self.scale)
 
 
 def depth_from_point_cloud(

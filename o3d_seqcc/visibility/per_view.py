@@ -32,6 +32,7 @@ from ..geometry.meshops import bounds, corner_mean, local_origin
 from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
+from ..io.files import depth_in_metres, read_depth_stored
 from .occlusion import occluded_view
 
 __all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
@@ -277,15 +278,22 @@ def _depth_bytes(view) -> int:
 
 
 def _depth_image(view, opts: dict):
-    """(depth image or None, source name or None) of a view: a :class:`~o3d_seqcc.visibility.depthmaps.DepthImage`
-    (16-bit counts when they give the map exactly)."""
+    """(depth image or None, source name or None) of a view, as a :class:`~o3d_seqcc.visibility.depthmaps.DepthImage`:
+    a 16-bit map read as stored (its counts), any other as :meth:`View.load_depth` gives it."""
+    dist = view.distortion
+    if (view.depth_map is None and view.depth is not None
+            and (dist is None or not dist.depth or dist.is_zero)):  # load_depth is the map in metres
+        stored = read_depth_stored(view.depth, shape=(view.height, view.width))
+        if stored.dtype == np.uint16:
+            return DepthImage(counts=stored, scale=view.depth_scale), "depth"
+        return DepthImage(depth_in_metres(stored, view.depth_scale)), "depth"
     D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
     if D is not None:
-        return DepthImage(D, view.depth_scale), "depth"
+        return DepthImage(D), "depth"
     points = view.load_points()
     if points is not None:
         return DepthImage(depth_from_point_cloud(points, view.intrinsic, view.extrinsic, view.width, view.height,
-                                                 fill_radius=opts["fill_radius"]), view.depth_scale), "point_cloud"
+                                                 fill_radius=opts["fill_radius"])), "point_cloud"
     return None, None
 
 

@@ -242,20 +242,27 @@ def test_rays_are_the_float64_rays_rounded(rng):
         np.testing.assert_array_equal(got.view(np.uint32), ref.view(np.uint32))
 
 
-def test_depth_images_are_held_as_counts_only_when_exact(rng):
-    """A 16-bit map read with its scale is held as its counts (a quarter of the bytes) and looks up the same float64
-    bits; a rendered (float) map, a wrong scale, or NaN keeps the float image."""
-    from o3d_seqcc.visibility.depthmaps import DepthImage
+def test_depth_maps_held_as_counts_look_up_what_load_depth_reads(tmp_path, rng):
+    """A 16-bit PNG depth map is held as its counts (a quarter of the float image's bytes) and looks up the float64
+    bits View.load_depth gives, also for a scale that puts some depths beyond MAX_COORDINATE (then 0)."""
+    from dataclasses import replace
 
-    k = rng.integers(0, 65536, size=(600, 70)).astype(np.uint16)
-    k[:40] = 0
-    D = k.astype(np.float64) / 1000.0
-    img = DepthImage(D, 1000.0)
-    assert img.counts is not None and img.nbytes == D.nbytes // 4
-    r, c = rng.integers(0, 600, 5000), rng.integers(0, 70, 5000)
-    np.testing.assert_array_equal(img.at(r, c).view(np.uint64), D[r, c].view(np.uint64))
-    np.testing.assert_array_equal(img.image().view(np.uint64), D.view(np.uint64))
-    for other, scale in ((D + 1e-7, 1000.0), (D, 999.0), (np.where(D > 60, np.nan, D), 1000.0), (D * 3.0, 1000.0)):
-        held = DepthImage(other, scale)
-        assert held.counts is None and held.nbytes == other.nbytes
-        np.testing.assert_array_equal(held.at(r, c), other[r, c])
+    from o3d_seqcc.visibility.depthmaps import DepthImage
+    from o3d_seqcc.visibility.per_view import _depth_image
+
+    v, f = plane(4, size=1.0)
+    scene = make_scene(tmp_path, (v, f), [look_at((0.1, 0.0, 1.0), (0.0, 0.0, 0.0))])
+    zeros = []
+    for scale in (1000.0, 7.3, 1.03e-9):
+        view = replace(scene.views[0], depth_scale=scale)
+        img, source = _depth_image(view, {"fill_radius": 0})
+        D = view.load_depth()
+        assert source == "depth" and img.counts is not None and img.nbytes * 4 == D.nbytes
+        r, c = rng.integers(0, D.shape[0], 3000), rng.integers(0, D.shape[1], 3000)
+        np.testing.assert_array_equal(img.at(r, c).view(np.uint64), D[r, c].view(np.uint64))
+        np.testing.assert_array_equal(img.image().view(np.uint64), D.view(np.uint64))
+        zeros.append(int((D == 0).sum()))
+    assert zeros[2] > zeros[0] and (D > 0).any()  # the tiny scale put the far depths beyond MAX_COORDINATE
+    held = DepthImage(D)
+    assert held.counts is None and held.nbytes == D.nbytes
+    np.testing.assert_array_equal(held.at(r, c), D[r, c])
