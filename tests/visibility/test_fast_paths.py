@@ -266,3 +266,25 @@ def test_depth_maps_held_as_counts_look_up_what_load_depth_reads(tmp_path, rng):
     held = DepthImage(D)
     assert held.counts is None and held.nbytes == D.nbytes
     np.testing.assert_array_equal(held.at(r, c), D[r, c])
+
+
+def test_vertex_projections_are_the_projections_rows(tmp_path, monkeypatch, rng):
+    """vertex_projection's one-dimensional take gives the rows of the view's projection (repeats, negative ids), cached
+    or not; out-of-range ids still raise."""
+    from o3d_seqcc.visibility import compute
+
+    v, f = plane(6, size=1.0)
+    scene = make_scene(tmp_path, (v, f), [look_at((0.1, 0.0, 1.0), (0.0, 0.0, 0.0)), look_at((0.4, 0.2, 0.8), (0, 0, 0))])
+    vis = compute_visibility(scene, split_faces=False)
+    n = len(vis.mesh.vertices)
+    ids = rng.integers(-n, n, 500)
+    for budget in (compute.CACHE_BYTES, 0):
+        monkeypatch.setattr(compute, "CACHE_BYTES", budget)
+        for view in range(vis.n_views):
+            uv, z = vis._project(view, None)
+            got_uv, got_z = vis.vertex_projection(view, ids)
+            assert got_uv.dtype == np.float32 and got_uv.shape == (500, 2) and got_uv.flags.c_contiguous
+            np.testing.assert_array_equal(got_uv.view(np.uint32), uv[ids].view(np.uint32))
+            np.testing.assert_array_equal(got_z.view(np.uint32), z[ids].view(np.uint32))
+    with pytest.raises(IndexError):
+        vis.vertex_projection(0, [n])
