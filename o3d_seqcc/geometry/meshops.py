@@ -209,19 +209,23 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     c0 = np.tile(np.arange(3), n_faces)
     c1 = (c0 + 1) % 3
     fid = np.repeat(np.arange(n_faces), 3)
-    a = f[fid, c0]
-    b = f[fid, c1]
+    a = f.reshape(-1)  # corner c0 of face fid
+    b = f[:, [1, 2, 0]].reshape(-1)  # corner c1
     ok = a != b
     fid, c0, c1, a, b = fid[ok], c0[ok], c1[ok], a[ok], b[ok]
     swap = a > b
     lo, hi = np.where(swap, b, a), np.where(swap, a, b)
     clo, chi = np.where(swap, c1, c0), np.where(swap, c0, c1)
     key = lo * (int(f.max()) + 1 if f.size else 1) + hi
-    order = np.argsort(key, kind="stable")
-    _, start, counts = np.unique(key[order], return_index=True, return_counts=True)
+    order = np.argsort(key)
+    sk = key[order]
+    run = np.ones(len(sk), dtype=bool)  # the first of every run of equal keys
+    run[1:] = sk[1:] != sk[:-1]
+    start = np.flatnonzero(run)
+    counts = np.diff(np.append(start, len(sk)))
     two = counts == 2
-    i0 = order[start[two]]
-    i1 = order[start[two] + 1]
+    p0, p1 = order[start[two]], order[start[two] + 1]
+    i0, i1 = np.minimum(p0, p1), np.maximum(p0, p1)  # the edge's two corners in the faces' order
     good = fid[i0] != fid[i1]
     i0, i1 = i0[good], i1[good]
     return EdgeTopology(

@@ -60,3 +60,45 @@ def test_face_normals_keep_their_values(rng):
     on, od, nf = oriented_face_normals(X, f, vn)
     np.testing.assert_array_equal(_bits(on), _bits(ref))
     assert nf == int(flip.sum()) > 0 and deg.any()
+
+
+def _reference_edge_topology(f):
+    """edge_topology as it was: corners by fancy indexing, a stable sort, np.unique of the sorted keys."""
+    n_faces = len(f)
+    c0 = np.tile(np.arange(3), n_faces)
+    c1 = (c0 + 1) % 3
+    fid = np.repeat(np.arange(n_faces), 3)
+    a, b = f[fid, c0], f[fid, c1]
+    ok = a != b
+    fid, c0, c1, a, b = fid[ok], c0[ok], c1[ok], a[ok], b[ok]
+    swap = a > b
+    lo, hi = np.where(swap, b, a), np.where(swap, a, b)
+    clo, chi = np.where(swap, c1, c0), np.where(swap, c0, c1)
+    key = lo * (int(f.max()) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    _, start, counts = np.unique(key[order], return_index=True, return_counts=True)
+    two = counts == 2
+    i0, i1 = order[start[two]], order[start[two] + 1]
+    good = fid[i0] != fid[i1]
+    i0, i1 = i0[good], i1[good]
+    return (fid[i0], clo[i0], chi[i0], fid[i1], clo[i1], chi[i1], np.stack([lo[i0], hi[i0]], axis=1),
+            int(np.count_nonzero(counts == 1)), int(np.count_nonzero(counts > 2)))
+
+
+def test_edge_topology_equals_the_stable_sort_version(rng):
+    """Random faces over few vertices (many shared, boundary and non-manifold edges, repeated and degenerate
+    corners, a face twice): the same edges, faces and corners in the same order, the same counts."""
+    from o3d_seqcc.geometry.meshops import edge_topology
+
+    seen = np.zeros(3, dtype=int)
+    for n_vertices in (30, 400, 3000):
+        f = rng.integers(0, n_vertices, size=(3000, 3))
+        f[:50, 1] = f[:50, 0]
+        f[60:70] = f[70:80]
+        t = edge_topology(f)
+        got = (t.face_a, t.corner_a0, t.corner_a1, t.face_b, t.corner_b0, t.corner_b1, t.edges, t.n_boundary,
+               t.n_nonmanifold)
+        for a, b in zip(got, _reference_edge_topology(f)):
+            np.testing.assert_array_equal(a, b)
+        seen += (t.n_nonmanifold, t.n_boundary, len(t.face_a))
+    assert (seen > 0).all()
