@@ -55,9 +55,25 @@ def _hidden(rs, rays: np.ndarray) -> np.ndarray:
     return out
 
 
+def same_positions(X: np.ndarray) -> np.ndarray | None:
+    """(N,) int64: for every vertex the first vertex with the very same coordinates (bit for bit), or None when
+    all differ. A mesh stored with three vertices per face (UV-unwrapped exports) repeats each position about
+    six times; their occlusion rays are the same rays."""
+    b = np.ascontiguousarray(X, dtype=np.float64).view(np.uint64).reshape(-1, 3)
+    order = np.lexsort((b[:, 2], b[:, 1], b[:, 0]))  # stable: a run's first is its smallest vertex index
+    sb = b[order]
+    new = np.ones(len(sb), dtype=bool)
+    new[1:] = (sb[1:, 0] != sb[:-1, 0]) | (sb[1:, 1] != sb[:-1, 1]) | (sb[1:, 2] != sb[:-1, 2])
+    if new.all():
+        return None
+    rep = np.empty(len(sb), dtype=np.int64)
+    rep[order] = order[new][np.cumsum(new) - 1]
+    return rep
+
+
 def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray, center: np.ndarray,
                   front: np.ndarray, area: np.ndarray, opts: dict, *,
-                  origin: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                  origin: np.ndarray | None = None, same: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Which of a view's front-facing valid faces are hidden by the mesh.
 
     Parameters
@@ -78,11 +94,15 @@ def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray
         ``occlusion_tol``, ``occlusion_atol``, ``occlusion_spacing``, ``occlusion_max_level``.
     origin : (3,) float64, optional
         The ray-casting scene's local origin (it holds the mesh minus ``origin``).
+    same : (N,) int64, optional
+        :func:`same_positions` of ``X``: vertices at one position share their ray.
 
     Returns
     -------
     occluded : (m,) bool
     n_rays : int
+        Test points: the vertices of the faces, then the interior points (a ray each; vertices at one
+        position share theirs).
     """
     occluded = np.zeros(len(front), dtype=bool)
     if not len(front):
@@ -94,10 +114,16 @@ def occluded_view(raycaster: Callable[[], Any], X: np.ndarray, faces: np.ndarray
     tri = faces[front]
     need[tri.ravel()] = True
     ids = np.flatnonzero(need)
-    hid = _hidden(rs, _rays_to(center, X[ids], tol, atol, origin))
-    n_rays = len(hid)
+    n_rays = len(ids)
     vh = np.zeros(len(X), dtype=bool)
-    vh[ids] = hid
+    if same is None:
+        vh[ids] = _hidden(rs, _rays_to(center, X[ids], tol, atol, origin))
+    else:  # one ray per position, its answer for every vertex there
+        first = np.zeros(len(X), dtype=bool)
+        first[same[ids]] = True
+        cast = np.flatnonzero(first)
+        vh[cast] = _hidden(rs, _rays_to(center, X[cast], tol, atol, origin))
+        vh[ids] = vh[same[ids]]
     occluded = vh[tri[:, 0]] | vh[tri[:, 1]] | vh[tri[:, 2]]
     # 2) interior points of faces with a large projection
     spacing = float(opts["occlusion_spacing"])

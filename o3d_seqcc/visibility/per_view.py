@@ -33,7 +33,7 @@ from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
 from ..io.files import depth_in_metres, read_depth_stored
-from .occlusion import occluded_view
+from .occlusion import occluded_view, same_positions
 
 __all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
            "view_record"]
@@ -71,7 +71,8 @@ class ViewRecord:
     info : dict
         The view's entry of ``stats["per_view"]`` (name, depth source, disagreement, counts).
     n_rays : int
-        Occlusion rays cast.
+        Occlusion test points (:func:`~o3d_seqcc.visibility.occlusion.occluded_view`: a ray each, vertices at one
+        position sharing theirs).
     n_known : int
         Vertices of visible faces with a depth measurement (for the disagreement warning).
     seconds : dict
@@ -199,6 +200,8 @@ class VisibilityJob:
         self.centers = occluder.centers if occluder is not None else np.array([v.center for v in self.views])
         self.X = X
         self.faces = f
+        # vertices at one position (three per face in UV-unwrapped exports) share their occlusion ray
+        self.same = same_positions(X) if len(X) > len(f) else None
         self.XT = np.ascontiguousarray(X.T)
         self.f0, self.f1, self.f2 = (np.ascontiguousarray(f[:, i]) for i in range(3))
         tri = X[f]
@@ -378,7 +381,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
         front = np.flatnonzero(~back)
         ids = idx[front] if cand is None else cand[idx[front]]
         occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, C, ids, area[front], opts,
-                                                origin=job.origin)
+                                                origin=job.origin, same=job.same)
     t2 = time.perf_counter()
     depth_bad = np.zeros(len(idx), dtype=bool)
     n_known = 0

@@ -288,3 +288,29 @@ def test_vertex_projections_are_the_projections_rows(tmp_path, monkeypatch, rng)
             np.testing.assert_array_equal(got_z.view(np.uint32), z[ids].view(np.uint32))
     with pytest.raises(IndexError):
         vis.vertex_projection(0, [n])
+
+
+def test_vertices_at_one_position_share_their_ray(tmp_path, monkeypatch):
+    """A floor and a box stored with three vertices per face: one ray per position gives the records and the ray
+    counts of one ray per vertex (fewer rays cast)."""
+    from o3d_seqcc.visibility import occlusion, per_view
+
+    v, f = merge(plane(10, size=1.6), box((-0.15, -0.15, 0.0), (0.15, 0.15, 0.3)))
+    vu, fu = v[f.reshape(-1)], np.arange(f.size).reshape(-1, 3)
+    cams = [look_at((0.4, -0.9, 1.6), (0.0, 0.0, 0.0)), look_at((-0.6, 0.5, 1.2), (0.1, 0.0, 0.0))]
+    scene = make_scene(tmp_path, (vu, fu), cams, mesh_normals=False)
+    cast = []
+    hidden = occlusion._hidden
+    monkeypatch.setattr(occlusion, "_hidden", lambda rs, rays: cast.append(len(rays)) or hidden(rs, rays))
+    shared = compute_visibility(scene, split_faces=False)
+    n_shared = sum(cast)
+    cast.clear()
+    monkeypatch.setattr(per_view, "same_positions", lambda X: None)
+    each = compute_visibility(scene, split_faces=False)
+    assert sum(cast) > n_shared
+    assert shared.stats["rays"] == each.stats["rays"] == sum(cast)
+    for a, b in zip(shared.records, each.records):
+        for name in ("faces", "flags", "area", "cos_angle"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert a.info == b.info
+    assert any((r.flags & 1).any() for r in shared.records)  # some faces hidden
