@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._shared.parallel import LocalExecutor
 from ..geometry.camera import project_columns
 from ..geometry.meshops import corner_mean, face_normals, row_norms, weld_vertices
 from ..geometry.meshsplit import bisect
@@ -307,30 +308,34 @@ class _Records:
         self._mark(records, ids)
 
     def records(self) -> list:
-        """One :class:`ViewRecord` per view over the current faces (ascending ids)."""
-        out = []
-        for v, base in enumerate(self.pieces[0][0]):
-            parts = [(recs[v], cur[recs[v].faces]) for recs, cur in self.pieces]
-            keep = [ids >= 0 for _, ids in parts]
-            faces = np.concatenate([ids[k] for (_, ids), k in zip(parts, keep)])
-            order = np.argsort(faces, kind="stable")
+        """One :class:`ViewRecord` per view over the current faces (ascending ids), merged on local threads; the
+        pieces are released view by view."""
+        return LocalExecutor().map(self._merged, range(len(self.pieces[0][0])), desc="split faces", unit="view")
 
-            def cat(name: str) -> np.ndarray:
-                return np.concatenate([getattr(r, name)[k] for (r, _), k in zip(parts, keep)])[order]
+    def _merged(self, v: int) -> ViewRecord:
+        base = self.pieces[0][0][v]
+        parts = [(recs[v], cur[recs[v].faces]) for recs, cur in self.pieces]
+        for recs, _ in self.pieces:
+            recs[v] = None
+        keep = [ids >= 0 for _, ids in parts]
+        faces = np.concatenate([ids[k] for (_, ids), k in zip(parts, keep)])
+        order = np.argsort(faces, kind="stable")
 
-            flags = cat("flags")
-            info = dict(base.info)
-            info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
-                        depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
-                        oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
-            secs: dict = {}
-            for r, _ in parts:
-                for k, t in r.seconds.items():
-                    secs[k] = secs.get(k, 0.0) + t
-            out.append(ViewRecord(faces=faces[order].astype(np.int32), flags=flags, area=cat("area"),
-                                  cos_angle=cat("cos_angle"), info=info, n_rays=int(sum(r.n_rays for r, _ in parts)),
-                                  n_known=base.n_known, seconds=secs))
-        return out
+        def cat(name: str) -> np.ndarray:
+            return np.concatenate([getattr(r, name)[k] for (r, _), k in zip(parts, keep)])[order]
+
+        flags = cat("flags")
+        info = dict(base.info)
+        info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
+                    depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
+                    oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
+        secs: dict = {}
+        for r, _ in parts:
+            for k, t in r.seconds.items():
+                secs[k] = secs.get(k, 0.0) + t
+        return ViewRecord(faces=faces[order].astype(np.int32), flags=flags, area=cat("area"),
+                          cos_angle=cat("cos_angle"), info=info, n_rays=int(sum(r.n_rays for r, _ in parts)),
+                          n_known=base.n_known, seconds=secs)
 
 
 def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: np.ndarray, min_px: float = 4.0,
@@ -342,7 +347,8 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
     job : VisibilityJob
         The job ``records`` were computed with (mesh, oriented normals, options, views).
     records : list of ViewRecord
-        One per view.
+        One per view. When faces are added the list is emptied (the input records are released view
+        by view as the refined ones are built).
     ex : executor
         :func:`o3d_seqcc._shared.parallel.current`'s (the probes and the parts' visibility run on it).
     vertex_normals : (N, 3) float64
@@ -371,7 +377,7 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
     V = len(job.views)
     stats = {"rounds": 0, "probed": 0, "distorted": 0, "merged_back": 0}
     book = _Records(records, F0)
-    latest, latest_ids = list(records), None  # the records of the fresh faces
+    latest, latest_ids = book.pieces[0][0], None  # the records of the fresh faces
     for _ in range(int(max_rounds)):
         usable_any = book.usable_any
         cand = np.flatnonzero(fresh & ~usable_any & ~deg)
@@ -447,6 +453,9 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
             book.renumber(old_to_new, len(f))
             book.add(_new_face_records(job, ex, X, f, fn, deg, new), new)
             stats["merged_back"] = int(n_old - len(f))
+        if len(f) != F0:  # the caller takes the refined records: the book releases the input ones as it merges
+            records.clear()
+        del latest
         records = book.records()
     split = np.bincount(parent, minlength=F0) > 1
     stats.update(input_faces=int(F0), faces_split=int(split.sum()), faces_added=int(len(f) - F0))
