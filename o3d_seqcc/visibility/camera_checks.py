@@ -39,6 +39,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.meshops import local_origin, oriented_face_normals
+from .occlusion import hand_over
 
 __all__ = ["CameraReport", "HYPOTHESES", "MIN_FRONT", "RATIO", "check_cameras", "hypothesis_extrinsic"]
 
@@ -415,6 +416,7 @@ def check_cameras(
                 len(checked), front0, 100 * area0, rep.seconds, f"; likely {mistake}" if mistake else "")
     if mistake is not None and raise_on_mistake:
         raise InputError(rep.error_message(where, fix))
+    hand_over(geo.X, geo.F, geo.origin, geo.rc)  # the visibility's ray casting needs the same scene
     return rep
 
 

@@ -7,11 +7,39 @@ a large projection); see :func:`o3d_seqcc.visibility.compute_visibility`.
 
 from __future__ import annotations
 
+import threading
+import weakref
 from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["bary_grid", "occluded_view"]
+__all__ = ["bary_grid", "hand_over", "occluded_view", "take_over"]
+
+_HANDED: list = []  # at most one (vertices ref, faces ref, origin, scene): the camera check's, for the visibility
+_HANDED_LOCK = threading.Lock()
+
+
+def hand_over(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, scene: Any) -> None:
+    """Keep a committed ``RaycastingScene`` of ``vertices - origin`` and ``faces`` for :func:`take_over`.
+
+    The camera check (:mod:`o3d_seqcc.visibility.camera_checks`) builds the one the visibility
+    needs (the same float32 triangles): handed over, it is not built twice. One is kept at a
+    time (a newer one replaces it), and only while the arrays live.
+    """
+    with _HANDED_LOCK:
+        _HANDED[:] = [(weakref.ref(vertices), weakref.ref(faces), np.array(origin, dtype=np.float64), scene)]
+
+
+def take_over(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray) -> Any:
+    """The scene :func:`hand_over` kept for these very arrays and origin (then no longer kept), else None."""
+    with _HANDED_LOCK:
+        if not _HANDED:
+            return None
+        v, f, o, scene = _HANDED[0]
+        if v() is not vertices or f() is not faces or not np.array_equal(o, origin):
+            return None
+        _HANDED.clear()
+        return scene
 
 
 def bary_grid(level: int, *, interior_only: bool) -> np.ndarray:

@@ -33,7 +33,7 @@ from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
 from ..io.files import depth_in_metres, read_depth_stored
-from .occlusion import occluded_view, same_positions
+from .occlusion import occluded_view, same_positions, take_over
 
 __all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
            "view_record"]
@@ -244,7 +244,8 @@ class VisibilityJob:
 
     def raycaster(self):
         """Open3D's ``RaycastingScene`` of the mesh (of :attr:`occluder`'s, when given) in the local frame
-        (minus :attr:`origin`), built once per process and committed."""
+        (minus :attr:`origin`), built once per process and committed (or the camera check's of the same
+        arrays, :func:`~o3d_seqcc.visibility.occlusion.take_over`)."""
         if self.occluder is not None:
             return self.occluder.raycaster()
         if self._rs is None:
@@ -253,6 +254,10 @@ class VisibilityJob:
                     import open3d as o3d
                     import open3d.core as o3c
 
+                    handed = take_over(self.X, self.faces, self.origin)
+                    if handed is not None:
+                        self._rs = handed
+                        return handed
                     rs = o3d.t.geometry.RaycastingScene()
                     rs.add_triangles(o3c.Tensor(np.ascontiguousarray(self.X - self.origin, dtype=np.float32)),
                                      o3c.Tensor(np.ascontiguousarray(self.faces, dtype=np.uint32)))

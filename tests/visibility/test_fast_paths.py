@@ -314,3 +314,26 @@ def test_vertices_at_one_position_share_their_ray(tmp_path, monkeypatch):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
         assert a.info == b.info
     assert any((r.flags & 1).any() for r in shared.records)  # some faces hidden
+
+
+def test_the_camera_checks_ray_casting_scene_is_handed_to_the_visibility(tmp_path, monkeypatch):
+    """load_scene's camera check hands its ray-casting scene over: the visibility takes it (not built twice), and its
+    records equal those of a scene built anew; other arrays never get it."""
+    from o3d_seqcc import load_scene
+    from o3d_seqcc.visibility import occlusion, per_view
+
+    v, f = merge(plane(10, size=1.6), box((-0.15, -0.15, 0.0), (0.15, 0.15, 0.3)))
+    make_scene(tmp_path, (v, f), [look_at((0.4, -0.9, 1.6), (0.0, 0.0, 0.0)), look_at((-0.6, 0.5, 1.2), (0, 0, 0))])
+    scene = load_scene(tmp_path / "scene.json")
+    mesh = scene.load_mesh()
+    assert occlusion.take_over(mesh.vertices.copy(), mesh.faces, np.zeros(3)) is None
+    taken = []
+    take = per_view.take_over
+    monkeypatch.setattr(per_view, "take_over", lambda *a: taken.append(take(*a)) or taken[-1])
+    handed = compute_visibility(scene)
+    assert len(taken) == 1 and taken[0] is not None and not occlusion._HANDED
+    built = compute_visibility(scene)
+    assert taken[1] is None
+    for a, b in zip(handed.records, built.records):
+        for name in ("faces", "flags", "area", "cos_angle"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
