@@ -484,20 +484,32 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
         One input face each output face is (part of), for its attributes (parent, normal).
     """
     w = np.asarray(welded)
-    cur = np.asarray(faces, dtype=np.int64).copy()
-    origin = np.arange(len(cur), dtype=np.int64)
+    f0 = np.asarray(faces, dtype=np.int64)
+    F0, cap = len(f0), 2 * len(f0) + 1  # a merge removes two faces and adds one: at most F0 merges
+    pool = np.empty((cap, 3), dtype=np.int64)  # the faces, merged ones appended; dead ones stay, not alive
+    pool[:F0] = f0
+    origin = np.full(cap, -1, dtype=np.int64)
+    origin[:F0] = np.arange(F0)
     rep = origin.copy()
     pos = origin.astype(np.float64)
-    dark = np.asarray(unseen, dtype=bool).copy()
-    is_mid = ends[:, 0] >= 0
+    dark = np.zeros(cap, dtype=bool)
+    dark[:F0] = unseen
+    alive = np.zeros(cap, dtype=bool)
+    alive[:F0] = True
+    n = F0
+    seen_v = np.zeros(len(w), dtype=bool)
+    seen_v[f0[~dark[:F0]].reshape(-1)] = True
+    is_mid = (ends[:, 0] >= 0) & ~seen_v  # a midpoint with a seen face never qualifies: its faces stay
     active = is_mid.copy()
     nm, span = len(w), int(w.max()) + 1
     while True:
-        fi, j = np.nonzero(active[cur])
+        cur = pool[:n]
+        fi, j = np.nonzero(active[cur] & alive[:n, None])
         if not len(fi):
             break
-        m = cur[fi, j]
-        o1, o2 = cur[fi, (j + 1) % 3], cur[fi, (j + 2) % 3]
+        flat = cur.reshape(-1)
+        m = flat[3 * fi + j]
+        o1, o2 = flat[3 * fi + (j + 1) % 3], flat[3 * fi + (j + 2) % 3]
         wp, wq = w[ends[m, 0]], w[ends[m, 1]]
         e1 = (w[o1] == wp) | (w[o1] == wq)
         e2 = (w[o2] == wp) | (w[o2] == wq)
@@ -517,7 +529,7 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
         cand_pair = cand[m]
         if not cand_pair.any():
             break
-        owner = np.full(len(cur), -1, dtype=np.int64)  # a face with two candidate midpoints: the newest takes it
+        owner = np.full(n, -1, dtype=np.int64)  # a face with two candidate midpoints: the newest takes it
         np.maximum.at(owner, fi[cand_pair], m[cand_pair])
         lost = np.bincount(m[cand_pair], weights=owner[fi[cand_pair]] != m[cand_pair], minlength=nm) > 0
         take = cand_pair & ~lost[m]
@@ -531,21 +543,22 @@ def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np
         first = np.flatnonzero(np.r_[True, gi_t[1:] != gi_t[:-1]])
         a_idx = np.where(pre_t[first], first, first + 1)
         b_idx = np.where(pre_t[first], first + 1, first)
-        merged = np.stack([end_t[a_idx], end_t[b_idx], apex_t[first]], axis=1)
-        halves = np.stack([fi_t[a_idx], fi_t[b_idx]], axis=1)
-        alive = np.ones(len(cur), dtype=bool)
-        alive[halves.reshape(-1)] = False
-        cur = np.concatenate([cur[alive], merged])
-        origin = np.concatenate([origin[alive], np.full(len(merged), -1, dtype=np.int64)])
-        rep = np.concatenate([rep[alive], rep[halves[:, 0]]])
-        pos = np.concatenate([pos[alive], pos[halves].min(axis=1)])
-        dark = np.concatenate([dark[alive], np.ones(len(merged), dtype=bool)])
+        h0, h1 = fi_t[a_idx], fi_t[b_idx]
+        k = len(first)
+        pool[n:n + k] = np.stack([end_t[a_idx], end_t[b_idx], apex_t[first]], axis=1)  # the merged faces
+        rep[n:n + k] = rep[h0]
+        pos[n:n + k] = np.minimum(pos[h0], pos[h1])
+        dark[n:n + k] = True
+        alive[n:n + k] = True
+        alive[h0] = alive[h1] = False
         active = np.zeros(nm, dtype=bool)
-        active[merged.reshape(-1)] = True
+        active[pool[n:n + k].reshape(-1)] = True
         active[m[cand_pair & ~take]] = True
         active &= is_mid
-    order = np.argsort(pos, kind="stable")
-    return cur[order], origin[order], rep[order]
+        n += k
+    keep = np.flatnonzero(alive[:n])
+    order = keep[np.argsort(pos[keep], kind="stable")]
+    return pool[order], origin[order], rep[order]
 
 
 def _new_face_records(job: VisibilityJob, ex, X, f, fn, deg, new) -> list:
