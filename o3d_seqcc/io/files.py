@@ -40,9 +40,9 @@ from ..errors import InputError, warn
 from . import headers
 
 __all__ = ["IMAGE_SUFFIXES", "MAX_COORDINATE", "MAX_IMAGE_PIXELS", "atomic_path", "atomic_write_bytes",
-           "check_depth_file", "check_image_file", "default_mode", "depth_in_metres", "encode_image", "find_file",
-           "image_dtype", "join_path", "open_regular", "parse_json", "read_depth", "read_depth_stored", "read_image",
-           "read_json", "read_view_images", "set_max_image_pixels", "to_jsonable", "write_image", "write_json"]
+           "check_depth_file", "check_image_file", "default_mode", "encode_image", "find_file", "image_dtype",
+           "join_path", "open_regular", "parse_json", "read_depth", "read_image", "read_json", "read_view_images",
+           "set_max_image_pixels", "to_jsonable", "write_image", "write_json"]
 
 logger = logging.getLogger(__name__)
 
@@ -472,7 +472,8 @@ def check_depth_file(path: str | os.PathLike, *, shape: tuple[int, int] | None =
         check_complete(path, f, size, what="depth map", full=False)
 
 
-def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None) -> np.ndarray:
+def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None,
+               stored: bool = False) -> np.ndarray:
     """Read a depth map and convert it to metres.
 
     Parameters
@@ -483,28 +484,20 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
         Units per metre (1000 for millimetres).
     shape : (int, int), optional
         Expected (height, width); a mismatch raises (before decoding).
+    stored : bool, default False
+        Return the map as stored (uint16 counts, float32, float64 or int32), not converted.
 
     Returns
     -------
     numpy.ndarray
         (H, W) float64 depth in metres, 0 where missing (and where not finite or beyond
-        :data:`~o3d_seqcc.io.MAX_COORDINATE`): :func:`depth_in_metres` of :func:`read_depth_stored`.
+        :data:`~o3d_seqcc.io.MAX_COORDINATE`).
 
     Raises
     ------
     InputError
-        Missing or not a regular file, a header declaring more pixels than the budget
-        (:data:`~o3d_seqcc.io.files.MAX_IMAGE_PIXELS`, before decoding), truncated PNG, wrong
-        size, channels or dtype.
-    """
-    return depth_in_metres(read_depth_stored(path, shape=shape), depth_scale)
-
-
-def read_depth_stored(path: str | os.PathLike, *, shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Read a depth map as stored: (H, W) uint16 (a 16-bit PNG's counts), float32, float64 or int32.
-
-    The checks and errors of :func:`read_depth`, which is :func:`depth_in_metres` of this (a
-    reader that keeps a 16-bit map holds a quarter of the bytes).
+        Missing or not a regular file, a header declaring more pixels than the budget (:data:`MAX_IMAGE_PIXELS`,
+        before decoding), truncated PNG, wrong size, channels or dtype.
     """
     path = Path(path)
     try:
@@ -521,21 +514,13 @@ def read_depth_stored(path: str | os.PathLike, *, shape: tuple[int, int] | None 
     if d.ndim != 2:
         raise InputError(f"depth map {path} has {d.shape[2]} channels; expected a single-channel depth image")
     if d.dtype not in (np.uint16, np.float32, np.float64, np.int32):
-        raise InputError(
-            f"depth map {path} has dtype {d.dtype}; expected uint16 (scaled by depth_scale) or float32"
-        )
+        raise InputError(f"depth map {path} has dtype {d.dtype}; expected uint16 (scaled by depth_scale) or float32")
     if shape is not None and d.shape != tuple(shape):
-        raise InputError(
-            f"depth map {path} is {d.shape[1]}x{d.shape[0]} but the view is {shape[1]}x{shape[0]}; "
-            "register/resize the depth map to the colour image"
-        )
-    return d
-
-
-def depth_in_metres(stored: np.ndarray, depth_scale: float) -> np.ndarray:
-    """float64 metres of depth values as stored (any shape): divided by ``depth_scale``, 0 where not finite,
-    negative or beyond :data:`MAX_COORDINATE`."""
-    out = np.asarray(stored).astype(np.float64) / float(depth_scale)
+        raise InputError(f"depth map {path} is {d.shape[1]}x{d.shape[0]} but the view is {shape[1]}x{shape[0]}; "
+                         "register/resize the depth map to the colour image")
+    if stored:
+        return d
+    out = d.astype(np.float64) / float(depth_scale)
     out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
     return out
 

@@ -34,7 +34,7 @@ import numpy as np
 from .._shared.parallel import LocalExecutor
 from ..geometry.camera import project_columns
 from ..geometry.meshops import corner_mean, face_normals, row_norms, weld_vertices
-from ..geometry.meshsplit import bisect
+from ..geometry.meshsplit import bisect, coarsen
 from .occlusion import _hidden, _rays_to, bary_grid
 from .per_view import (DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, chunk_members, frustum_chunks,
                        morton_chunks, view_record)
@@ -437,7 +437,7 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
         fresh = np.zeros(len(f), dtype=bool)
         fresh[new] = True
     if stats["rounds"]:  # parts no view can use, all of one bisection: merged back (fewer unseen faces)
-        f2, origin, rep = _coarsen(f, welded, ends, ~book.usable_any)
+        f2, origin, rep = coarsen(f, welded, ends, ~book.usable_any)
         if (origin < 0).any():
             n_old = len(f)
             old_to_new = np.full(n_old, -1, dtype=np.int64)
@@ -461,104 +461,6 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
     stats.update(input_faces=int(F0), faces_split=int(split.sum()), faces_added=int(len(f) - F0))
     return Refinement(vertices=X, faces=f, vertex_normals=vn, normals=fn, degenerate=deg, parent=parent,
                       records=list(records), stats=stats)
-
-
-def _coarsen(faces: np.ndarray, welded: np.ndarray, ends: np.ndarray, unseen: np.ndarray):
-    """Undo the bisections whose every part is unseen (reverse of :func:`o3d_seqcc.geometry.meshsplit.bisect`).
-
-    A vertex ``m`` made as the midpoint of edge ``(p, q)`` (``ends[m]``) is removed when every
-    face around it is unseen and they pair up, per apex ``C``, as the two halves ``(A, m, C)`` and
-    ``(m, B, C)`` of a face ``(A, B, C)`` with ``{A, B} = {p, q}`` (welded ids): on both sides of
-    the edge at once, so the mesh stays conforming. The newest midpoints go first, repeatedly,
-    until none qualifies. After the first pass only the midpoints whose faces changed (corners of
-    a merged face) or that lost a face to a newer one are looked at again: the others' faces are as
-    they were, so they still do not qualify.
-
-    Returns
-    -------
-    faces : (F', 3) int64
-        The unchanged faces in their order, each merged face where its first half was.
-    origin : (F',) int64
-        Index into ``faces`` of an unchanged face, -1 for a merged one.
-    rep : (F',) int64
-        One input face each output face is (part of), for its attributes (parent, normal).
-    """
-    w = np.asarray(welded)
-    f0 = np.asarray(faces, dtype=np.int64)
-    F0, cap = len(f0), 2 * len(f0) + 1  # a merge removes two faces and adds one: at most F0 merges
-    pool = np.empty((cap, 3), dtype=np.int64)  # the faces, merged ones appended; dead ones stay, not alive
-    pool[:F0] = f0
-    origin = np.full(cap, -1, dtype=np.int64)
-    origin[:F0] = np.arange(F0)
-    rep = origin.copy()
-    pos = origin.astype(np.float64)
-    dark = np.zeros(cap, dtype=bool)
-    dark[:F0] = unseen
-    alive = np.zeros(cap, dtype=bool)
-    alive[:F0] = True
-    n = F0
-    seen_v = np.zeros(len(w), dtype=bool)
-    seen_v[f0[~dark[:F0]].reshape(-1)] = True
-    is_mid = (ends[:, 0] >= 0) & ~seen_v  # a midpoint with a seen face never qualifies: its faces stay
-    active = is_mid.copy()
-    nm, span = len(w), int(w.max()) + 1
-    while True:
-        cur = pool[:n]
-        fi, j = np.nonzero(active[cur] & alive[:n, None])
-        if not len(fi):
-            break
-        flat = cur.reshape(-1)
-        m = flat[3 * fi + j]
-        o1, o2 = flat[3 * fi + (j + 1) % 3], flat[3 * fi + (j + 2) % 3]
-        wp, wq = w[ends[m, 0]], w[ends[m, 1]]
-        e1 = (w[o1] == wp) | (w[o1] == wq)
-        e2 = (w[o2] == wp) | (w[o2] == wq)
-        follow, precede = e1 & ~e2, e2 & ~e1  # (m, B, C) / (A, m, C)
-        ok = dark[fi] & (follow ^ precede)
-        apex = np.where(follow, o2, o1)
-        end = np.where(follow, o1, o2)
-        key = m * span + w[apex]
-        uk, g = np.unique(key, return_inverse=True)
-        n_pre = np.bincount(g, weights=precede & ok, minlength=len(uk))
-        n_fol = np.bincount(g, weights=follow & ok, minlength=len(uk))
-        n_all = np.bincount(g, minlength=len(uk))
-        good_g = (n_pre == 1) & (n_fol == 1) & (n_all == 2)
-        bad_m = np.bincount(m, weights=~good_g[g], minlength=nm) > 0
-        n_groups = np.bincount(uk // span, minlength=nm)
-        cand = ~bad_m & (n_groups >= 1) & (n_groups <= 2)
-        cand_pair = cand[m]
-        if not cand_pair.any():
-            break
-        owner = np.full(n, -1, dtype=np.int64)  # a face with two candidate midpoints: the newest takes it
-        np.maximum.at(owner, fi[cand_pair], m[cand_pair])
-        lost = np.bincount(m[cand_pair], weights=owner[fi[cand_pair]] != m[cand_pair], minlength=nm) > 0
-        take = cand_pair & ~lost[m]
-        if not take.any():
-            break
-        gi = g[take]
-        order = np.argsort(gi, kind="stable")
-        fi_t, gi_t = fi[take][order], gi[order]
-        pre_t, end_t, apex_t = precede[take][order], end[take][order], apex[take][order]
-        # two entries per group, sorted by group: the "precede" half gives A, the "follow" half B
-        first = np.flatnonzero(np.r_[True, gi_t[1:] != gi_t[:-1]])
-        a_idx = np.where(pre_t[first], first, first + 1)
-        b_idx = np.where(pre_t[first], first + 1, first)
-        h0, h1 = fi_t[a_idx], fi_t[b_idx]
-        k = len(first)
-        pool[n:n + k] = np.stack([end_t[a_idx], end_t[b_idx], apex_t[first]], axis=1)  # the merged faces
-        rep[n:n + k] = rep[h0]
-        pos[n:n + k] = np.minimum(pos[h0], pos[h1])
-        dark[n:n + k] = True
-        alive[n:n + k] = True
-        alive[h0] = alive[h1] = False
-        active = np.zeros(nm, dtype=bool)
-        active[pool[n:n + k].reshape(-1)] = True
-        active[m[cand_pair & ~take]] = True
-        active &= is_mid
-        n += k
-    keep = np.flatnonzero(alive[:n])
-    order = keep[np.argsort(pos[keep], kind="stable")]
-    return pool[order], origin[order], rep[order]
 
 
 def _new_face_records(job: VisibilityJob, ex, X, f, fn, deg, new) -> list:

@@ -7,7 +7,7 @@ import pytest
 
 from _mapping_scenes import box, look_at, make_scene, merge, plane
 from o3d_seqcc.geometry.meshops import weld_vertices
-from o3d_seqcc.geometry.meshsplit import bisect
+from o3d_seqcc.geometry.meshsplit import bisect, coarsen
 from o3d_seqcc.visibility import refine
 from o3d_seqcc.visibility.compute import compute_visibility
 from o3d_seqcc.visibility.per_view import DEPTH, OBLIQUE, OCCLUDED, ViewRecord
@@ -89,7 +89,7 @@ def test_coarsen_equals_the_pass_over_every_midpoint(seed):
     X, f, welded, ends = _split_rounds(rng, 4)
     cen = X[f].mean(axis=1)
     unseen = (cen[:, 0] < rng.uniform(-0.5, 0.5)) | (rng.random(len(f)) < 0.2)
-    got = refine._coarsen(f, welded, ends, unseen)
+    got = coarsen(f, welded, ends, unseen)
     ref = _reference_coarsen(f, welded, ends, unseen)
     for a, b in zip(got, ref):
         np.testing.assert_array_equal(a, b)
