@@ -125,7 +125,7 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
     flat = (wf[:, 0] == wf[:, 1]) | (wf[:, 1] == wf[:, 2]) | (wf[:, 2] == wf[:, 0])
     mk = mk & ~flat
     split = np.zeros(len(p), dtype=bool)
-    front = np.unique(eid[mk, longest[mk]])
+    front = eid[mk, longest[mk]]  # (repeats only repeat a little work)
     split[front] = True
     while len(front):  # closure: a face with a split edge splits its longest edge (terminates: edges only get added)
         cnt = ptr[front + 1] - ptr[front]
@@ -133,7 +133,7 @@ def _close(X: np.ndarray, f: np.ndarray, wf: np.ndarray, mk: np.ndarray, quantum
         fc = perm[at] // 3  # the faces around the edges split last
         fc = fc[~flat[fc]]
         need = eid[fc, longest[fc]]
-        front = np.unique(need[~split[need]])
+        front = need[~split[need]]
         split[front] = True
     has = split[eid].any(axis=1) & ~flat
     return {"eid": eid, "p": p, "q": q, "longest": longest, "flat": flat, "split": split, "involved": has | mk}

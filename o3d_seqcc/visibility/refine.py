@@ -212,7 +212,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
     if len(idx) and "occlusion" in opts["filters"]:
         rays = _rays_to(C, P[idx], float(opts["occlusion_tol"]), float(opts["occlusion_atol"]), base.origin)
         idx = idx[~_hidden(base.raycaster(), rays)]
-    seen = np.unique(owner[idx])
+    seen = owner[idx]  # repeats: a face with several points seen
     out[seen if sub is None else sub[seen]] = True
     return out
 
@@ -465,7 +465,9 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
 
 def _new_face_records(job: VisibilityJob, ex, X, f, fn, deg, new) -> list:
     """Every view's record of the faces ``new`` (ids into ``f``; a record's face ``j`` is ``new[j]``)."""
-    used = np.unique(f[new])
+    mask = np.zeros(len(X), dtype=bool)
+    mask[f[new].reshape(-1)] = True
+    used = np.flatnonzero(mask)  # the new faces' vertices, ascending
     local = np.empty(len(X), dtype=np.int64)
     local[used] = np.arange(len(used))
     part_job = VisibilityJob(job.views, X[used], local[f[new]], fn[new], deg[new], job.opts, occluder=job)
