@@ -400,7 +400,8 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
         vert &= known_v
         n_known = int(vert.sum())
         info["depth_disagreement"] = float(bad_v[vert].mean()) if n_known else 0.0
-    flags = (occluded * OCCLUDED + depth_bad * DEPTH + oblique * OBLIQUE).astype(np.uint8)
+    flags = occluded.view(np.uint8) * np.uint8(OCCLUDED) | depth_bad.view(np.uint8) * np.uint8(DEPTH) | (
+        oblique.view(np.uint8) * np.uint8(OBLIQUE))  # the filter bits, as uint8 throughout
     faces = (idx if cand is None else cand[idx]).astype(np.int32)
     info.update(valid=int(len(idx)), occluded=int(occluded.sum()), depth_inconsistent=int(depth_bad.sum()),
                 oblique=int(oblique.sum()), usable=int(np.count_nonzero(flags == 0)))
