@@ -4,7 +4,7 @@ conforming face splits, the scene's up direction.
 - :mod:`~o3d_seqcc.geometry.camera`: pinhole projection;
 - :mod:`~o3d_seqcc.geometry.distortion`: :class:`Distortion` (OpenCV, fisheye, MeshLab's lens models);
 - :mod:`~o3d_seqcc.geometry.meshops`: vertex welding, edge topology, face adjacency, normals, local frames;
-- :mod:`~o3d_seqcc.geometry.meshsplit`: conforming longest-edge bisection (no T-junctions);
+- :mod:`~o3d_seqcc.geometry.meshsplit`: conforming longest-edge bisection (no T-junctions) and its reverse;
 - :mod:`~o3d_seqcc.geometry.orientation`: the up direction from the cameras, the Y-up / Z-up rotation.
 """
 
@@ -16,6 +16,6 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "project_points": "camera",
     "Distortion": "distortion",
     **dict.fromkeys(("face_adjacency", "edge_topology", "weld_vertices"), "meshops"),
-    "bisect": "meshsplit",
+    **dict.fromkeys(("bisect", "coarsen"), "meshsplit"),
     **dict.fromkeys(("estimate_up", "up_axis_transform"), "orientation"),
 })

@@ -17,6 +17,9 @@ from ..errors import InputError
 
 __all__ = [
     "EdgeTopology",
+    "bounds",
+    "corner_mean",
+    "row_norms",
     "edge_topology",
     "face_adjacency",
     "face_normals",
@@ -31,6 +34,58 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 
+# numpy reduces a small axis (the 3 coordinates of a point, the 3 corners of a face) with a loop per
+# element, several times slower than the same operations on whole columns; these give the same values
+# (min / max are exact, sums are added in the order numpy adds them: first + second, then + third).
+
+
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(points.min(axis=0), points.max(axis=0))`` of (n, d) points, column by column (the same values).
+
+    Parameters
+    ----------
+    points : (n, d) array, n >= 1
+
+    Returns
+    -------
+    lo, hi : (d,) arrays of ``points``' dtype
+    """
+    p = np.asarray(points)
+    if p.ndim != 2 or not len(p):
+        return p.min(axis=0), p.max(axis=0)
+    return (np.array([p[:, k].min() for k in range(p.shape[1])], dtype=p.dtype),
+            np.array([p[:, k].max() for k in range(p.shape[1])], dtype=p.dtype))
+
+
+def row_norms(a: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(a, axis=-1)`` of real vectors along a short last axis, bit for bit.
+
+    Parameters
+    ----------
+    a : (..., d) float array
+
+    Returns
+    -------
+    (...,) float array
+        ``sqrt(a0*a0 + a1*a1 + ...)``, the squares added from the first, as numpy's sum does.
+    """
+    a = np.asarray(a)
+    if a.shape[-1] == 0 or a.shape[-1] > 8 or not np.issubdtype(a.dtype, np.floating):
+        return np.linalg.norm(a, axis=-1)
+    s = a[..., 0] * a[..., 0]
+    for k in range(1, a.shape[-1]):
+        s = s + a[..., k] * a[..., k]
+    return np.sqrt(s)
+
+
+def corner_mean(tri: np.ndarray) -> np.ndarray:
+    """``tri.mean(axis=1)`` of (F, 3, d) face corners, bit for bit: ``(c0 + c1 + c2) / 3``."""
+    t = np.asarray(tri)
+    if t.ndim != 3 or t.shape[1] != 3 or not np.issubdtype(t.dtype, np.floating):
+        return t.mean(axis=1)
+    return (t[:, 0] + t[:, 1] + t[:, 2]) / 3.0
+
+
 def local_origin(vertices: np.ndarray) -> np.ndarray:
     """(3,) float64: the centre of the vertices' bounding box (zeros when there are none).
 
@@ -41,7 +96,8 @@ def local_origin(vertices: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     if not len(v):
         return np.zeros(3)
-    return 0.5 * (v.min(axis=0) + v.max(axis=0))
+    lo, hi = bounds(v)
+    return 0.5 * (lo + hi)
 
 
 #: positions are written relative to their bounding box's centre when they lie more than this many
@@ -59,7 +115,7 @@ def float32_offset(vertices: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     if not len(v):
         return np.zeros(3)
-    lo, hi = v.min(axis=0), v.max(axis=0)
+    lo, hi = bounds(v)
     size = float(np.max(hi - lo))
     far = float(np.max(np.abs(np.concatenate([lo, hi]))))
     return local_origin(v) if far > FLOAT32_FAR * max(size, 1e-12) else np.zeros(3)
@@ -85,15 +141,16 @@ def weld_vertices(vertices: np.ndarray, *, tol: float | None = None) -> np.ndarr
     v = np.asarray(vertices, dtype=np.float64)
     if len(v) == 0:
         return np.zeros(0, dtype=np.int64)
+    lo, hi = bounds(v)
     if tol is None:
-        diag = float(np.linalg.norm(v.max(0) - v.min(0)))
+        diag = float(np.linalg.norm(hi - lo))
         tol = max(diag, 1.0) * 1e-9
-    q = np.round((v - v.min(0)) / float(tol)).astype(np.int64)
+    q = np.round((v - lo) / float(tol)).astype(np.int64)
     # ids of the distinct rows in lexicographic order (np.unique(q, axis=0)'s inverse, 3x faster)
     order = np.lexsort((q[:, 2], q[:, 1], q[:, 0]))
     qs = q[order]
     new = np.ones(len(q), dtype=bool)
-    new[1:] = (qs[1:] != qs[:-1]).any(axis=1)
+    new[1:] = (qs[1:, 0] != qs[:-1, 0]) | (qs[1:, 1] != qs[:-1, 1]) | (qs[1:, 2] != qs[:-1, 2])
     inv = np.empty(len(q), dtype=np.int64)
     inv[order] = np.cumsum(new) - 1
     # ids in the order of each group's first vertex, not of the rounded positions: the same ids wherever the mesh
@@ -152,19 +209,23 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     c0 = np.tile(np.arange(3), n_faces)
     c1 = (c0 + 1) % 3
     fid = np.repeat(np.arange(n_faces), 3)
-    a = f[fid, c0]
-    b = f[fid, c1]
+    a = f.reshape(-1)  # corner c0 of face fid
+    b = f[:, [1, 2, 0]].reshape(-1)  # corner c1
     ok = a != b
     fid, c0, c1, a, b = fid[ok], c0[ok], c1[ok], a[ok], b[ok]
     swap = a > b
     lo, hi = np.where(swap, b, a), np.where(swap, a, b)
     clo, chi = np.where(swap, c1, c0), np.where(swap, c0, c1)
     key = lo * (int(f.max()) + 1 if f.size else 1) + hi
-    order = np.argsort(key, kind="stable")
-    _, start, counts = np.unique(key[order], return_index=True, return_counts=True)
+    order = np.argsort(key)
+    sk = key[order]
+    run = np.ones(len(sk), dtype=bool)  # the first of every run of equal keys
+    run[1:] = sk[1:] != sk[:-1]
+    start = np.flatnonzero(run)
+    counts = np.diff(np.append(start, len(sk)))
     two = counts == 2
-    i0 = order[start[two]]
-    i1 = order[start[two] + 1]
+    p0, p1 = order[start[two]], order[start[two] + 1]
+    i0, i1 = np.minimum(p0, p1), np.maximum(p0, p1)  # the edge's two corners in the faces' order
     good = fid[i0] != fid[i1]
     i0, i1 = i0[good], i1[good]
     return EdgeTopology(
@@ -236,14 +297,22 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray, *, rel_tol: float = 0.
     tri = v[np.asarray(faces, dtype=np.int64)]
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     n = np.cross(e1, e2)
-    norm = np.linalg.norm(n, axis=1)
+    norm = row_norms(n)
     if rel_tol > 0:
-        edge = np.sqrt(np.maximum.reduce([(e1 * e1).sum(1), (e2 * e2).sum(1), ((e2 - e1) ** 2).sum(1)]))
-        mag = np.abs(tri).max(axis=(1, 2)) if len(tri) else np.zeros(0)
+        edge = np.sqrt(np.maximum.reduce([_sq(e1), _sq(e2), _sq(e2 - e1)]))
+        t = np.abs(tri)
+        mag = t[:, 0, 0]
+        for i, j in ((0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)):  # .max(axis=(1, 2))
+            mag = np.maximum(mag, t[:, i, j])
         degenerate = norm <= float(rel_tol) * edge * np.maximum(edge, mag)
     else:
         degenerate = norm <= 0.0
     return np.divide(n, norm[:, None], out=np.zeros_like(n), where=~degenerate[:, None]), degenerate
+
+
+def _sq(e: np.ndarray) -> np.ndarray:
+    """``(e * e).sum(1)`` of (n, 3) vectors, in numpy's order."""
+    return e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1] + e[:, 2] * e[:, 2]
 
 
 def oriented_face_normals(
@@ -261,7 +330,9 @@ def oriented_face_normals(
     fn, degenerate = face_normals(vertices, faces, rel_tol=rel_tol)
     flipped = 0
     if vertex_normals is not None and np.shape(vertex_normals) == np.shape(vertices):
-        s = np.asarray(vertex_normals, dtype=np.float64)[np.asarray(faces, dtype=np.int64)].sum(1)
+        vn = np.asarray(vertex_normals, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        s = vn[f[:, 0]] + vn[f[:, 1]] + vn[f[:, 2]]  # .sum(1) of the corners' normals, in its order
         flip = np.einsum("ij,ij->i", fn, s) < 0
         flipped = int(flip.sum())
         fn[flip] *= -1.0

@@ -472,7 +472,8 @@ def check_depth_file(path: str | os.PathLike, *, shape: tuple[int, int] | None =
         check_complete(path, f, size, what="depth map", full=False)
 
 
-def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None) -> np.ndarray:
+def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int, int] | None = None,
+               stored: bool = False) -> np.ndarray:
     """Read a depth map and convert it to metres.
 
     Parameters
@@ -483,6 +484,8 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
         Units per metre (1000 for millimetres).
     shape : (int, int), optional
         Expected (height, width); a mismatch raises (before decoding).
+    stored : bool, default False
+        Return the map as stored (uint16 counts, float32, float64 or int32), not converted.
 
     Returns
     -------
@@ -493,9 +496,8 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
     Raises
     ------
     InputError
-        Missing or not a regular file, a header declaring more pixels than the budget
-        (:data:`~o3d_seqcc.io.files.MAX_IMAGE_PIXELS`, before decoding), truncated PNG, wrong
-        size, channels or dtype.
+        Missing or not a regular file, a header declaring more pixels than the budget (:data:`MAX_IMAGE_PIXELS`,
+        before decoding), truncated PNG, wrong size, channels or dtype.
     """
     path = Path(path)
     try:
@@ -512,14 +514,12 @@ def read_depth(path: str | os.PathLike, depth_scale: float, *, shape: tuple[int,
     if d.ndim != 2:
         raise InputError(f"depth map {path} has {d.shape[2]} channels; expected a single-channel depth image")
     if d.dtype not in (np.uint16, np.float32, np.float64, np.int32):
-        raise InputError(
-            f"depth map {path} has dtype {d.dtype}; expected uint16 (scaled by depth_scale) or float32"
-        )
+        raise InputError(f"depth map {path} has dtype {d.dtype}; expected uint16 (scaled by depth_scale) or float32")
     if shape is not None and d.shape != tuple(shape):
-        raise InputError(
-            f"depth map {path} is {d.shape[1]}x{d.shape[0]} but the view is {shape[1]}x{shape[0]}; "
-            "register/resize the depth map to the colour image"
-        )
+        raise InputError(f"depth map {path} is {d.shape[1]}x{d.shape[0]} but the view is {shape[1]}x{shape[0]}; "
+                         "register/resize the depth map to the colour image")
+    if stored:
+        return d
     out = d.astype(np.float64) / float(depth_scale)
     out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
     return out

@@ -74,7 +74,8 @@ def check_mesh_file(path: str | os.PathLike, what: str = "mesh") -> Path:
 
 
 def _far(path: Path, what: str, v: np.ndarray) -> None:
-    bad = ~(np.abs(v) <= files.MAX_COORDINATE).all(axis=1)
+    a = np.abs(v)
+    bad = ~((a[:, 0] <= files.MAX_COORDINATE) & (a[:, 1] <= files.MAX_COORDINATE) & (a[:, 2] <= files.MAX_COORDINATE))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         x = v[i]

@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..geometry.meshops import oriented_face_normals
+from ..geometry.meshops import local_origin, oriented_face_normals
+from .occlusion import hand_over
 
 __all__ = ["CameraReport", "HYPOTHESES", "MIN_FRONT", "RATIO", "check_cameras", "hypothesis_extrinsic"]
 
@@ -194,7 +195,7 @@ class _Geometry:
         vn = getattr(mesh, "vertex_normals", None)
         self.vn = vn if vn is not None and np.shape(vn) == self.X.shape else None
         X, F = self.X, self.F
-        self.origin = 0.5 * (X.min(0) + X.max(0))
+        self.origin = local_origin(X)
         self.rc = o3d.t.geometry.RaycastingScene()
         self.rc.add_triangles(o3d.core.Tensor(np.ascontiguousarray(X - self.origin, dtype=np.float32)),
                               o3d.core.Tensor(np.ascontiguousarray(F, dtype=np.uint32)))
@@ -415,6 +416,7 @@ def check_cameras(
                 len(checked), front0, 100 * area0, rep.seconds, f"; likely {mistake}" if mistake else "")
     if mistake is not None and raise_on_mistake:
         raise InputError(rep.error_message(where, fix))
+    hand_over(geo.X, geo.F, geo.origin, geo.rc)  # the visibility's ray casting needs the same scene
     return rep
 
 

@@ -218,14 +218,14 @@ class Visibility(DenseViews):
         n = self._XT.shape[1]
         if 12 * n * self.n_views <= CACHE_BYTES:  # every view's whole projection fits the cache: keep them
             uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
-            return uv[ids], z[ids]
+            return _gather(uv, z, ids)
         mark = np.zeros(n, dtype=bool)
         mark[ids] = True
         uniq = np.flatnonzero(mark)  # each vertex projected once
         uv, z = self._project(v, uniq)
         local = np.empty(n, dtype=np.int64)
         local[uniq] = np.arange(len(uniq))
-        return uv[local[ids]], z[local[ids]]
+        return _gather(uv, z, local[ids])
 
     def _project(self, v: int, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         K, E = self.cameras
@@ -281,6 +281,14 @@ class Visibility(DenseViews):
 
     def __getstate__(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in _DENSE}
+
+
+def _gather(uv: np.ndarray, z: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(uv[ids], z[ids])`` of (n, 2) float32 pixel coordinates and (n,) depths: the coordinate pairs taken as
+    one 8-byte item each (a one-dimensional take, several times faster than numpy's row indexing; the same
+    bits)."""
+    pairs = np.take(uv.view(np.float64).reshape(-1), ids)
+    return pairs.view(np.float32).reshape(-1, 2), np.take(z, ids)
 
 
 # --------------------------------------------------------------------------------------------

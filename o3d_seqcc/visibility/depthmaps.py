@@ -2,7 +2,8 @@
 
 :func:`depth_from_point_cloud` renders a view's partial point cloud to a depth image (nearest
 point per pixel) and fills its small holes with OpenCV's Navier-Stokes inpainting, as the paper
-does; :func:`depth_edges` marks the pixels near depth discontinuities.
+does; :func:`depth_edges` marks the pixels near depth discontinuities. :class:`DepthImage` holds a
+view's depth image for the visibility's passes (a 16-bit map as its counts).
 """
 
 from __future__ import annotations
@@ -10,9 +11,58 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.camera import inside_image, pixel_index, project_points
+from ..io.files import MAX_COORDINATE
 from .settings import VisibilitySettings
 
-__all__ = ["depth_edges", "depth_from_point_cloud"]
+__all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud", "in_metres"]
+
+class DepthImage:
+    """A view's depth image in metres; a 16-bit depth map is held as its counts.
+
+    :func:`~o3d_seqcc.io.files.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
+    :data:`~o3d_seqcc.io.files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
+    and converting at each look-up (:func:`in_metres`, the same elementwise arithmetic) gives the
+    same values, bit for bit, without the float image.
+
+    Parameters
+    ----------
+    depth : (H, W) float64, optional
+        Metres, 0 = missing.
+    counts : (H, W) uint16, optional
+        Instead of ``depth``: a 16-bit map as stored, with its ``scale`` (units per metre).
+    scale : float
+    """
+
+    def __init__(self, depth: np.ndarray | None = None, *, counts: np.ndarray | None = None,
+                 scale: float = 1.0) -> None:
+        if (depth is None) == (counts is None):
+            raise ValueError("DepthImage takes depth or counts")
+        self.depth = None if depth is None else np.asarray(depth)
+        self.counts = None if counts is None else np.asarray(counts)
+        self.scale = float(scale)
+        self.shape = (self.depth if counts is None else self.counts).shape
+
+    @property
+    def nbytes(self) -> int:
+        return int((self.depth if self.counts is None else self.counts).nbytes)
+
+    def at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(n,) float64 depths at the pixels ``(rows, cols)``."""
+        if self.counts is None:
+            return self.depth[rows, cols]
+        return in_metres(self.counts[rows, cols], self.scale)
+
+    def image(self) -> np.ndarray:
+        """(H, W) float64: the whole image."""
+        return self.depth if self.counts is None else in_metres(self.counts, self.scale)
+
+
+def in_metres(stored: np.ndarray, depth_scale: float) -> np.ndarray:
+    """float64 metres of depth values as stored (:func:`~o3d_seqcc.io.files.read_depth`'s conversion): divided by
+    ``depth_scale``, 0 where not finite, negative or beyond :data:`~o3d_seqcc.io.files.MAX_COORDINATE`."""
+    out = np.asarray(stored).astype(np.float64) / float(depth_scale)
+    out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
+    return out
 
 
 def depth_from_point_cloud(

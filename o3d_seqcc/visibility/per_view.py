@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.camera import project_columns
-from ..geometry.meshops import local_origin
-from .depthmaps import depth_edges, depth_from_point_cloud
+from ..geometry.meshops import bounds, corner_mean, local_origin
+from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud, in_metres
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
-from .occlusion import occluded_view
+from ..io.files import read_depth
+from .occlusion import occluded_view, same_positions, take_over
 
 __all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
            "view_record"]
@@ -70,7 +71,8 @@ class ViewRecord:
     info : dict
         The view's entry of ``stats["per_view"]`` (name, depth source, disagreement, counts).
     n_rays : int
-        Occlusion rays cast.
+        Occlusion test points (:func:`~o3d_seqcc.visibility.occlusion.occluded_view`: a ray each, vertices at one
+        position sharing theirs).
     n_known : int
         Vertices of visible faces with a depth measurement (for the disagreement warning).
     seconds : dict
@@ -105,6 +107,64 @@ def _part1by2(x: np.ndarray) -> np.ndarray:
     return (x | (x << 2)) & np.uint32(0x09249249)
 
 
+def morton_chunks(tri: np.ndarray, cen: np.ndarray, ptr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces grouped into chunks along a Morton curve of their centroids, and the chunks' boxes.
+
+    Parameters
+    ----------
+    tri : (F, 3, 3) float64
+        The faces' corners.
+    cen : (F, 3) float64
+        Their centroids.
+    ptr : (C+1,) int
+        Chunk ``c`` holds the faces ``perm[ptr[c]:ptr[c+1]]``.
+
+    Returns
+    -------
+    perm : (F,) int64
+        The faces in curve order (stable for equal codes).
+    corners : (C, 8, 3) float64
+        The eight corners of every chunk's bounding box.
+    """
+    lo, hi = bounds(cen)
+    q = np.clip((cen - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint32)
+    code = _part1by2(q[:, 0]) | (_part1by2(q[:, 1]) << np.uint32(1)) | (_part1by2(q[:, 2]) << np.uint32(2))
+    perm = np.argsort(code, kind="stable")
+    starts = ptr[:-1]
+    box_lo = np.minimum.reduceat(np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])[perm], starts)  # (C, 3)
+    box_hi = np.maximum.reduceat(np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])[perm], starts)
+    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(8, 3)
+    return perm.astype(np.int64), np.where(corners[None, :, :] == 0, box_lo[:, None, :], box_hi[:, None, :])
+
+
+def frustum_chunks(corners: np.ndarray, view) -> np.ndarray:
+    """(C,) bool: the chunks (boxes' ``corners`` (C, 8, 3)) not wholly beyond one of the view's frustum planes.
+
+    A box is dropped only when all its corners lie beyond one plane (``u >= -0.5``, ``u < W - 0.5``,
+    ``v >= -0.5``, ``v < H - 0.5``, ``z > 0``) by a relative margin far above rounding, so no face
+    inside it can have a corner inside the image.
+    """
+    K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
+    pc = corners @ E[:3, :3].T + E[:3, 3]  # (C, 8, 3) camera frame
+    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    W, H = view.width, view.height
+    planes = np.array([
+        [fx, s, cx + 0.5],  # u >= -0.5
+        [-fx, -s, W - 0.5 - cx],  # u < W - 0.5
+        [0.0, fy, cy + 0.5],  # v >= -0.5
+        [0.0, -fy, H - 0.5 - cy],  # v < H - 0.5
+        [0.0, 0.0, 1.0],  # z > 0
+    ])
+    vals = pc @ planes.T  # (C, 8, 5)
+    margin = 1e-9 * np.abs(pc).max(axis=(1, 2))[:, None] * np.abs(planes).sum(axis=1)[None, :] + 1e-300
+    return ~(vals.max(axis=1) < -margin).any(axis=1)
+
+
+def chunk_members(perm: np.ndarray, ptr: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Ascending ids of the faces in the chunks ``keep`` ((C,) bool) of :func:`morton_chunks`."""
+    return np.sort(perm[np.repeat(keep, ptr[1:] - ptr[:-1])])
+
+
 class VisibilityJob:
     """What every view's visibility task shares (see the module docstring).
 
@@ -136,18 +196,23 @@ class VisibilityJob:
         self.opts = dict(opts)
         self.occluder = occluder
         self.origin = occluder.origin if occluder is not None else local_origin(X)
+        # the camera centres, solved once per job (View.center solves R c = -t at each call)
+        self.centers = occluder.centers if occluder is not None else np.array([v.center for v in self.views])
         self.X = X
         self.faces = f
+        # vertices at one position (three per face in UV-unwrapped exports) share their occlusion ray
+        self.same = same_positions(X) if len(X) > len(f) else None
         self.XT = np.ascontiguousarray(X.T)
         self.f0, self.f1, self.f2 = (np.ascontiguousarray(f[:, i]) for i in range(3))
-        cen = X[f].mean(axis=1)
+        tri = X[f]
+        cen = corner_mean(tri)
         self.cen = [np.ascontiguousarray(cen[:, i]) for i in range(3)]
         self.fn = [np.ascontiguousarray(normals[:, i]) for i in range(3)]
         self.degenerate = np.asarray(degenerate, dtype=bool)
-        self._chunk(cen)
+        self._chunk(tri, cen)
         self._rs = None
         self._lock = threading.Lock()
-        need = sum(8 * int(v.width) * int(v.height) for v in self.views if v.has_depth)  # float64 depth images
+        need = sum(_depth_bytes(v) for v in self.views)
         self._depths = LRUCache(max(DEPTH_CACHE_BYTES, need if need <= DEPTH_CACHE_MAX_BYTES else 0))
 
     def depth(self, i: int):
@@ -158,58 +223,29 @@ class VisibilityJob:
             return self.occluder.depth(i)
         return self._depths.get(i, lambda: _depth_image(self.views[i], self.opts))
 
-    def _chunk(self, cen: np.ndarray) -> None:
+    def _chunk(self, tri: np.ndarray, cen: np.ndarray) -> None:
         F = len(self.faces)
         self.chunk_ptr = np.arange(0, F + CHUNK_FACES, CHUNK_FACES).clip(max=F)
         if F <= 4 * CHUNK_FACES:  # small meshes: no culling
             self.chunk_perm = None
             return
-        lo, hi = cen.min(axis=0), cen.max(axis=0)
-        q = np.clip((cen - lo) / np.maximum(hi - lo, 1e-300) * 1023.0, 0, 1023).astype(np.uint32)
-        code = _part1by2(q[:, 0]) | (_part1by2(q[:, 1]) << np.uint32(1)) | (_part1by2(q[:, 2]) << np.uint32(2))
-        perm = np.argsort(code, kind="stable")
-        starts = self.chunk_ptr[:-1]
-        box_lo = np.empty((len(starts), 3))
-        box_hi = np.empty((len(starts), 3))
-        fp = self.faces[perm]
-        for a in range(3):
-            vals = self.X[fp, a]  # (F, 3) coordinate a of the corners, chunk order
-            box_lo[:, a] = np.minimum.reduceat(vals.min(axis=1), starts)
-            box_hi[:, a] = np.maximum.reduceat(vals.max(axis=1), starts)
-        self.chunk_perm = perm.astype(np.int64)
-        corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), axis=-1).reshape(8, 3)
-        self.chunk_corners = np.where(corners[None, :, :] == 0, box_lo[:, None, :], box_hi[:, None, :])  # (C, 8, 3)
+        self.chunk_perm, self.chunk_corners = morton_chunks(tri, cen, self.chunk_ptr)
 
     def candidates(self, view) -> np.ndarray | None:
         """Ascending ids of the faces in chunks that meet the view's frustum; None = all faces."""
         if self.chunk_perm is None:
             return None
-        K, E = np.asarray(view.intrinsic, np.float64), np.asarray(view.extrinsic, np.float64)
-        pc = self.chunk_corners @ E[:3, :3].T + E[:3, 3]  # (C, 8, 3) camera frame
-        fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
-        W, H = view.width, view.height
-        planes = np.array([
-            [fx, s, cx + 0.5],  # u >= -0.5
-            [-fx, -s, W - 0.5 - cx],  # u < W - 0.5
-            [0.0, fy, cy + 0.5],  # v >= -0.5
-            [0.0, -fy, H - 0.5 - cy],  # v < H - 0.5
-            [0.0, 0.0, 1.0],  # z > 0
-        ])
-        vals = pc @ planes.T  # (C, 8, 5)
-        margin = 1e-9 * np.abs(pc).max(axis=(1, 2))[:, None] * np.abs(planes).sum(axis=1)[None, :] + 1e-300
-        keep = ~(vals.max(axis=1) < -margin).any(axis=1)
+        keep = frustum_chunks(self.chunk_corners, view)
         ptr = self.chunk_ptr
         n_keep = int((ptr[1:] - ptr[:-1])[keep].sum())
         if n_keep >= 0.5 * len(self.faces):
             return None
-        ks = np.flatnonzero(keep)
-        if not len(ks):
-            return np.zeros(0, np.int64)
-        return np.sort(np.concatenate([self.chunk_perm[ptr[c]:ptr[c + 1]] for c in ks]))
+        return chunk_members(self.chunk_perm, ptr, keep)
 
     def raycaster(self):
         """Open3D's ``RaycastingScene`` of the mesh (of :attr:`occluder`'s, when given) in the local frame
-        (minus :attr:`origin`), built once per process and committed."""
+        (minus :attr:`origin`), built once per process and committed (or the camera check's of the same
+        arrays, :func:`~o3d_seqcc.visibility.occlusion.take_over`)."""
         if self.occluder is not None:
             return self.occluder.raycaster()
         if self._rs is None:
@@ -218,6 +254,10 @@ class VisibilityJob:
                     import open3d as o3d
                     import open3d.core as o3c
 
+                    handed = take_over(self.X, self.faces, self.origin)
+                    if handed is not None:
+                        self._rs = handed
+                        return handed
                     rs = o3d.t.geometry.RaycastingScene()
                     rs.add_triangles(o3c.Tensor(np.ascontiguousarray(self.X - self.origin, dtype=np.float32)),
                                      o3c.Tensor(np.ascontiguousarray(self.faces, dtype=np.uint32)))
@@ -236,15 +276,32 @@ class VisibilityJob:
         self._lock = threading.Lock()
 
 
+def _depth_bytes(view) -> int:
+    """The bytes a view's :class:`~o3d_seqcc.visibility.depthmaps.DepthImage` is expected to hold: 2 a pixel for a
+    16-bit PNG depth map, 8 for any other depth (float maps, rendered point clouds), 0 without."""
+    if not view.has_depth:
+        return 0
+    png = view.depth_map is None and view.depth is not None and str(view.depth).lower().endswith(".png")
+    return (2 if png else 8) * int(view.width) * int(view.height)
+
+
 def _depth_image(view, opts: dict):
-    """(depth image or None, source name or None) of a view."""
+    """(depth image or None, source name or None) of a view, as a :class:`~o3d_seqcc.visibility.depthmaps.DepthImage`:
+    a 16-bit map read as stored (its counts), any other as :meth:`View.load_depth` gives it."""
+    dist = view.distortion
+    if (view.depth_map is None and view.depth is not None
+            and (dist is None or not dist.depth or dist.is_zero)):  # load_depth is the map in metres
+        stored = read_depth(view.depth, view.depth_scale, shape=(view.height, view.width), stored=True)
+        if stored.dtype == np.uint16:
+            return DepthImage(counts=stored, scale=view.depth_scale), "depth"
+        return DepthImage(in_metres(stored, view.depth_scale)), "depth"
     D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
     if D is not None:
-        return D, "depth"
+        return DepthImage(D), "depth"
     points = view.load_points()
     if points is not None:
-        return depth_from_point_cloud(points, view.intrinsic, view.extrinsic, view.width, view.height,
-                                      fill_radius=opts["fill_radius"]), "point_cloud"
+        return DepthImage(depth_from_point_cloud(points, view.intrinsic, view.extrinsic, view.width, view.height,
+                                                 fill_radius=opts["fill_radius"])), "point_cloud"
     return None, None
 
 
@@ -286,7 +343,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     idx = np.flatnonzero(inside[l0] & inside[l1] & inside[l2] & ~degenerate)
     i0, i1, i2 = l0[idx], l1[idx], l2[idx]
     area = (0.5 * np.abs((u[i1] - u[i0]) * (v[i2] - v[i0]) - (v[i1] - v[i0]) * (u[i2] - u[i0]))).astype(np.float32)
-    C = view.center
+    C = job.centers[i]
     dx, dy, dz = C[0] - cen[0][idx], C[1] - cen[1][idx], C[2] - cen[2][idx]
     dist = np.sqrt(dx * dx + dy * dy + dz * dz)
     n0, n1, n2 = fn[0][idx], fn[1][idx], fn[2][idx]
@@ -312,14 +369,14 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
             vid = np.flatnonzero(inside)
             c = np.clip(np.floor(u[vid] + 0.5), 0, W - 1).astype(np.intp)
             r = np.clip(np.floor(v[vid] + 0.5), 0, H - 1).astype(np.intp)
-            d = D[r, c]
+            d = D.at(r, c)
             known_v = np.zeros(len(u), dtype=bool)
             bad_v = np.zeros(len(u), dtype=bool)
             known_v[vid] = d > 0
             zi = z[vid]
             bad_v[vid] = (d > 0) & (np.abs(zi - d) > np.maximum(opts["depth_atol"], opts["depth_tol"] * zi))
             if int(opts["depth_edge_margin"]) > 0:
-                edge = depth_edges(D, int(opts["depth_edge_margin"]), opts["depth_atol"], opts["depth_tol"])
+                edge = depth_edges(D.image(), int(opts["depth_edge_margin"]), opts["depth_atol"], opts["depth_tol"])
                 near_v = np.zeros(len(u), dtype=bool)
                 near_v[vid] = edge[r, c]
     t1 = time.perf_counter()
@@ -328,8 +385,8 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     if "occlusion" in filters:
         front = np.flatnonzero(~back)
         ids = idx[front] if cand is None else cand[idx[front]]
-        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, view.center, ids, area[front], opts,
-                                                origin=job.origin)
+        occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, C, ids, area[front], opts,
+                                                origin=job.origin, same=job.same)
     t2 = time.perf_counter()
     depth_bad = np.zeros(len(idx), dtype=bool)
     n_known = 0
@@ -343,7 +400,8 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
         vert &= known_v
         n_known = int(vert.sum())
         info["depth_disagreement"] = float(bad_v[vert].mean()) if n_known else 0.0
-    flags = (occluded * OCCLUDED + depth_bad * DEPTH + oblique * OBLIQUE).astype(np.uint8)
+    flags = occluded.view(np.uint8) * np.uint8(OCCLUDED) | depth_bad.view(np.uint8) * np.uint8(DEPTH) | (
+        oblique.view(np.uint8) * np.uint8(OBLIQUE))  # the filter bits, as uint8 throughout
     faces = (idx if cand is None else cand[idx]).astype(np.int32)
     info.update(valid=int(len(idx)), occluded=int(occluded.sum()), depth_inconsistent=int(depth_bad.sum()),
                 oblique=int(oblique.sum()), usable=int(np.count_nonzero(flags == 0)))

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.meshops import bounds
+
 __all__ = ["FAR", "drop_faces", "stray_faces"]
 
 
@@ -49,10 +51,12 @@ def stray_faces(vertices: np.ndarray, faces: np.ndarray, records, centers: np.nd
     for k in range(3):
         vseen[faces[usable, k]] = True
     pts = vertices[vseen] if centers is None else np.vstack([vertices[vseen], np.asarray(centers, np.float64)])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = bounds(pts)
     grow = FAR * float(np.linalg.norm(hi - lo))
     lo, hi = lo - grow, hi + grow
-    out_v = ((vertices < lo) | (vertices > hi)).any(axis=1)
+    out_v = np.zeros(len(vertices), dtype=bool)
+    for a in range(3):
+        out_v |= (vertices[:, a] < lo[a]) | (vertices[:, a] > hi[a])
     if not out_v.any():  # the usual case: nothing far at all
         return np.zeros(F, dtype=bool)
     cand = np.flatnonzero(out_v[faces[:, 0]] & ~usable)
