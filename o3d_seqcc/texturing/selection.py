@@ -276,13 +276,13 @@ def _select_mrf(
     seen_pos = np.full(n_faces, -1, dtype=np.int64)
     seen_pos[seen_idx] = np.arange(len(seen_idx))
     cur_seen = cur[seen_idx]
-    n_dis = int(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
+    p0, p1 = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    n_dis = int(np.count_nonzero(labels[p0] != labels[p1]))
     energy = float(cur_seen.sum()) + w * float(n_dis)  # = sum_f D_f(l_f) + w * transitions
-    ptr, pair_ids = _incident(pairs, n_faces)
-    mark = np.zeros(len(pairs), dtype=bool)
     logger.debug("mrf: start energy %.1f, %d transitions", energy, n_dis)
     pos = np.empty(n_faces, dtype=np.int64)
     free = np.zeros(n_faces, dtype=bool)
+    flag = np.zeros(n_faces, dtype=bool)  # scratch: the faces a move switched
     for sweep in range(int(n_sweeps)):
         changed = 0
         for alpha in rng.permutation(n_views):
@@ -296,54 +296,56 @@ def _select_mrf(
             d_alpha = data[sl][keep]
             pos[fidx] = np.arange(nfree)
             free[fidx] = True
-            lp_all = labels
-            inc = pairs[_gather(ptr, pair_ids, fidx, mark)]  # every pair with a free face, in pair order
+            f0, f1 = free[p0], free[p1]
+            inc = np.flatnonzero(f0 | f1)  # every pair with a free face, in pair order
+            q0, q1, f0, f1 = p0[inc], p1[inc], f0[inc], f1[inc]
+            l0, l1 = labels[q0], labels[q1]
+            i0, i1 = pos[q0], pos[q1]  # positions (meaningless where the face is not free)
+            diff = l0 != l1
             # unary costs of keeping (x=0) / switching to alpha (x=1)
-            cost0 = cur[fidx].copy()
+            cost0 = cur[fidx]
             cost1 = d_alpha.copy()
-            fp, fq = free[inc[:, 0]], free[inc[:, 1]]
             # both free: Potts expansion term, submodular
-            both = inc[fp & fq]
-            bi, bj = pos[both[:, 0]], pos[both[:, 1]]
-            A = w * (lp_all[both[:, 0]] != lp_all[both[:, 1]])
+            both = f0 & f1
+            bi, bj = i0[both], i1[both]
+            A = w * diff[both]
             # E = A + (C-A) x_i + (D-C) x_j + (B+C-A-D)(1-x_i) x_j with B = C = w, D = 0
             cost1 += np.bincount(bi, weights=w - A, minlength=nfree)
             cost1 -= w * np.bincount(bj, minlength=nfree)
             cost0_add = np.zeros(nfree)
             # one free, one fixed: unary on the free one
-            for a_col, b_col, mask in ((0, 1, fp & ~fq), (1, 0, fq & ~fp)):
-                pp = inc[mask]
-                i = pos[pp[:, a_col]]
-                lf = lp_all[pp[:, a_col]]
-                lo = lp_all[pp[:, b_col]]
-                cost0_add += w * np.bincount(i, weights=(lf != lo).astype(np.float64), minlength=nfree)
-                cost1 += w * np.bincount(i, weights=(lo != alpha).astype(np.float64), minlength=nfree)
+            for i, lo, mask in ((i0, l1, f0 > f1), (i1, l0, f1 > f0)):
+                im = i[mask]
+                cost0_add += w * np.bincount(im, weights=diff[mask].astype(np.float64), minlength=nfree)
+                cost1 += w * np.bincount(im, weights=(lo[mask] != alpha).astype(np.float64), minlength=nfree)
             cost0 += cost0_add
             free[fidx] = False
-            g = maxflow.Graph[float](nfree, len(both))
-            nodes = g.add_nodes(nfree)
-            if len(both):
-                g.add_edges(nodes[bi], nodes[bj], 2.0 * w - A, np.zeros(len(both)))
+            g = maxflow.Graph[float](nfree, len(bi))
+            nodes = g.add_nodes(nfree)  # 0 .. nfree - 1: the positions themselves
+            if len(bi):
+                g.add_edges(bi, bj, 2.0 * w - A, np.zeros(len(bi)))
             mn = np.minimum(cost0, cost1)
-            g.add_grid_tedges(np.asarray(nodes), cost1 - mn, cost0 - mn)
+            g.add_grid_tedges(nodes, cost1 - mn, cost0 - mn)
             g.maxflow()
-            switch = np.asarray(g.get_grid_segments(np.asarray(nodes)), dtype=bool)
+            switch = np.asarray(g.get_grid_segments(nodes), dtype=bool)
             if switch.any():
                 sw = fidx[switch]
-                touched = pairs[_gather(ptr, pair_ids, sw, mark)]
-                before = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
-                old, old_cost = labels[sw].copy(), cur_seen[seen_pos[sw]]
-                labels[sw] = alpha
+                flag[sw] = True
+                s0, s1 = flag[q0], flag[q1]
+                flag[sw] = False
+                touched = s0 | s1  # the pairs of a switched face: their labels before and after
+                before = int(np.count_nonzero(l0[touched] != l1[touched]))
+                after = int(np.count_nonzero(np.where(s0, alpha, l0)[touched] != np.where(s1, alpha, l1)[touched]))
+                old_cost = cur_seen[seen_pos[sw]]
                 cur_seen[seen_pos[sw]] = d_alpha[switch]
-                after = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
                 n_dis_new = n_dis - before + after
                 e_new = float(cur_seen.sum()) + w * float(n_dis_new)  # the full sum: the same float as before
                 if e_new < energy - 1e-9:
                     energy, n_dis = e_new, n_dis_new
+                    labels[sw] = alpha
                     cur[sw] = d_alpha[switch]
                     changed += int(switch.sum())
                 else:
-                    labels[sw] = old
                     cur_seen[seen_pos[sw]] = old_cost
         logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
         if changed == 0:
