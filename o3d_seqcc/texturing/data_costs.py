@@ -45,6 +45,8 @@ logger = logging.getLogger(__name__)
 _QUANT = 10000.0
 #: scanline spans (rows of projected triangles) handled per step by the data costs
 SPAN_ROWS = 1 << 19
+#: rows of a photo converted to float and grey at a time
+GREY_ROWS = 256
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -80,6 +82,42 @@ def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     1 reads about 1.
     """
     return _sobel_magnitude(_grey(image))
+
+
+#: every uint8 level as a float32 in [0, 1] (level / 255 in float32, as the data costs scale their photos)
+_UNIT = np.arange(256, dtype=np.float32) / np.float32(255.0)
+
+
+def _level_magnitude(image: np.ndarray) -> np.ndarray:
+    """:func:`gradient_magnitude` of an (H, W, 3) uint8 photo as ``image.astype(float32) / 255``, without that
+    float copy: the grey image is made :data:`GREY_ROWS` rows at a time (OpenCV converts row by row, so the
+    pixels are the whole image's), and freed before the Sobel magnitude is complete."""
+    import cv2
+
+    grey = np.empty(image.shape[:2], dtype=np.float32)
+    for r in range(0, len(grey), GREY_ROWS):
+        f = image[r:r + GREY_ROWS].astype(np.float32)
+        f /= np.float32(255.0)
+        cv2.cvtColor(f, cv2.COLOR_RGB2GRAY, dst=grey[r:r + GREY_ROWS])
+    return _sobel_magnitude(grey)
+
+
+def _sample_levels(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(n, 3) ``sample_bilinear(image.astype(float32) / 255, x, y)`` of an (H, W, 3) uint8 photo, from its levels
+    (:data:`_UNIT`): the same arithmetic at the four corners, without the float copy of the photo."""
+    h, w = image.shape[:2]
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, w - 1.0)
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, h - 1.0)
+    x0, y0 = np.floor(x).astype(np.intp), np.floor(y).astype(np.intp)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+
+    def at(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        return _UNIT[image[yy, xx]].astype(np.float64)
+
+    top = at(y0, x0) * (1.0 - fx) + at(y0, x1) * fx
+    bot = at(y1, x0) * (1.0 - fx) + at(y1, x1) * fx
+    return top * (1.0 - fy) + bot * fy
 
 
 class _Spans(NamedTuple):
@@ -128,17 +166,20 @@ def _spans(tri: np.ndarray, height: int, width: int, *, chunk: int = SPAN_ROWS) 
     ny = np.where(ok, np.maximum(y1 - y0 + 1, 0), 0)
     has = np.flatnonzero(ny > 0)
     # the kind of every edge: 0 left bound, 1 right bound, 2 flat, 3 NaN (no effect, as in row_spans)
-    code = np.zeros(len(has), dtype=np.int64)
+    code = np.zeros(len(has), dtype=np.uint8)
     for j in range(3):
         a = A[j][has]
-        code += np.where(a > 1e-15, 0, np.where(a < -1e-15, 1, np.where(np.abs(a) <= 1e-15, 2, 3))) << (2 * j)
-    order = np.argsort(code, kind="stable")
-    codes, first_of = np.unique(code[order], return_index=True)
+        kind = (a < -1e-15).view(np.uint8) + 2 * (np.abs(a) <= 1e-15).view(np.uint8) + 3 * np.isnan(a).view(np.uint8)
+        code += kind << (2 * j)
+    order = has[np.argsort(code, kind="stable")]  # the triangles grouped by the kinds of their edges (a radix sort)
+    bounds = np.cumsum(np.bincount(code, minlength=64))
+    total = int(ny[has].sum())
+    tri_of, offsets, count_of = np.empty(len(has), np.int64), np.empty(len(has), np.int64), np.empty(len(has), np.int64)
+    start, stop = np.empty(total, np.int64), np.empty(total, np.int64)
     eps = 1e-7
-    parts: list[tuple[np.ndarray, ...]] = []
-    done = 0
-    for g, cd in enumerate(codes.tolist()):
-        group = has[order[first_of[g]:first_of[g + 1] if g + 1 < len(codes) else len(order)]]
+    done = done_t = 0
+    for cd in np.flatnonzero(np.diff(bounds, prepend=0)).tolist():
+        group = order[(bounds[cd - 1] if cd else 0):bounds[cd]]
         kinds = [(cd >> (2 * j)) & 3 for j in range(3)]
         ends = np.cumsum(ny[group])
         lo_t = 0
@@ -149,17 +190,20 @@ def _spans(tri: np.ndarray, height: int, width: int, *, chunk: int = SPAN_ROWS) 
             nyt = ny[t]
             first = np.cumsum(nyt) - nyt
             rows = int(first[-1] + nyt[-1])
-            yi = np.repeat(y0[t] - first, nyt) + np.arange(rows)  # the row of every span
+            k = np.zeros(rows, dtype=np.intp)  # the triangle (in t) of every span: gathers, not np.repeat (slow)
+            k[first[1:]] = 1
+            np.cumsum(k, out=k)
+            yi = (y0[t] - first)[k] + np.arange(rows)  # the row of every span
             y = yi.astype(np.float64)
 
             def r(j: int) -> np.ndarray:
-                return np.repeat(B[j][t], nyt) * y + np.repeat(C[j][t], nyt)
+                return B[j][t][k] * y + C[j][t][k]
 
-            lo = np.repeat(xlo[t], nyt)
-            hi = np.repeat(xhi[t], nyt)
+            lo = xlo[t][k]
+            hi = xhi[t][k]
             for j in range(3):
                 if kinds[j] < 2:
-                    bound = (-eps - r(j)) / np.repeat(A[j][t], nyt)
+                    bound = (-eps - r(j)) / A[j][t][k]
                     (np.maximum if kinds[j] == 0 else np.minimum)(lo if kinds[j] == 0 else hi, bound,
                                                                    out=lo if kinds[j] == 0 else hi)
             xs = np.ceil(lo).astype(np.int64)
@@ -168,24 +212,27 @@ def _spans(tri: np.ndarray, height: int, width: int, *, chunk: int = SPAN_ROWS) 
             for j in range(3):
                 if kinds[j] == 2:
                     n[r(j) < -eps] = 0
-            start = yi * (width + 1) + np.where(n > 0, xs, 0)
-            parts.append((t, first + done, start, start + n, np.add.reduceat(n, first)))
+            xs[n == 0] = 0
+            sl = slice(done, done + rows)
+            np.multiply(yi, width + 1, out=start[sl])
+            start[sl] += xs
+            np.add(start[sl], n, out=stop[sl])
+            ts = slice(done_t, done_t + len(t))
+            tri_of[ts], offsets[ts], count_of[ts] = t, first + done, np.add.reduceat(n, first)
             done += rows
+            done_t += len(t)
             lo_t = hi_t
     count = np.zeros(len(p), dtype=np.int64)
-    if not parts:
-        e = np.zeros(0, dtype=np.int64)
-        return _Spans(e, e, e, e, count)
-    t, offsets, start, stop, cnt = (np.concatenate(x) for x in zip(*parts))
-    count[t] = cnt
-    return _Spans(t, offsets, start, stop, count)
+    count[tri_of] = count_of
+    return _Spans(tri_of, offsets, start, stop, count)
 
 
 def _span_sums(spans: _Spans, q: np.ndarray) -> np.ndarray:
     """(k,) int64 exact sums of an (H, W) int32 channel over the spans of every triangle."""
     h, w = q.shape
     cum = np.zeros((h, w + 1), dtype=np.int32)
-    np.cumsum(q, axis=1, out=cum[:, 1:])  # row sums <= 6e4 x W: exact for W < 35k
+    np.cumsum(q, axis=1, dtype=np.int32, out=cum[:, 1:])  # row sums <= 6e4 x W: exact for W < 35k
+    del q
     cum = cum.reshape(-1)
     out = np.zeros(len(spans.count), dtype=np.int64)
     if len(spans.tri):
@@ -194,13 +241,16 @@ def _span_sums(spans: _Spans, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def _quantised(x: np.ndarray) -> np.ndarray:
-    """float32 values clipped to [0, 6] as int32 multiples of 1 / :data:`_QUANT` (rounded)."""
-    return np.rint(np.clip(x, 0.0, 6.0) * _QUANT).astype(np.int32)
+def _quantise(x: np.ndarray) -> np.ndarray:
+    """float32 values clipped to [0, 6] as int32 multiples of 1 / :data:`_QUANT` (rounded); ``x`` is overwritten."""
+    np.clip(x, 0.0, 6.0, out=x)
+    x *= _QUANT
+    np.rint(x, out=x)
+    return x.astype(np.int32)
 
 
-#: the quantised [0, 1] value of every uint8 level (as the float32 image's level / 255 would give)
-_LEVELS = _quantised(np.arange(256, dtype=np.float32) / np.float32(255.0))
+#: the quantised value of every uint8 level
+_LEVELS = _quantise(_UNIT.copy())
 
 
 def _view_means(image: np.ndarray, tri: np.ndarray, *, gmi: bool, colour: bool
@@ -216,13 +266,13 @@ def _view_means(image: np.ndarray, tri: np.ndarray, *, gmi: bool, colour: bool
     Returns
     -------
     gmi : (k,) float64 or None
-        Mean Sobel magnitude (:func:`gradient_magnitude`).
+        Mean Sobel magnitude of the photo as float32 / 255 (:func:`gradient_magnitude`).
     colour : (k, 3) float64 or None
         Mean RGB in [0, 1].
 
     Every channel is quantised to int32 multiples of 1 / :data:`_QUANT` and summed exactly along the
     spans (:func:`_span_sums`); a triangle covering no pixel centre reads its centroid (bilinear). One
-    channel's (H, W + 1) cumulative sum is alive at a time, the float image only until the grey one.
+    (H, W) channel and its cumulative sum are alive at a time; the photo is never copied as float.
     """
     h, w = image.shape[:2]
     spans = _spans(tri, h, w)
@@ -230,29 +280,21 @@ def _view_means(image: np.ndarray, tri: np.ndarray, *, gmi: bool, colour: bool
     empty = spans.count == 0
     cen = tri[empty].mean(axis=1) if empty.any() else None
     g = c = None
-    grey = None
-    if gmi or (colour and cen is not None):
-        f = image.astype(np.float32) / np.float32(255.0)
-        if colour:
-            c = np.zeros((len(tri), 3))
-            if cen is not None:
-                c[empty] = sample_bilinear(f, cen[:, 0], cen[:, 1]).reshape(-1, 3)
-        if gmi:
-            grey = _grey(f)
-        del f
     if gmi:
-        mag = _sobel_magnitude(grey)
-        del grey
-        g = _span_sums(spans, _quantised(mag)) / denom
-        if cen is not None:
-            g[empty] = sample_bilinear(mag, cen[:, 0], cen[:, 1])
+        mag = _level_magnitude(image)
+        at_centre = sample_bilinear(mag, cen[:, 0], cen[:, 1]) if cen is not None else None
+        g = _span_sums(spans, _quantise(mag)) / denom
         del mag
+        if cen is not None:
+            g[empty] = at_centre
     if colour:
-        if c is None:
-            c = np.zeros((len(tri), 3))
-        full = ~empty
-        for j in range(3):
-            c[full, j] = (_span_sums(spans, _LEVELS[image[..., j]]) / denom)[full]
+        import cv2
+
+        c = np.empty((len(tri), 3))
+        for j in range(3):  # OpenCV's table lookup: a third of numpy's gather from the strided channel
+            c[:, j] = _span_sums(spans, cv2.LUT(np.ascontiguousarray(image[..., j]), _LEVELS)) / denom
+        if cen is not None:
+            c[empty] = _sample_levels(image, cen[:, 0], cen[:, 1])
     return g, c
 
 

@@ -17,7 +17,15 @@ from o3d_seqcc.errors import InputError
 from o3d_seqcc.geometry.meshops import face_adjacency
 from o3d_seqcc.texturing import bake_texture, select_views
 from o3d_seqcc.texturing.bake import row_spans
-from o3d_seqcc.texturing.data_costs import _spans, _view_means, face_view_statistics, gradient_magnitude, score_visibility
+from o3d_seqcc.texturing.data_costs import (
+    _level_magnitude,
+    _sample_levels,
+    _spans,
+    _view_means,
+    face_view_statistics,
+    gradient_magnitude,
+    score_visibility,
+)
 from o3d_seqcc.texturing.outliers import _median_outliers, colour_lab, photometric_outliers
 from o3d_seqcc.texturing.textured_mesh import sample_texture
 
@@ -107,6 +115,25 @@ def test_view_means_match_brute_force(rng):
     c0 = tri[0].mean(axis=0)
     np.testing.assert_allclose(g[0], sample_bilinear(ch[..., 0], c0[:1], c0[1:])[0], rtol=1e-12)
     np.testing.assert_allclose(c[0], sample_bilinear(ch[..., 1:], c0[:1], c0[1:])[0], rtol=1e-12)
+
+
+def test_photo_levels_without_a_float_copy(rng, monkeypatch):
+    """The data costs never copy a photo as float: its gradient magnitude (grey made a few rows at a time) and the
+    bilinear colour at points (read through the levels' table) are those of ``photo.astype(float32) / 255``, to the
+    bit, for any number of rows per step."""
+    from o3d_seqcc.imaging.arrays import sample_bilinear
+    from o3d_seqcc.texturing import data_costs
+
+    img = rng.integers(0, 256, size=(61, 77, 3), dtype=np.uint8)
+    img[20:40, 30:50] = 255  # a step
+    f = img.astype(np.float32) / np.float32(255.0)
+    whole = gradient_magnitude(f)
+    for rows in (1, 7, 60, 256):
+        monkeypatch.setattr(data_costs, "GREY_ROWS", rows)
+        assert np.array_equal(_level_magnitude(img), whole)
+    x, y = rng.uniform(-2, 79, 500), rng.uniform(-2, 63, 500)
+    x[:3], y[:3] = [0.0, 76.0, 76.5], [0.0, 60.0, 60.9]  # the corners, clamped
+    assert np.array_equal(_sample_levels(img, x, y), sample_bilinear(f, x, y))
 
 
 def test_gradient_magnitude_of_a_step():
