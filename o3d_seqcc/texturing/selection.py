@@ -185,26 +185,6 @@ def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
     return np.clip(np.nan_to_num(cost, nan=max_cost, posinf=max_cost), 0.0, max_cost)
 
 
-def _incident(pairs: np.ndarray, n_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR (ptr, pair ids) of the pairs each face belongs to."""
-    ends = pairs.reshape(-1)
-    order = np.argsort(ends, kind="stable")
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=n_faces))]).astype(np.int64)
-    return ptr, (order // 2).astype(np.int64)
-
-
-def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray, mark: np.ndarray) -> np.ndarray:
-    """Ascending unique pair ids incident to ``faces`` (``mark``: an all-False (E,) scratch mask)."""
-    n = ptr[faces + 1] - ptr[faces]
-    if not n.sum():
-        return np.zeros(0, np.int64)
-    rows = np.repeat(ptr[faces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
-    mark[ids[rows]] = True
-    out = np.flatnonzero(mark)
-    mark[out] = False
-    return out
-
-
 def _select_mrf(
     visibility: VisibilityLike,
     *,
@@ -267,6 +247,7 @@ def _select_mrf(
         return labels
     w = float(smoothness)
     rng = np.random.default_rng(seed)
+    labels = labels.astype(np.int32)  # half the bytes for the moves' gathers (returned as int64)
     cur = np.zeros(n_faces)  # data cost of every face's current label
     for v in range(n_views):
         sl = e.view(v)
@@ -350,7 +331,7 @@ def _select_mrf(
         logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
         if changed == 0:
             break
-    return labels
+    return labels.astype(np.int64)
 
 
 #: name -> ``fn(visibility, *, seed, **options) -> (F,) int64`` (written out; :func:`register_selection` adds more)
