@@ -324,7 +324,7 @@ def _statistics(visibility: Any, images: Sequence[np.ndarray], indptr: np.ndarra
         mg, mc = _view_means(img, tri, gmi=gmi, colour=colour or lab)
         del img
         if gmi:
-            out_g[a:b] = mg * np.asarray(area[a:b], dtype=np.float64)
+            out_g[a:b] = mg * np.nan_to_num(np.asarray(area[a:b], dtype=np.float64), nan=0.0)
         if colour or lab:
             mc = mc.astype(np.float32)
             if colour:
@@ -470,26 +470,25 @@ def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, da
         raise InputError(f"{len(images)} images given for {visibility.n_views} views")
     t = time.perf_counter()
     indptr, faces, area, cos = visibility.usable_entries()
-    area64 = np.nan_to_num(np.asarray(area, dtype=np.float64), nan=0.0)
     median = outlier_removal == "median"
-    st = (_statistics(visibility, images, indptr, faces, area64, gmi=data_term == "gmi",
+    st = (_statistics(visibility, images, indptr, faces, area, gmi=data_term == "gmi",
                       colour=outlier_removal != "none" and not median, lab=median) if need else None)
     if data_term == "gmi":
         quality = st.gmi
-    elif data_term == "area-cos":
-        quality = area64 * np.clip(np.nan_to_num(np.asarray(cos, dtype=np.float64)), 0.0, 1.0)
     else:
-        quality = area64
+        quality = np.nan_to_num(np.asarray(area, dtype=np.float64), nan=0.0)
+        if data_term == "area-cos":
+            quality *= np.clip(np.nan_to_num(np.asarray(cos, dtype=np.float64)), 0.0, 1.0)
     stats: dict[str, Any] = {"data_term": data_term, "outlier_removal": outlier_removal}
     if outlier_removal != "none":
         weight, ost = photometric_outliers(faces, st.colour, method=outlier_removal, lab=st.lab)
         del st
         stats.update(ost)
-        quality = quality * weight
+        quality *= weight
         keep = weight > 0
         if not keep.all():
-            view = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(view[keep], minlength=len(indptr) - 1))]).astype(np.int64)
+            kept_before = np.concatenate([[0], np.cumsum(keep)])
+            indptr = kept_before[indptr]  # the kept incidences before each view's first
             faces, area, cos, quality = faces[keep], area[keep], cos[keep], quality[keep]
         logger.info("outlier removal (%s): %d of %d faces tested, %d views dropped on %d faces", outlier_removal,
                     ost["faces_tested"], visibility.n_faces, ost["incidences_dropped"], ost["faces_with_outliers"])

@@ -89,7 +89,7 @@ class _Entries:
 
     indptr: np.ndarray  # (V+1,) int64
     faces: np.ndarray  # (nnz,) int64, ascending within a view
-    area: np.ndarray  # (nnz,) float64
+    area: np.ndarray  # (nnz,) float64 (as given when ``quality`` is: unused then)
     cos_angle: np.ndarray | None  # (nnz,) float64
     n_views: int
     n_faces: int
@@ -103,9 +103,10 @@ def _entries(visibility: VisibilityLike, *, cos: bool = False) -> _Entries:
     """The usable incidences of a visibility (:class:`~o3d_seqcc.visibility.Visibility`'s sparse records, or the
     scored ones of :class:`~o3d_seqcc.texturing.data_costs.ScoredVisibility` with their quality)."""
     indptr, faces, area, cos_angle = visibility.usable_entries()
-    return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
+    quality = getattr(visibility, "entry_quality", None)
+    return _Entries(indptr, faces.astype(np.int64), area if quality is not None else area.astype(np.float64),
                     cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces),
-                    getattr(visibility, "entry_quality", None))
+                    quality)
 
 
 def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
@@ -173,10 +174,15 @@ def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
     all incidences (Waechter et al.), so detailed faces get strong data terms and pick their
     sharpest photo while plain ones follow the smoothness.
     """
-    q = np.maximum(_quality(e, data_term), 0.0)
+    q = _quality(e, data_term)  # a new array: the steps below work in place
+    np.maximum(q, 0.0, out=q)
     if data_term == "gmi":
         ref = float(np.percentile(q, 99.5)) if len(q) else 1.0
-        return GMI_COST * (1.0 - np.minimum(1.0, q / max(ref, 1e-12)))
+        q /= max(ref, 1e-12)
+        np.minimum(q, 1.0, out=q)
+        np.subtract(1.0, q, out=q)
+        q *= GMI_COST
+        return q
     qmax = np.zeros(e.n_faces)
     np.maximum.at(qmax, e.faces, q)
     qm = qmax[e.faces]
