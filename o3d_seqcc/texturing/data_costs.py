@@ -1,4 +1,4 @@
-"""How much a photo shows of a face: the data term of the view selection, photometric outliers (issue 19).
+"""How much a photo shows of a face: the data term of the view selection (issue 19).
 
 After mvs-texturing's ``calculate_data_costs`` (Waechter et al. 2014), on the (colour-corrected)
 photos and the sparse usable (view, face) incidences of a
@@ -7,17 +7,14 @@ photos and the sparse usable (view, face) incidences of a
 - :func:`face_view_statistics`: per incidence, the **GMI** (gradient magnitude integrated over
   the face's projection: the mean Sobel magnitude of the photo's luminance at the pixel centres
   inside the projected triangle, times its area in px^2; a face covering no pixel centre reads
-  the magnitude at its centroid) and the face's mean colour in the photo. One pass over the views,
-  each photo read once; the sums over a triangle are differences of row-wise cumulative sums
-  along its scanline spans (:func:`~o3d_seqcc.texturing.bake.row_spans`), so the cost is the
-  number of projected rows, not pixels;
-- :func:`photometric_outliers`: per face, the views whose mean colour is far from the
-  consensus of the others, so that a pedestrian or a car the mesh does not hold, seen in one or
-  two photos, does not texture the wall behind it: ``"median"`` (robust: the distance to the
-  per-channel median of the face's CIE Lab colours) or texrecon's ``--outlier_removal`` (an
-  iterated multivariate Gaussian of the faces' YCbCr colours; ``"gauss-clamping"`` drops the
-  views below its rejection threshold, ``"gauss-damping"`` scales their quality by the
-  Gaussian). Vectorised over all faces at once (segment sums and sorts over the incidences);
+  the magnitude at its centroid) and the face's mean colour in the photo. One task per view on
+  local threads, each photo read once; the sums over a triangle are exact integer sums of a
+  row-wise cumulative sum along its scanline spans (the pixels of
+  :func:`~o3d_seqcc.texturing.bake.row_spans`), one channel at a time, so the cost is the number
+  of projected rows, not pixels;
+- the photometric outliers (:mod:`~o3d_seqcc.texturing.outliers`): per face, the views whose mean
+  colour is far from the consensus of the others (the CIE Lab of the colours is converted in the
+  view's task);
 - :class:`ScoredVisibility`: a visibility whose usable incidences carry that quality and lack
   the outliers, what the selection methods read (:mod:`~o3d_seqcc.texturing.selection`).
 
@@ -29,13 +26,13 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
 from ..errors import InputError
-from ..imaging.arrays import img_as_float, img_as_uint8, rgb_to_lab, sample_bilinear
-from .bake import row_spans
+from ..imaging.arrays import img_as_float, img_as_uint8, sample_bilinear
+from .outliers import colour_lab, photometric_outliers
 from .settings import DATA_TERMS, OUTLIER_REMOVALS, TextureSettings
 
 __all__ = ["DATA_TERMS", "OUTLIER_REMOVALS", "ScoredVisibility", "face_view_statistics", "gradient_magnitude",
@@ -44,20 +41,38 @@ __all__ = ["DATA_TERMS", "OUTLIER_REMOVALS", "ScoredVisibility", "face_view_stat
 logger = logging.getLogger(__name__)
 
 
-#: texrecon's constants: rejection threshold of the unnormalised Gaussian, covariance below which
-#: the iteration stops, iterations, fewest inliers for a face to be tested
-GAUSS_REJECTION = 6e-3
-MIN_COVARIANCE = 5e-4
-OUTLIER_ITERATIONS = 10
-MIN_INLIERS = 4
-#: gauss-damping widens the final Gaussian by 1 / this (texrecon's 0.2)
-DAMPING_FACTOR = 0.2
-#: "median": a view's colour of a face is an outlier beyond this CIE Lab distance from the median of its views ...
-MEDIAN_MIN_DELTA_E = 20.0
-#: ... and beyond this many times the face's median distance
-MEDIAN_MAD_FACTOR = 3.0
 #: integer scale of the channels summed exactly in int32 (values in [0, 6) -> < 2^16 per pixel)
 _QUANT = 10000.0
+#: scanline spans (rows of projected triangles) handled per step by the data costs
+SPAN_ROWS = 1 << 19
+#: rows of a photo converted to float and grey at a time
+GREY_ROWS = 256
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """(H, W) float32 luminance (OpenCV's RGB -> grey) of an RGB image, float32 in [0, 1] or any dtype."""
+    import cv2
+
+    img = np.asarray(image)
+    img = img if img.dtype == np.float32 else img_as_float(img).astype(np.float32)
+    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+
+
+def _sobel_magnitude(grey: np.ndarray) -> np.ndarray:
+    """(H, W) float32 Sobel gradient magnitude over 8 of a float32 grey image (see :func:`gradient_magnitude`)."""
+    import cv2
+
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    # numpy, not cv2.magnitude: OpenCV's SIMD rows fuse the multiply-add and its scalar row tails do not, and its
+    # threads split the rows differently from call to call: the last bit of a few texels changed between runs
+    np.multiply(gx, gx, out=gx)
+    np.multiply(gy, gy, out=gy)
+    gx += gy
+    del gy
+    np.sqrt(gx, out=gx)
+    gx /= np.float32(8.0)
+    return gx
 
 
 def gradient_magnitude(image: np.ndarray) -> np.ndarray:
@@ -66,43 +81,262 @@ def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     The 3 x 3 Sobel operator (borders replicated) over 8 (its weights' sum), so a step of height
     1 reads about 1.
     """
+    return _sobel_magnitude(_grey(image))
+
+
+#: every uint8 level as a float32 in [0, 1] (level / 255 in float32, as the data costs scale their photos)
+_UNIT = np.arange(256, dtype=np.float32) / np.float32(255.0)
+
+
+def _level_magnitude(image: np.ndarray) -> np.ndarray:
+    """:func:`gradient_magnitude` of an (H, W, 3) uint8 photo as ``image.astype(float32) / 255``, without that
+    float copy: the grey image is made :data:`GREY_ROWS` rows at a time (OpenCV converts row by row, so the
+    pixels are the whole image's), and freed before the Sobel magnitude is complete."""
     import cv2
 
-    img = np.asarray(image)
-    img = img if img.dtype == np.float32 else img_as_float(img).astype(np.float32)
-    grey = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
-    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    # numpy, not cv2.magnitude: OpenCV's SIMD rows fuse the multiply-add and its scalar row tails do not, and its
-    # threads split the rows differently from call to call: the last bit of a few texels changed between runs
-    mag = np.multiply(gx, gx)
-    mag += gy * gy
-    return np.sqrt(mag, out=mag) / np.float32(8.0)
+    grey = np.empty(image.shape[:2], dtype=np.float32)
+    for r in range(0, len(grey), GREY_ROWS):
+        f = image[r:r + GREY_ROWS].astype(np.float32)
+        f /= np.float32(255.0)
+        cv2.cvtColor(f, cv2.COLOR_RGB2GRAY, dst=grey[r:r + GREY_ROWS])
+    return _sobel_magnitude(grey)
 
 
-def _triangle_means(tri: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of (H, W, C) float32 ``channels`` (values in [0, 6)) over the pixel centres inside each
-    (n, 3, 2) triangle, and their number; triangles covering no centre read their centroid (bilinear)."""
-    h, w, c = channels.shape
-    q = np.rint(np.clip(channels, 0.0, 6.0) * _QUANT).astype(np.int32)
-    cum = np.zeros((h, w + 1, c), dtype=np.int32)
-    np.cumsum(q, axis=1, out=cum[:, 1:])  # row sums <= 6e4 x W: exact for W < 35k
+def _sample_levels(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(n, 3) ``sample_bilinear(image.astype(float32) / 255, x, y)`` of an (H, W, 3) uint8 photo, from its levels
+    (:data:`_UNIT`): the same arithmetic at the four corners, without the float copy of the photo."""
+    h, w = image.shape[:2]
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, w - 1.0)
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, h - 1.0)
+    x0, y0 = np.floor(x).astype(np.intp), np.floor(y).astype(np.intp)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+
+    def at(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        return _UNIT[image[yy, xx]].astype(np.float64)
+
+    top = at(y0, x0) * (1.0 - fx) + at(y0, x1) * fx
+    bot = at(y1, x0) * (1.0 - fx) + at(y1, x1) * fx
+    return top * (1.0 - fy) + bot * fy
+
+
+class _Spans(NamedTuple):
+    """The pixel centres inside k triangles, one scanline span per (triangle, row).
+
+    ``tri`` (t,) the triangles with rows, in the order of their spans; ``offsets`` (t,) the first
+    span of each; ``start`` / ``stop`` (rows,) int64 flat indices ``y * (W + 1) + x`` of a span's
+    ends in a row-wise cumulative sum with a leading zero column (``start == stop``: empty);
+    ``count`` (k,) int64 pixel centres per triangle.
+    """
+
+    tri: np.ndarray
+    offsets: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+    count: np.ndarray
+
+
+def _spans(tri: np.ndarray, height: int, width: int, *, chunk: int = SPAN_ROWS) -> _Spans:
+    """The spans of :func:`~o3d_seqcc.texturing.bake.row_spans` (the same arithmetic per row: the same
+    pixels), without its barycentric rows. Each edge of a triangle bounds its rows on the left
+    (``A_i > 1e-15``), on the right (``A_i < -1e-15``) or is flat (a test per row); the triangles
+    are handled in groups of one pattern of the three, so that a row computes its own bounds only.
+
+    Parameters
+    ----------
+    tri : (k, 3, 2) float64
+        Triangles in pixel coordinates (x right, y down, centres at integers).
+    height, width : int
+        Image size (spans are clipped to it).
+    chunk : int
+        Rows handled per step (bounds the per-row float64 temporaries).
+    """
+    p = np.asarray(tri, dtype=np.float64)
+    ax, ay, bx, by, cx, cy = p[:, 0, 0], p[:, 0, 1], p[:, 1, 0], p[:, 1, 1], p[:, 2, 0], p[:, 2, 1]
+    d = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)  # bake._area2 / _edge_functions, term for term
+    ok = np.abs(d) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, d, 1.0), 0.0)
+    A = ((by - cy) * inv, (cy - ay) * inv, (ay - by) * inv)
+    B = ((cx - bx) * inv, (ax - cx) * inv, (bx - ax) * inv)
+    C = ((bx * cy - cx * by) * inv, (cx * ay - ax * cy) * inv, (ax * by - bx * ay) * inv)
+    y0 = np.maximum(np.ceil(np.minimum(np.minimum(ay, by), cy) - 1e-9), 0).astype(np.int64)
+    y1 = np.minimum(np.floor(np.maximum(np.maximum(ay, by), cy) + 1e-9), height - 1).astype(np.int64)
+    xlo = np.maximum(np.minimum(np.minimum(ax, bx), cx) - 1e-9, 0.0)
+    xhi = np.minimum(np.maximum(np.maximum(ax, bx), cx) + 1e-9, width - 1.0)
+    ny = np.where(ok, np.maximum(y1 - y0 + 1, 0), 0)
+    has = np.flatnonzero(ny > 0)
+    # the kind of every edge: 0 left bound, 1 right bound, 2 flat, 3 NaN (no effect, as in row_spans)
+    code = np.zeros(len(has), dtype=np.uint8)
+    for j in range(3):
+        a = A[j][has]
+        kind = (a < -1e-15).view(np.uint8) + 2 * (np.abs(a) <= 1e-15).view(np.uint8) + 3 * np.isnan(a).view(np.uint8)
+        code += kind << (2 * j)
+    order = has[np.argsort(code, kind="stable")]  # the triangles grouped by the kinds of their edges (a radix sort)
+    bounds = np.cumsum(np.bincount(code, minlength=64))
+    total = int(ny[has].sum())
+    tri_of, offsets, count_of = np.empty(len(has), np.int64), np.empty(len(has), np.int64), np.empty(len(has), np.int64)
+    start, stop = np.empty(total, np.int64), np.empty(total, np.int64)
+    eps = 1e-7
+    done = done_t = 0
+    for cd in np.flatnonzero(np.diff(bounds, prepend=0)).tolist():
+        group = order[(bounds[cd - 1] if cd else 0):bounds[cd]]
+        kinds = [(cd >> (2 * j)) & 3 for j in range(3)]
+        ends = np.cumsum(ny[group])
+        lo_t = 0
+        while lo_t < len(group):
+            base = ends[lo_t - 1] if lo_t else 0
+            hi_t = max(int(np.searchsorted(ends, base + chunk, side="right")), lo_t + 1)
+            t = group[lo_t:hi_t]
+            nyt = ny[t]
+            first = np.cumsum(nyt) - nyt
+            rows = int(first[-1] + nyt[-1])
+            k = np.zeros(rows, dtype=np.intp)  # the triangle (in t) of every span: gathers, not np.repeat (slow)
+            k[first[1:]] = 1
+            np.cumsum(k, out=k)
+            yi = (y0[t] - first)[k] + np.arange(rows)  # the row of every span
+            y = yi.astype(np.float64)
+
+            def r(j: int) -> np.ndarray:
+                return B[j][t][k] * y + C[j][t][k]
+
+            lo = xlo[t][k]
+            hi = xhi[t][k]
+            for j in range(3):
+                if kinds[j] < 2:
+                    bound = (-eps - r(j)) / A[j][t][k]
+                    (np.maximum if kinds[j] == 0 else np.minimum)(lo if kinds[j] == 0 else hi, bound,
+                                                                   out=lo if kinds[j] == 0 else hi)
+            xs = np.ceil(lo).astype(np.int64)
+            n = np.floor(hi).astype(np.int64) - xs + 1
+            np.maximum(n, 0, out=n)
+            for j in range(3):
+                if kinds[j] == 2:
+                    n[r(j) < -eps] = 0
+            xs[n == 0] = 0
+            sl = slice(done, done + rows)
+            np.multiply(yi, width + 1, out=start[sl])
+            start[sl] += xs
+            np.add(start[sl], n, out=stop[sl])
+            ts = slice(done_t, done_t + len(t))
+            tri_of[ts], offsets[ts], count_of[ts] = t, first + done, np.add.reduceat(n, first)
+            done += rows
+            done_t += len(t)
+            lo_t = hi_t
+    count = np.zeros(len(p), dtype=np.int64)
+    count[tri_of] = count_of
+    return _Spans(tri_of, offsets, start, stop, count)
+
+
+def _span_sums(spans: _Spans, q: np.ndarray) -> np.ndarray:
+    """(k,) int64 exact sums of an (H, W) int32 channel over the spans of every triangle."""
+    h, w = q.shape
+    cum = np.zeros((h, w + 1), dtype=np.int32)
+    np.cumsum(q, axis=1, dtype=np.int32, out=cum[:, 1:])  # row sums <= 6e4 x W: exact for W < 35k
     del q
-    sums = np.zeros((len(tri), c), dtype=np.int64)
-    count = np.zeros(len(tri), dtype=np.int64)
-    for k, y, xs, n, _, _ in row_spans(tri, h, w):
-        m = n > 0
-        k, yy, x0, x1 = k[m], y[m].astype(np.int64), xs[m], xs[m] + n[m]
-        seg = cum[yy, x1].astype(np.int64) - cum[yy, x0]  # (rows, C) exact sums over the spans
-        for j in range(c):
-            sums[:, j] += np.bincount(k, weights=seg[:, j], minlength=len(tri)).astype(np.int64)
-        count += np.bincount(k, weights=n[m], minlength=len(tri)).astype(np.int64)
-    mean = sums / (_QUANT * np.maximum(count, 1))[:, None]
-    empty = count == 0
-    if empty.any():
-        cen = tri[empty].mean(axis=1)
-        mean[empty] = sample_bilinear(channels, cen[:, 0], cen[:, 1]).reshape(-1, c)
-    return mean, count
+    cum = cum.reshape(-1)
+    out = np.zeros(len(spans.count), dtype=np.int64)
+    if len(spans.tri):
+        seg = cum[spans.stop] - cum[spans.start]
+        out[spans.tri] = np.add.reduceat(seg, spans.offsets, dtype=np.int64)
+    return out
+
+
+def _quantise(x: np.ndarray) -> np.ndarray:
+    """float32 values clipped to [0, 6] as int32 multiples of 1 / :data:`_QUANT` (rounded); ``x`` is overwritten."""
+    np.clip(x, 0.0, 6.0, out=x)
+    x *= _QUANT
+    np.rint(x, out=x)
+    return x.astype(np.int32)
+
+
+#: the quantised value of every uint8 level
+_LEVELS = _quantise(_UNIT.copy())
+
+
+def _view_means(image: np.ndarray, tri: np.ndarray, *, gmi: bool, colour: bool
+                ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Mean gradient magnitude and mean RGB of one photo over the pixel centres inside each projected triangle.
+
+    Parameters
+    ----------
+    image : (H, W, 3) uint8
+    tri : (k, 3, 2) float64
+        The triangles in pixel coordinates.
+
+    Returns
+    -------
+    gmi : (k,) float64 or None
+        Mean Sobel magnitude of the photo as float32 / 255 (:func:`gradient_magnitude`).
+    colour : (k, 3) float64 or None
+        Mean RGB in [0, 1].
+
+    Every channel is quantised to int32 multiples of 1 / :data:`_QUANT` and summed exactly along the
+    spans (:func:`_span_sums`); a triangle covering no pixel centre reads its centroid (bilinear). One
+    (H, W) channel and its cumulative sum are alive at a time; the photo is never copied as float.
+    """
+    h, w = image.shape[:2]
+    spans = _spans(tri, h, w)
+    denom = _QUANT * np.maximum(spans.count, 1)
+    empty = spans.count == 0
+    cen = tri[empty].mean(axis=1) if empty.any() else None
+    g = c = None
+    if gmi:
+        mag = _level_magnitude(image)
+        at_centre = sample_bilinear(mag, cen[:, 0], cen[:, 1]) if cen is not None else None
+        g = _span_sums(spans, _quantise(mag)) / denom
+        del mag
+        if cen is not None:
+            g[empty] = at_centre
+    if colour:
+        import cv2
+
+        c = np.empty((len(tri), 3))
+        for j in range(3):  # OpenCV's table lookup: a third of numpy's gather from the strided channel
+            c[:, j] = _span_sums(spans, cv2.LUT(np.ascontiguousarray(image[..., j]), _LEVELS)) / denom
+        if cen is not None:
+            c[empty] = _sample_levels(image, cen[:, 0], cen[:, 1])
+    return g, c
+
+
+class _Statistics(NamedTuple):
+    gmi: np.ndarray | None  # (nnz,) float64
+    colour: np.ndarray | None  # (nnz, 3) float32
+    lab: np.ndarray | None  # (nnz, 3) float64
+
+
+def _statistics(visibility: Any, images: Sequence[np.ndarray], indptr: np.ndarray, faces: np.ndarray,
+                area: np.ndarray, *, gmi: bool, colour: bool, lab: bool) -> _Statistics:
+    """:func:`face_view_statistics`, plus the CIE Lab of the mean colours (:func:`~o3d_seqcc.texturing.outliers.colour_lab`, per view in the tasks)."""
+    from .._shared.parallel import LocalExecutor
+
+    nnz = len(faces)
+    out_g = np.zeros(nnz) if gmi else None
+    out_c = np.zeros((nnz, 3), dtype=np.float32) if colour else None
+    out_l = np.zeros((nnz, 3)) if lab else None
+    mesh_faces = np.asarray(visibility.mesh.faces)
+
+    def one(v: int) -> None:
+        # each view writes its own slice of the outputs: the same numbers for any number of threads
+        a, b = int(indptr[v]), int(indptr[v + 1])
+        img = img_as_uint8(images[v], where=f"image of view {v}")
+        fs = np.asarray(faces[a:b], dtype=np.int64)
+        tri = visibility.vertex_uv(v, mesh_faces[fs].reshape(-1)).reshape(-1, 3, 2).astype(np.float64)
+        mg, mc = _view_means(img, tri, gmi=gmi, colour=colour or lab)
+        del img
+        if gmi:
+            out_g[a:b] = mg * np.nan_to_num(np.asarray(area[a:b], dtype=np.float64), nan=0.0)
+        if colour or lab:
+            mc = mc.astype(np.float32)
+            if colour:
+                out_c[a:b] = mc
+            if lab:
+                out_l[a:b] = colour_lab(mc)
+
+    # one task per view with incidences, on local threads (OpenCV's filters and numpy's sums, gathers and sorts
+    # release the GIL): the images are read by the tasks, at most one per thread at a time
+    views = [v for v in range(len(indptr) - 1) if indptr[v + 1] > indptr[v]]
+    LocalExecutor().map(one, views, desc="data costs", unit="view")
+    return _Statistics(out_g, out_c, out_l)
 
 
 def face_view_statistics(visibility: Any, images: Sequence[np.ndarray], indptr: np.ndarray, faces: np.ndarray,
@@ -129,183 +363,8 @@ def face_view_statistics(visibility: Any, images: Sequence[np.ndarray], indptr: 
     colour : (nnz, 3) float32 or None
         Mean RGB in [0, 1].
     """
-    from .._shared.parallel import LocalExecutor
-
-    nnz = len(faces)
-    out_g = np.zeros(nnz) if gmi else None
-    out_c = np.zeros((nnz, 3), dtype=np.float32) if colour else None
-    mesh_faces = np.asarray(visibility.mesh.faces)
-
-    def one(v: int) -> None:
-        # each view writes its own slice of the outputs: the same numbers for any number of threads
-        a, b = int(indptr[v]), int(indptr[v + 1])
-        img = img_as_uint8(images[v], where=f"image of view {v}").astype(np.float32) / np.float32(255.0)
-        fs = np.asarray(faces[a:b], dtype=np.int64)
-        tri = visibility.vertex_uv(v, mesh_faces[fs].reshape(-1)).reshape(-1, 3, 2).astype(np.float64)
-        parts = ([gradient_magnitude(img)[..., None]] if gmi else []) + ([img[..., :3]] if colour else [])
-        del img
-        mean, _ = _triangle_means(tri, np.concatenate(parts, axis=2) if len(parts) > 1 else parts[0])
-        if gmi:
-            out_g[a:b] = mean[:, 0] * np.asarray(area[a:b], dtype=np.float64)
-        if colour:
-            out_c[a:b] = mean[:, 1 if gmi else 0:]
-
-    # one task per view with incidences, on local threads (OpenCV's filters and numpy's cumulative sums and
-    # bincounts release the GIL): the images are read by the tasks, at most one per thread at a time
-    views = [v for v in range(len(indptr) - 1) if indptr[v + 1] > indptr[v]]
-    LocalExecutor().map(one, views, desc="data costs", unit="view")
-    return out_g, out_c
-
-
-def _rgb_to_ycbcr(rgb: np.ndarray) -> np.ndarray:
-    """(n, 3) RGB in [0, 1] -> YCbCr (ITU-R BT.601, full range, in [0, 1])."""
-    m = np.array([[0.299, 0.587, 0.114], [-0.168736, -0.331264, 0.5], [0.5, -0.418688, -0.081312]])
-    return rgb @ m.T + [0.0, 0.5, 0.5]
-
-
-def _moments(x: np.ndarray, w: np.ndarray, seg: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted sums per segment of (m, 3) ``x`` -> (n, 3) and of its outer products -> (n, 3, 3)."""
-    s1 = np.stack([np.bincount(seg, weights=x[:, i] * w, minlength=n) for i in range(3)], axis=1)
-    s2 = np.zeros((n, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            s2[:, i, j] = s2[:, j, i] = np.bincount(seg, weights=x[:, i] * x[:, j] * w, minlength=n)
-    return s1, s2
-
-
-def _mahalanobis2(d: np.ndarray, inv: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """``d_k^T inv[seg_k] d_k`` for (m, 3) ``d`` without an (m, 3, 3) gather."""
-    out = np.zeros(len(d))
-    for i in range(3):
-        for j in range(3):
-            out += inv[seg, i, j] * d[:, i] * d[:, j]
-    return out
-
-
-def _median_outliers(seg: np.ndarray, lab: np.ndarray, nf: int) -> np.ndarray:
-    """Incidences whose Lab colour is more than max(:data:`MEDIAN_MIN_DELTA_E`, :data:`MEDIAN_MAD_FACTOR`
-    x the face's median distance) from the per-channel median of the face's views (faces of >= 3 views)."""
-    m = len(seg)
-    order = np.lexsort((np.arange(m), seg))
-    s = seg[order]
-    start = np.r_[0, np.flatnonzero(s[1:] != s[:-1]) + 1]
-    n = np.diff(np.r_[start, m])
-    med = np.zeros((nf, 3))
-    for c in range(3):  # per-channel medians: sort within faces, average the middle one or two
-        o = np.lexsort((lab[order, c], s))
-        vals = lab[order, c][o]
-        lo = start + (n - 1) // 2
-        hi = start + n // 2
-        med[s[start], c] = 0.5 * (vals[lo] + vals[hi])
-    d = np.linalg.norm(lab - med[seg], axis=1)
-    dmed = np.zeros(nf)
-    o = np.lexsort((d[order], s))
-    dv = d[order][o]
-    dmed[s[start]] = 0.5 * (dv[start + (n - 1) // 2] + dv[start + n // 2])
-    many = np.zeros(nf, dtype=bool)
-    many[s[start]] = n >= 3
-    return many[seg] & (d > np.maximum(MEDIAN_MIN_DELTA_E, MEDIAN_MAD_FACTOR * dmed[seg]))
-
-
-def photometric_outliers(face: np.ndarray, colour: np.ndarray, *, method: str = "median"
-                         ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Per-incidence weight from the consensus of each face's colours (texrecon's outlier removal).
-
-    ``"median"``: per face seen by at least 3 views, the per-channel median of their CIE Lab
-    colours is the consensus, and a view is dropped when its colour is more than
-    :data:`MEDIAN_MIN_DELTA_E` from it and more than :data:`MEDIAN_MAD_FACTOR` times the face's
-    median distance (robust: a passer-by in 2 of 5 photos is dropped, where the Gaussian of all
-    five is wide enough to keep it).
-
-    texrecon's ``"gauss-clamping"`` / ``"gauss-damping"``: per face with at least
-    :data:`MIN_INLIERS` views: starting from all of them, the inliers'
-    mean and covariance (YCbCr) define an unnormalised Gaussian; the views where it is at least
-    :data:`GAUSS_REJECTION` are the next inliers; :data:`OUTLIER_ITERATIONS` times, stopping
-    early when fewer than :data:`MIN_INLIERS` remain or the covariance is singular (the face is
-    left as it is) or when every covariance entry is below :data:`MIN_COVARIANCE` (the
-    non-inliers are dropped). Then ``"gauss-clamping"`` drops the views below the threshold and
-    ``"gauss-damping"`` multiplies each view's quality by the Gaussian widened by
-    1 / :data:`DAMPING_FACTOR`. The sample covariance bounds a view's squared Mahalanobis
-    distance by (n - 1)^2 / n, so with fewer than 12 views (threshold 2 ln(1 / 6e-3) = 10.2) not
-    even a single outlier is found: the reason for ``"median"``.
-
-    Parameters
-    ----------
-    face : (m,) int
-        Face of every incidence.
-    colour : (m, 3) float
-        Mean RGB in [0, 1] of the face in the incidence's view.
-    method : {"median", "gauss-clamping", "gauss-damping"}
-
-    Returns
-    -------
-    weight : (m,) float64
-        0 = drop, else the factor on the quality (1 for clamping's inliers).
-    stats : dict
-        ``faces_tested``, ``incidences_dropped``, ``faces_with_outliers``.
-    """
-    if method not in OUTLIER_REMOVALS or method == "none":
-        raise ValueError(f"unknown outlier removal {method!r}; valid: "
-                         f"{', '.join(repr(m) for m in OUTLIER_REMOVALS if m != 'none')}")
-    face = np.asarray(face, dtype=np.int64)
-    m = len(face)
-    weight = np.ones(m)
-    if m == 0:
-        return weight, {"faces_tested": 0, "incidences_dropped": 0, "faces_with_outliers": 0}
-    _, seg = np.unique(face, return_inverse=True)
-    seg = seg.reshape(-1)
-    nf = int(seg.max()) + 1
-    if method == "median":
-        drop = _median_outliers(seg, rgb_to_lab(np.clip(np.asarray(colour, dtype=np.float64), 0.0, 1.0)), nf)
-        weight[drop] = 0.0
-        return weight, {"faces_tested": int(np.count_nonzero(np.bincount(seg, minlength=nf) >= 3)),
-                        "incidences_dropped": int(drop.sum()),
-                        "faces_with_outliers": int(len(np.unique(seg[drop]))) if drop.any() else 0}
-    x = _rgb_to_ycbcr(np.asarray(colour, dtype=np.float64))
-    inl = np.ones(m, dtype=bool)
-    active = np.bincount(seg, minlength=nf) >= MIN_INLIERS  # faces still iterating
-    tested = active.copy()
-    final = np.zeros(nf, dtype=bool)  # faces whose result is decided by the final Gaussian
-    drop = np.zeros(m, dtype=bool)
-    mean = np.zeros((nf, 3))
-    inv = np.zeros((nf, 3, 3))
-    for it in range(OUTLIER_ITERATIONS):
-        w = (inl & active[seg]).astype(np.float64)
-        cnt = np.bincount(seg, weights=w, minlength=nf)
-        active &= cnt >= MIN_INLIERS
-        if not active.any():
-            break
-        s1, s2 = _moments(x, w, seg, nf)
-        n_ = np.maximum(cnt, 2.0)
-        mu = s1 / n_[:, None]
-        cov = (s2 - n_[:, None, None] * mu[:, :, None] * mu[:, None, :]) / (n_ - 1.0)[:, None, None]
-        small = active & (np.abs(cov).reshape(nf, 9).max(axis=1) < MIN_COVARIANCE)
-        drop |= small[seg] & ~inl  # converged: keep only the inliers
-        active &= ~small
-        det = np.linalg.det(cov)
-        scale = np.abs(cov).reshape(nf, 9).max(axis=1)
-        singular = active & ~(np.abs(det) > 1e-12 * np.maximum(scale, 1e-300) ** 3)
-        active &= ~singular
-        ok = np.flatnonzero(active)
-        mean[ok] = mu[ok]
-        inv[ok] = np.linalg.inv(cov[ok])
-        g = np.exp(-0.5 * _mahalanobis2(x - mean[seg], inv, seg))
-        upd = active[seg]
-        inl = np.where(upd, g >= GAUSS_REJECTION, inl)
-        if it == OUTLIER_ITERATIONS - 1:
-            final = active.copy()
-    if final.any():
-        sel = final[seg]
-        factor = 1.0 if method == "gauss-clamping" else DAMPING_FACTOR
-        g = np.exp(-0.5 * factor * _mahalanobis2(x[sel] - mean[seg[sel]], inv, seg[sel]))
-        if method == "gauss-clamping":
-            drop[np.flatnonzero(sel)[g < GAUSS_REJECTION]] = True
-        else:
-            weight[sel] = g
-    weight[drop] = 0.0
-    stats = {"faces_tested": int(tested.sum()), "incidences_dropped": int(drop.sum()),
-             "faces_with_outliers": int(len(np.unique(seg[drop]))) if drop.any() else 0}
-    return weight, stats
+    st = _statistics(visibility, images, indptr, faces, area, gmi=gmi, colour=colour, lab=False)
+    return st.gmi, st.colour
 
 
 @dataclass(frozen=True, eq=False)
@@ -411,24 +470,25 @@ def score_visibility(visibility: Any, images: Sequence[np.ndarray] | None, *, da
         raise InputError(f"{len(images)} images given for {visibility.n_views} views")
     t = time.perf_counter()
     indptr, faces, area, cos = visibility.usable_entries()
-    area64 = np.nan_to_num(np.asarray(area, dtype=np.float64), nan=0.0)
-    gmi, colour = (face_view_statistics(visibility, images, indptr, faces, area64, gmi=data_term == "gmi",
-                                        colour=outlier_removal != "none") if need else (None, None))
+    median = outlier_removal == "median"
+    st = (_statistics(visibility, images, indptr, faces, area, gmi=data_term == "gmi",
+                      colour=outlier_removal != "none" and not median, lab=median) if need else None)
     if data_term == "gmi":
-        quality = gmi
-    elif data_term == "area-cos":
-        quality = area64 * np.clip(np.nan_to_num(np.asarray(cos, dtype=np.float64)), 0.0, 1.0)
+        quality = st.gmi
     else:
-        quality = area64
+        quality = np.nan_to_num(np.asarray(area, dtype=np.float64), nan=0.0)
+        if data_term == "area-cos":
+            quality *= np.clip(np.nan_to_num(np.asarray(cos, dtype=np.float64)), 0.0, 1.0)
     stats: dict[str, Any] = {"data_term": data_term, "outlier_removal": outlier_removal}
     if outlier_removal != "none":
-        weight, ost = photometric_outliers(faces, colour, method=outlier_removal)
+        weight, ost = photometric_outliers(faces, st.colour, method=outlier_removal, lab=st.lab)
+        del st
         stats.update(ost)
-        quality = quality * weight
+        quality *= weight
         keep = weight > 0
         if not keep.all():
-            view = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(view[keep], minlength=len(indptr) - 1))]).astype(np.int64)
+            kept_before = np.concatenate([[0], np.cumsum(keep)])
+            indptr = kept_before[indptr]  # the kept incidences before each view's first
             faces, area, cos, quality = faces[keep], area[keep], cos[keep], quality[keep]
         logger.info("outlier removal (%s): %d of %d faces tested, %d views dropped on %d faces", outlier_removal,
                     ost["faces_tested"], visibility.n_faces, ost["incidences_dropped"], ost["faces_with_outliers"])

@@ -89,7 +89,7 @@ class _Entries:
 
     indptr: np.ndarray  # (V+1,) int64
     faces: np.ndarray  # (nnz,) int64, ascending within a view
-    area: np.ndarray  # (nnz,) float64
+    area: np.ndarray  # (nnz,) float64 (as given when ``quality`` is: unused then)
     cos_angle: np.ndarray | None  # (nnz,) float64
     n_views: int
     n_faces: int
@@ -103,9 +103,10 @@ def _entries(visibility: VisibilityLike, *, cos: bool = False) -> _Entries:
     """The usable incidences of a visibility (:class:`~o3d_seqcc.visibility.Visibility`'s sparse records, or the
     scored ones of :class:`~o3d_seqcc.texturing.data_costs.ScoredVisibility` with their quality)."""
     indptr, faces, area, cos_angle = visibility.usable_entries()
-    return _Entries(indptr, faces.astype(np.int64), area.astype(np.float64),
+    quality = getattr(visibility, "entry_quality", None)
+    return _Entries(indptr, faces.astype(np.int64), area if quality is not None else area.astype(np.float64),
                     cos_angle.astype(np.float64) if cos else None, int(visibility.n_views), int(visibility.n_faces),
-                    getattr(visibility, "entry_quality", None))
+                    quality)
 
 
 def _select_random(visibility: VisibilityLike, *, seed: int = 0) -> np.ndarray:
@@ -173,36 +174,21 @@ def _mrf_data_cost(e: _Entries, data_term: str, max_cost: float) -> np.ndarray:
     all incidences (Waechter et al.), so detailed faces get strong data terms and pick their
     sharpest photo while plain ones follow the smoothness.
     """
-    q = np.maximum(_quality(e, data_term), 0.0)
+    q = _quality(e, data_term)  # a new array: the steps below work in place
+    np.maximum(q, 0.0, out=q)
     if data_term == "gmi":
         ref = float(np.percentile(q, 99.5)) if len(q) else 1.0
-        return GMI_COST * (1.0 - np.minimum(1.0, q / max(ref, 1e-12)))
+        q /= max(ref, 1e-12)
+        np.minimum(q, 1.0, out=q)
+        np.subtract(1.0, q, out=q)
+        q *= GMI_COST
+        return q
     qmax = np.zeros(e.n_faces)
     np.maximum.at(qmax, e.faces, q)
     qm = qmax[e.faces]
     with np.errstate(divide="ignore", invalid="ignore"):
         cost = -np.log(q / np.where(qm > 0, qm, 1.0))
     return np.clip(np.nan_to_num(cost, nan=max_cost, posinf=max_cost), 0.0, max_cost)
-
-
-def _incident(pairs: np.ndarray, n_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR (ptr, pair ids) of the pairs each face belongs to."""
-    ends = pairs.reshape(-1)
-    order = np.argsort(ends, kind="stable")
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=n_faces))]).astype(np.int64)
-    return ptr, (order // 2).astype(np.int64)
-
-
-def _gather(ptr: np.ndarray, ids: np.ndarray, faces: np.ndarray, mark: np.ndarray) -> np.ndarray:
-    """Ascending unique pair ids incident to ``faces`` (``mark``: an all-False (E,) scratch mask)."""
-    n = ptr[faces + 1] - ptr[faces]
-    if not n.sum():
-        return np.zeros(0, np.int64)
-    rows = np.repeat(ptr[faces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
-    mark[ids[rows]] = True
-    out = np.flatnonzero(mark)
-    mark[out] = False
-    return out
 
 
 def _select_mrf(
@@ -267,6 +253,7 @@ def _select_mrf(
         return labels
     w = float(smoothness)
     rng = np.random.default_rng(seed)
+    labels = labels.astype(np.int32)  # half the bytes for the moves' gathers (returned as int64)
     cur = np.zeros(n_faces)  # data cost of every face's current label
     for v in range(n_views):
         sl = e.view(v)
@@ -276,13 +263,13 @@ def _select_mrf(
     seen_pos = np.full(n_faces, -1, dtype=np.int64)
     seen_pos[seen_idx] = np.arange(len(seen_idx))
     cur_seen = cur[seen_idx]
-    n_dis = int(np.count_nonzero(labels[pairs[:, 0]] != labels[pairs[:, 1]]))
+    p0, p1 = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    n_dis = int(np.count_nonzero(labels[p0] != labels[p1]))
     energy = float(cur_seen.sum()) + w * float(n_dis)  # = sum_f D_f(l_f) + w * transitions
-    ptr, pair_ids = _incident(pairs, n_faces)
-    mark = np.zeros(len(pairs), dtype=bool)
     logger.debug("mrf: start energy %.1f, %d transitions", energy, n_dis)
     pos = np.empty(n_faces, dtype=np.int64)
     free = np.zeros(n_faces, dtype=bool)
+    flag = np.zeros(n_faces, dtype=bool)  # scratch: the faces a move switched
     for sweep in range(int(n_sweeps)):
         changed = 0
         for alpha in rng.permutation(n_views):
@@ -296,59 +283,61 @@ def _select_mrf(
             d_alpha = data[sl][keep]
             pos[fidx] = np.arange(nfree)
             free[fidx] = True
-            lp_all = labels
-            inc = pairs[_gather(ptr, pair_ids, fidx, mark)]  # every pair with a free face, in pair order
+            f0, f1 = free[p0], free[p1]
+            inc = np.flatnonzero(f0 | f1)  # every pair with a free face, in pair order
+            q0, q1, f0, f1 = p0[inc], p1[inc], f0[inc], f1[inc]
+            l0, l1 = labels[q0], labels[q1]
+            i0, i1 = pos[q0], pos[q1]  # positions (meaningless where the face is not free)
+            diff = l0 != l1
             # unary costs of keeping (x=0) / switching to alpha (x=1)
-            cost0 = cur[fidx].copy()
+            cost0 = cur[fidx]
             cost1 = d_alpha.copy()
-            fp, fq = free[inc[:, 0]], free[inc[:, 1]]
             # both free: Potts expansion term, submodular
-            both = inc[fp & fq]
-            bi, bj = pos[both[:, 0]], pos[both[:, 1]]
-            A = w * (lp_all[both[:, 0]] != lp_all[both[:, 1]])
+            both = f0 & f1
+            bi, bj = i0[both], i1[both]
+            A = w * diff[both]
             # E = A + (C-A) x_i + (D-C) x_j + (B+C-A-D)(1-x_i) x_j with B = C = w, D = 0
             cost1 += np.bincount(bi, weights=w - A, minlength=nfree)
             cost1 -= w * np.bincount(bj, minlength=nfree)
             cost0_add = np.zeros(nfree)
             # one free, one fixed: unary on the free one
-            for a_col, b_col, mask in ((0, 1, fp & ~fq), (1, 0, fq & ~fp)):
-                pp = inc[mask]
-                i = pos[pp[:, a_col]]
-                lf = lp_all[pp[:, a_col]]
-                lo = lp_all[pp[:, b_col]]
-                cost0_add += w * np.bincount(i, weights=(lf != lo).astype(np.float64), minlength=nfree)
-                cost1 += w * np.bincount(i, weights=(lo != alpha).astype(np.float64), minlength=nfree)
+            for i, lo, mask in ((i0, l1, f0 > f1), (i1, l0, f1 > f0)):
+                im = i[mask]
+                cost0_add += w * np.bincount(im, weights=diff[mask].astype(np.float64), minlength=nfree)
+                cost1 += w * np.bincount(im, weights=(lo[mask] != alpha).astype(np.float64), minlength=nfree)
             cost0 += cost0_add
             free[fidx] = False
-            g = maxflow.Graph[float](nfree, len(both))
-            nodes = g.add_nodes(nfree)
-            if len(both):
-                g.add_edges(nodes[bi], nodes[bj], 2.0 * w - A, np.zeros(len(both)))
+            g = maxflow.Graph[float](nfree, len(bi))
+            nodes = g.add_nodes(nfree)  # 0 .. nfree - 1: the positions themselves
+            if len(bi):
+                g.add_edges(bi, bj, 2.0 * w - A, np.zeros(len(bi)))
             mn = np.minimum(cost0, cost1)
-            g.add_grid_tedges(np.asarray(nodes), cost1 - mn, cost0 - mn)
+            g.add_grid_tedges(nodes, cost1 - mn, cost0 - mn)
             g.maxflow()
-            switch = np.asarray(g.get_grid_segments(np.asarray(nodes)), dtype=bool)
+            switch = np.asarray(g.get_grid_segments(nodes), dtype=bool)
             if switch.any():
                 sw = fidx[switch]
-                touched = pairs[_gather(ptr, pair_ids, sw, mark)]
-                before = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
-                old, old_cost = labels[sw].copy(), cur_seen[seen_pos[sw]]
-                labels[sw] = alpha
+                flag[sw] = True
+                s0, s1 = flag[q0], flag[q1]
+                flag[sw] = False
+                touched = s0 | s1  # the pairs of a switched face: their labels before and after
+                before = int(np.count_nonzero(l0[touched] != l1[touched]))
+                after = int(np.count_nonzero(np.where(s0, alpha, l0)[touched] != np.where(s1, alpha, l1)[touched]))
+                old_cost = cur_seen[seen_pos[sw]]
                 cur_seen[seen_pos[sw]] = d_alpha[switch]
-                after = int(np.count_nonzero(labels[touched[:, 0]] != labels[touched[:, 1]]))
                 n_dis_new = n_dis - before + after
                 e_new = float(cur_seen.sum()) + w * float(n_dis_new)  # the full sum: the same float as before
                 if e_new < energy - 1e-9:
                     energy, n_dis = e_new, n_dis_new
+                    labels[sw] = alpha
                     cur[sw] = d_alpha[switch]
                     changed += int(switch.sum())
                 else:
-                    labels[sw] = old
                     cur_seen[seen_pos[sw]] = old_cost
         logger.debug("mrf: sweep %d, %d faces changed, energy %.1f", sweep, changed, energy)
         if changed == 0:
             break
-    return labels
+    return labels.astype(np.int64)
 
 
 #: name -> ``fn(visibility, *, seed, **options) -> (F,) int64`` (written out; :func:`register_selection` adds more)

@@ -16,13 +16,17 @@ import pytest
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.geometry.meshops import face_adjacency
 from o3d_seqcc.texturing import bake_texture, select_views
+from o3d_seqcc.texturing.bake import row_spans
 from o3d_seqcc.texturing.data_costs import (
-    _triangle_means,
+    _level_magnitude,
+    _sample_levels,
+    _spans,
+    _view_means,
     face_view_statistics,
     gradient_magnitude,
-    photometric_outliers,
     score_visibility,
 )
+from o3d_seqcc.texturing.outliers import _median_outliers, colour_lab, photometric_outliers
 from o3d_seqcc.texturing.textured_mesh import sample_texture
 
 from test_texturing import RAW, camera, grid_mesh, project
@@ -47,29 +51,89 @@ def _photo(cam) -> np.ndarray:
     return np.clip(np.rint(col), 0, 255).astype(np.uint8).reshape(h, w, 3)
 
 
-def test_triangle_means_match_brute_force(rng):
-    """The mean of a channel over the pixel centres inside random triangles (row-wise cumulative sums
-    along scanline spans) is the brute-force mean; a triangle covering no pixel centre reads its centroid."""
-    h, w = 40, 50
-    ch = rng.uniform(0, 5, size=(h, w, 2)).astype(np.float32)
-    tri = rng.uniform([-2, -2], [w + 1, h + 1], size=(30, 3, 2))
+def _random_triangles(rng, h: int, w: int, n: int) -> np.ndarray:
+    """Triangles of every kind over an h x w image: large, tiny, off the image, with a horizontal edge,
+    degenerate, one between pixel centres (first)."""
+    tri = rng.uniform([-2, -2], [w + 1, h + 1], size=(n, 3, 2))
     tri[0] = [[10.1, 10.1], [10.4, 10.2], [10.2, 10.45]]  # between pixel centres
-    mean, count = _triangle_means(tri, ch)
+    small = tri[1:n // 2, :1] + rng.uniform(-1.5, 1.5, size=(n // 2 - 1, 3, 2))
+    tri[1:n // 2] = small
+    tri[n // 2, :, 1] = [7.0, 7.0, 12.5]  # a horizontal edge on a row of centres
+    tri[n // 2 + 1] = [[3.0, 3.0], [6.0, 6.0], [9.0, 9.0]]  # degenerate
+    tri[n // 2 + 2] = [[4.0, 2.0], [4.0, 9.0], [11.0, 2.0]]  # edges through pixel centres
+    return tri
+
+
+def test_spans_are_the_bake_row_spans(rng):
+    """The data costs' spans are the bake's scanline spans (the same pixels of every triangle and row)."""
+    h, w = 40, 50
+    tri = _random_triangles(rng, h, w, 400)
+    want = {}
+    for k, y, xs, n, _, _ in row_spans(tri, h, w, chunk=5000):
+        for kk, yy, x0, nn in zip(k, y.astype(int), xs, n):
+            if nn > 0:
+                want[(kk, yy)] = (x0, nn)
+    sp = _spans(tri, h, w, chunk=64)  # many steps
+    got = {}
+    rows_of = np.repeat(sp.tri, np.diff(np.r_[sp.offsets, len(sp.start)]))
+    for kk, a, b in zip(rows_of, sp.start, sp.stop):
+        if b > a:
+            got[(kk, a // (w + 1))] = (a % (w + 1), b - a)
+    assert got == want and len(want) > 1000
+    assert np.array_equal(sp.count, np.bincount([k for k, _ in want], weights=[n for _, n in want.values()],
+                                                minlength=len(tri)).astype(np.int64))
+
+
+def test_view_means_match_brute_force(rng):
+    """The mean gradient magnitude and colour over the pixel centres inside random triangles (exact sums of
+    quantised channels along scanline spans) are the brute-force means; a triangle covering no pixel centre
+    reads its centroid (bilinear)."""
+    h, w = 40, 50
+    img = rng.integers(0, 256, size=(h, w, 3), dtype=np.uint8)
+    tri = _random_triangles(rng, h, w, 60)
+    g, c = _view_means(img, tri, gmi=True, colour=True)
+    ch = np.concatenate([gradient_magnitude(img)[..., None], img.astype(np.float32) / np.float32(255)], axis=2)
     ys, xs = np.mgrid[0:h, 0:w]
+    checked = 0
     for k in range(1, len(tri)):
-        a, b, c = tri[k]
-        d = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
-        l1 = ((xs - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (ys - a[1])) / d
+        a, b, cc = tri[k]
+        d = (b[0] - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (b[1] - a[1])
+        if abs(d) < 1e-6:
+            continue
+        l1 = ((xs - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (ys - a[1])) / d
         l2 = ((b[0] - a[0]) * (ys - a[1]) - (xs - a[0]) * (b[1] - a[1])) / d
-        inside = (l1 >= -1e-9) & (l2 >= -1e-9) & (l1 + l2 <= 1 + 1e-9)
-        assert count[k] == inside.sum()
-        if inside.any():
-            np.testing.assert_allclose(mean[k], ch[inside].mean(axis=0), atol=2e-4)
+        inside = (l1 >= 1e-6) & (l2 >= 1e-6) & (l1 + l2 <= 1 - 1e-6)
+        near = (l1 >= -1e-6) & (l2 >= -1e-6) & (l1 + l2 <= 1 + 1e-6)
+        if inside.sum() != near.sum() or not inside.any():
+            continue  # a pixel centre on an edge: the spans' tolerance decides
+        np.testing.assert_allclose(g[k], ch[inside, 0].mean(), atol=2e-4)
+        np.testing.assert_allclose(c[k], ch[inside, 1:].mean(axis=0), atol=2e-4)
+        checked += 1
+    assert checked > 10
     from o3d_seqcc.imaging.arrays import sample_bilinear
 
-    assert count[0] == 0
     c0 = tri[0].mean(axis=0)
-    np.testing.assert_allclose(mean[0], sample_bilinear(ch, c0[:1], c0[1:])[0], atol=1e-6)
+    np.testing.assert_allclose(g[0], sample_bilinear(ch[..., 0], c0[:1], c0[1:])[0], rtol=1e-12)
+    np.testing.assert_allclose(c[0], sample_bilinear(ch[..., 1:], c0[:1], c0[1:])[0], rtol=1e-12)
+
+
+def test_photo_levels_without_a_float_copy(rng, monkeypatch):
+    """The data costs never copy a photo as float: its gradient magnitude (grey made a few rows at a time) and the
+    bilinear colour at points (read through the levels' table) are those of ``photo.astype(float32) / 255``, to the
+    bit, for any number of rows per step."""
+    from o3d_seqcc.imaging.arrays import sample_bilinear
+    from o3d_seqcc.texturing import data_costs
+
+    img = rng.integers(0, 256, size=(61, 77, 3), dtype=np.uint8)
+    img[20:40, 30:50] = 255  # a step
+    f = img.astype(np.float32) / np.float32(255.0)
+    whole = gradient_magnitude(f)
+    for rows in (1, 7, 60, 256):
+        monkeypatch.setattr(data_costs, "GREY_ROWS", rows)
+        assert np.array_equal(_level_magnitude(img), whole)
+    x, y = rng.uniform(-2, 79, 500), rng.uniform(-2, 63, 500)
+    x[:3], y[:3] = [0.0, 76.0, 76.5], [0.0, 60.0, 60.9]  # the corners, clamped
+    assert np.array_equal(_sample_levels(img, x, y), sample_bilinear(f, x, y))
 
 
 def test_gradient_magnitude_of_a_step():
@@ -167,3 +231,55 @@ def test_photometric_outliers_known_answers(rng):
     assert (w == 1).all() and st["faces_tested"] == 0
     w, _ = photometric_outliers(np.zeros(8, int), eight, method="gauss-damping")
     assert (w > 0).all() and (w <= 1).all() and np.argmin(w) == 7
+
+
+def _median_outliers_by_lexsort(seg: np.ndarray, lab: np.ndarray, nf: int) -> np.ndarray:
+    """The first implementation of the median test (lexsorts over all incidences): the reference."""
+    m = len(seg)
+    order = np.lexsort((np.arange(m), seg))
+    s = seg[order]
+    start = np.r_[0, np.flatnonzero(s[1:] != s[:-1]) + 1]
+    n = np.diff(np.r_[start, m])
+    med = np.zeros((nf, 3))
+    for c in range(3):
+        vals = lab[order, c][np.lexsort((lab[order, c], s))]
+        med[s[start], c] = 0.5 * (vals[start + (n - 1) // 2] + vals[start + n // 2])
+    d = np.linalg.norm(lab - med[seg], axis=1)
+    dv = d[order][np.lexsort((d[order], s))]
+    dmed = np.zeros(nf)
+    dmed[s[start]] = 0.5 * (dv[start + (n - 1) // 2] + dv[start + n // 2])
+    many = np.zeros(nf, dtype=bool)
+    many[s[start]] = n >= 3
+    return many[seg] & (d > np.maximum(20.0, 3.0 * dmed[seg]))
+
+
+def test_median_outliers_by_blocks_are_the_lexsort_ones(rng):
+    """Faces tested in blocks of equal view counts drop exactly the incidences of the lexsort version, on
+    view-major incidences with 1 to 12 views per face, outliers and ties (repeated colours)."""
+    n_faces, n_views = 3000, 12
+    usable = rng.random((n_views, n_faces)) < rng.uniform(0.05, 0.9, size=n_faces)
+    view, face = np.nonzero(usable)  # view-major, faces ascending within a view
+    colour = rng.normal(0.5, 0.03, size=(n_faces, 3))[face] + rng.normal(0, 0.01, size=(len(face), 3))
+    odd = rng.random(len(face)) < 0.1
+    colour[odd] = rng.random((odd.sum(), 3))
+    colour[rng.random(len(face)) < 0.05] = 0.25  # ties
+    colour = np.clip(colour, 0, 1).astype(np.float32)
+    lab = colour_lab(colour)
+    want = _median_outliers_by_lexsort(face, lab, n_faces)
+    got = _median_outliers(face, lab, n_faces)
+    assert want.sum() > 100 and np.array_equal(got, want)
+    w, st = photometric_outliers(face, colour, method="median")
+    assert np.array_equal(w == 0, want) and st["incidences_dropped"] == want.sum()
+
+
+def test_lab_of_a_part_is_the_part_of_the_lab(rng):
+    """The CIE Lab of the colours, converted view by view in the data cost tasks, is the conversion of all of them
+    at once, to the bit (a part of one row is converted as two rows)."""
+    from o3d_seqcc.imaging.arrays import rgb_to_lab
+
+    colour = rng.random((20000, 3)).astype(np.float32)
+    whole = rgb_to_lab(np.clip(colour.astype(np.float64), 0.0, 1.0))
+    single = [rgb_to_lab(np.clip(colour[a:a + 1].astype(np.float64), 0.0, 1.0)) for a in range(50)]
+    assert any(not np.array_equal(x, whole[a:a + 1]) for a, x in enumerate(single))  # what the padding is for
+    for a, b in [*((a, a + 1) for a in range(50)), (0, 2), (7, 10), (100, 5100), (3, 20000)]:
+        assert np.array_equal(colour_lab(colour[a:b]), whole[a:b]), (a, b)
