@@ -37,8 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import INTERPOLATIONS, delta_e_2000, dtype_scale, img_as_float, sample_colors
-from ..mappings.pairs import thinned
-from .._shared.parallel import LocalExecutor
+from ..mappings.pairs import thinned_many
 
 __all__ = [
     "PSNR_CAP_DB",
@@ -324,19 +323,21 @@ def thin_indices(n: int, k: int | None) -> np.ndarray | None:
 def _pair_items(mappings, keys, *, min_n: int, max_per_pair: int | None, skipped: list):
     """Yield ``(a, b, n, uv_a, uv_b)`` per pair with the (thinned) mappings; pairs below min_n go to ``skipped``.
 
-    A generator: the pairs of lazy mappings are built one at a time, so scoring every mapping
-    of a large scene never holds them all.
+    A generator: lazy pairs are built in batches of thinned pairs (:func:`~o3d_seqcc.mappings.pairs.thinned_many`),
+    or one at a time when all their mappings are scored, so scoring every mapping of a large scene never
+    holds them all.
     """
     if max_per_pair is not None and int(max_per_pair) < 1:
         raise ValueError(f"max_per_pair must be >= 1 or None, got {max_per_pair!r}")
     lo = max(int(min_n), 1)
 
-    def one(key):  # only the mappings scored are built
-        return key, *thinned(mappings.pairs, key, lambda n: thin_indices(n, max_per_pair) if n >= lo
-                             else np.zeros(0, np.int64))
+    def pick(n: int) -> np.ndarray | None:  # only the mappings scored are built
+        return thin_indices(n, max_per_pair) if n >= lo else np.zeros(0, np.int64)
 
-    # pairs built on local threads (numpy releases the GIL), yielded in order, a few ahead of the scoring
-    for (a, b), n, pm in LocalExecutor().imap(one, list(keys), desc="pairs", unit="pair"):
+    # pairs built in vectorised batches on local threads (numpy releases the GIL), yielded in order
+    keys = list(keys)
+    batch = None if max_per_pair is not None else 1
+    for (a, b), (n, pm) in zip(keys, thinned_many(mappings.pairs, keys, pick, batch_pairs=batch)):
         if n < lo:
             skipped.append((a, b))
             continue

