@@ -97,6 +97,37 @@ def test_colour_samples_from_uint8_are_the_float_samples():
                 assert np.array_equal(got, want), (dtype, interp)
 
 
+def test_bilinear_samples_from_the_flat_image_are_the_indexed_ones():
+    """sample_bilinear gathers the four neighbours from the flattened image and multiplies them as float64 in
+    the products: bit for bit the 2-D indexed, converted-first samples, any dtype, channels, query shape."""
+    from o3d_seqcc.imaging.arrays import sample_bilinear
+
+    def indexed(img, x, y):  # as first written
+        h, w = img.shape[:2]
+        x = np.clip(np.asarray(x, dtype=np.float64), 0.0, w - 1.0)
+        y = np.clip(np.asarray(y, dtype=np.float64), 0.0, h - 1.0)
+        x0, y0 = np.floor(x).astype(np.intp), np.floor(y).astype(np.intp)
+        x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+        fx, fy = x - x0, y - y0
+        if img.ndim == 3:
+            fx, fy = fx[..., None], fy[..., None]
+        top = img[y0, x0].astype(np.float64) * (1.0 - fx) + img[y0, x1].astype(np.float64) * fx
+        bot = img[y1, x0].astype(np.float64) * (1.0 - fx) + img[y1, x1].astype(np.float64) * fx
+        return top * (1.0 - fy) + bot * fy
+
+    rng = np.random.default_rng(4)
+    for dtype in (np.uint8, np.uint16, np.float32, np.float64):
+        for shape in ((31, 47, 3), (31, 47), (9, 6, 4), (1, 1, 3)):
+            img = (rng.random(shape) * (1000 if dtype == np.uint16 else 255 if dtype == np.uint8 else 1)).astype(dtype)
+            for image in (img, img[::2, ::-1]):
+                h, w = image.shape[:2]
+                for q in ((500,), (40, 9), ()):
+                    x, y = rng.uniform(-2, w + 1, q), rng.uniform(-2, h + 1, q)
+                    want, got = indexed(image, x, y), sample_bilinear(image, x, y)
+                    assert got.dtype == want.dtype == np.float64 and got.shape == want.shape
+                    assert np.array_equal(got, want), (dtype, shape, q)
+
+
 def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch, tmp_path):
     """raycast casts rows in chunks (memory): every array is bit for bit the one-chunk cast."""
     from o3d_seqcc.evaluation import render
