@@ -450,9 +450,10 @@ def _adjust_channel(
     ew = np.ones(E)
 
     def evaluate(phi_, u_):
-        k0, fr = _knot_index(u_[r_lat], uk)
-        g = phi_[r_view, k0] * (1.0 - fr) + phi_[r_view, k0 + 1] * fr
-        return g - r_meas, k0, fr, (phi_[r_view, k0 + 1] - phi_[r_view, k0]) / (uk[k0 + 1] - uk[k0])
+        k0, fr = _knot_index(np.take(u_, r_lat), uk)
+        at = r_view * K + k0  # phi_[r_view, k0], phi_[r_view, k0 + 1] from the flat array
+        p0, p1 = np.take(phi_, at), np.take(phi_, at + 1)
+        return p0 * (1.0 - fr) + p1 * fr - r_meas, k0, fr, (p1 - p0) / (uk[k0 + 1] - uk[k0])
 
     def cost(r, phi_, w_):  # r: evaluate(phi_, u_)[0]
         d = phi_[free] - phi_start
@@ -495,11 +496,11 @@ def _adjust_channel(
         hpu = w[:, None] * vals * sl[:, None]
         cols4 = np.concatenate([idx[first], np.where(two[:, None], idx[second], -1)], axis=1)  # (J, 4)
         vals4 = np.where(cols4 >= 0, np.concatenate([hpu[first], hpu[second]], axis=1), 0.0)
-        ok4 = cols4 >= 0
-        pair_ok = ok4[:, :, None] & ok4[:, None, :]
-        pair_idx = (cols4[:, :, None] * U + cols4[:, None, :])[pair_ok]
-        pair_lat = np.nonzero(pair_ok)[0]  # the latent of each (column, column) entry
-        pair_vv = (vals4[:, :, None] * vals4[:, None, :])[pair_ok]
+        # the fixed columns (-1) sent to a spare column U, dropped after the sums: every entry of a column
+        # pair is summed in the same order as over the valid entries alone, without masks
+        c4 = np.where(cols4 >= 0, cols4, U)
+        pair_idx = (c4[:, :, None] * (U + 1) + c4[:, None, :]).reshape(-1)
+        pair_vv = vals4[:, :, None] * vals4[:, None, :]  # (J, 4, 4)
         h0u = float(np.median(Huu[Huu > 0])) if np.any(Huu > 0) else 1.0
         dpp = Hpp[:: U + 1].copy()
         h0p = float(np.median(dpp[dpp > 0])) if np.any(dpp > 0) else 1.0
@@ -510,10 +511,10 @@ def _adjust_channel(
             # otherwise jump) and knots; the latents are eliminated by their Schur complement
             # S = H_pp - H_pu diag(1 / H_uu) H_up, which couples the views sharing latents (edges)
             inv = 1.0 / (Huu + mu * (Huu + h0u))
-            sw = pair_vv * inv[pair_lat]  # (vals4 vals4^T)[ok] * inv, entry by entry
-            S = Hpp - np.bincount(pair_idx, weights=sw, minlength=U * U)
+            sw = (pair_vv * inv[:, None, None]).reshape(-1)  # vals4 vals4^T * inv, entry by entry
+            S = Hpp - np.bincount(pair_idx, weights=sw, minlength=(U + 1) ** 2).reshape(U + 1, U + 1)[:U, :U].reshape(-1)
             S[:: U + 1] += mu * (dpp + h0p)
-            rhs = -gp + np.bincount(cols4[ok4], weights=(vals4 * (inv * gu)[:, None])[ok4], minlength=U)
+            rhs = -gp + np.bincount(c4.reshape(-1), weights=(vals4 * (inv * gu)[:, None]).reshape(-1), minlength=U + 1)[:U]
             S = S.reshape(U, U)
             try:
                 dphi = cho_solve(cho_factor(S, check_finite=False), rhs, check_finite=False)
