@@ -473,20 +473,15 @@ class PairSource:
         lev = lev[order].astype(np.int64)
         return k[order], lev, np.concatenate([[0], np.cumsum(self.count[lev])])
 
-    def thinned_batch(self, keys: list[Pair], pick) -> list[tuple[int, PairMapping]]:
-        """:meth:`thinned` of several pairs in vectorised passes: each pair sized from its two views'
-        levels, the picked mappings of up to :data:`BATCH_MAPPINGS` of them computed together (one
-        projection per view) by the same arithmetic as :meth:`build` (bit for bit its values)."""
-        out: list = []
-        parts: list[tuple] = []  # (a, b, n, face, level, point) of the pairs not built yet
-        mark, held, pending = None, None, 0
-
-        def flush() -> None:
-            out.extend((p[2], pm) for p, pm in zip(parts, self._build_located(parts)))
-            parts.clear()
-
+    def locate_batch(self, keys: list[Pair], pick) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Where the picked mappings of several pairs are, without computing them: per pair ``(n, face (s,),
+        point (s,))`` int32, mapping ``i`` being row ``point[i]`` of the barycentric table (vertex mode: vertex
+        ``point[i]``) on face ``face[i]``, a face's mappings consecutive (:meth:`points` gives their positions).
+        Each pair is sized from its two views' levels (``keys`` sorted by their first view share its levels)."""
+        out = []
+        mark, held = None, None
         for a, b in keys:
-            if held != a:  # view a's levels on the faces, for all its pairs (keys sorted by a: set once per a)
+            if held != a:  # view a's levels on the faces, for all its pairs
                 if mark is None:
                     mark = np.full(self.vis.n_faces, -1, dtype=self._level_dtype)
                 elif held is not None:
@@ -495,8 +490,41 @@ class PairSource:
                 mark[ia] = la
                 held = a
             k, lev = self._pair_levels(a, b, mark)
-            parts.append((a, b) + locate(k, lev, self.count, pick, sort=self.mode != "vertices"))
-            pending += len(parts[-1][3])
+            n, face, level, point = locate(k, lev, self.count, pick, sort=self.mode != "vertices")
+            row = point if self.mode == "vertices" else self.start[level] + point
+            out.append((n, face.astype(np.int32), row.astype(np.int32)))
+        return out
+
+    def points(self, views: np.ndarray, bounds: np.ndarray, face: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """(M, 2) float64 pixel positions of located mappings (:meth:`locate_batch`) in runs: run ``p``, the
+        mappings ``bounds[p]:bounds[p + 1]``, in view ``views[p]`` (bit for bit :meth:`build`'s values)."""
+        face = np.asarray(face, np.int64)
+        point = np.asarray(point, np.int64)
+        faces = np.asarray(self.vis.mesh.faces)
+        if self.mode != "vertices":
+            return project_points(self.vis.vertex_projection, faces, views, bounds, face,
+                                  [np.take(col, point) for col in self._table_columns])
+        out = np.empty((len(face), 2))
+        view_of = np.repeat(np.asarray(views, np.int64), np.diff(bounds))
+        for v in np.unique(view_of):
+            rows = np.flatnonzero(view_of == v)
+            out[rows] = self.vis.vertex_projection(int(v), faces[face[rows], point[rows]])[0]
+        return out
+
+    def thinned_batch(self, keys: list[Pair], pick) -> list[tuple[int, PairMapping]]:
+        """:meth:`thinned` of several pairs in vectorised passes (:meth:`locate_batch`, then the mappings of
+        up to :data:`BATCH_MAPPINGS` of them computed together by :meth:`points`)."""
+        out: list = []
+        parts: list[tuple] = []  # (a, b, n, face, point) of the pairs not built yet
+        pending = 0
+
+        def flush() -> None:
+            out.extend(zip((p[2] for p in parts), self._build_located(parts)))
+            parts.clear()
+
+        for (a, b), located in zip(keys, self.locate_batch(keys, pick)):
+            parts.append((a, b) + located)
+            pending += len(located[1])
             if pending >= BATCH_MAPPINGS:
                 flush()
                 pending = 0
@@ -535,33 +563,19 @@ class PairSource:
             return self._build_all(a, b, plan)
         sel = np.arange(first[-1]) if index is None else index
         f = np.searchsorted(first, sel, side="right") - 1  # the face of every mapping
-        return self._build_located([(a, b, int(first[-1]), k[f], lev[f], sel - first[f])])[0]
+        row = sel - first[f] if self.mode == "vertices" else self.start[lev[f]] + sel - first[f]
+        return self._build_located([(a, b, int(first[-1]), k[f], row)])[0]
 
     def _build_located(self, parts: list[tuple]) -> list[PairMapping]:
-        """The picked mappings of one or several pairs (:meth:`thinned_batch`'s ``(a, b, n, face, level,
-        point)``: mapping ``i`` is point ``point[i]`` of its level's pattern in face ``face[i]``), all at once
-        (:func:`~o3d_seqcc.mappings.sampling.project_points`)."""
+        """The located mappings (:meth:`locate_batch`) of one or several pairs ``(a, b, n, face, point)``, all
+        at once (:meth:`points` in each pair's two views)."""
         size = np.array([len(p[3]) for p in parts], dtype=np.int64)
         bounds = np.concatenate([[0], np.cumsum(size)])
         face = np.concatenate([p[3] for p in parts]).astype(np.int64, copy=False)
-        point = np.concatenate([p[5] for p in parts]).astype(np.int64, copy=False)
-        views = np.array([(p[0], p[1]) for p in parts], dtype=np.int64).reshape(-1, 2)
-        faces = np.asarray(self.vis.mesh.faces)
-        if self.mode == "vertices":
-            vid = faces[face, point]
-            pair_of = np.repeat(np.arange(len(parts)), size)
-            uv = [np.empty((len(face), 2), np.float32) for _ in range(2)]
-            for side in range(2):
-                for v in np.unique(views[:, side]):
-                    rows = np.flatnonzero(views[pair_of, side] == v)
-                    uv[side][rows] = self.vis.vertex_projection(int(v), vid[rows])[0]
-        else:
-            row = self.start[np.concatenate([p[4] for p in parts])] + point  # the table row of every mapping
-            uv = project_points(self.vis.vertex_projection, faces, views, bounds, face,
-                                [np.take(col, row) for col in self._table_columns])
-            W32 = self._table32[row]
-        return [PairMapping(p[0], p[1], uv[0][s0:s1], uv[1][s0:s1], face[s0:s1],
-                            None if self.mode == "vertices" else W32[s0:s1])
+        point = np.concatenate([p[4] for p in parts]).astype(np.int64, copy=False)
+        uv = [self.points(np.array([p[side] for p in parts], np.int64), bounds, face, point) for side in (0, 1)]
+        W32 = None if self.mode == "vertices" else self._table32[point]
+        return [PairMapping(p[0], p[1], uv[0][s0:s1], uv[1][s0:s1], face[s0:s1], None if W32 is None else W32[s0:s1])
                 for p, s0, s1 in zip(parts, bounds[:-1], bounds[1:])]
 
     def _build_all(self, a: int, b: int, plan: tuple) -> PairMapping:

@@ -4,9 +4,9 @@ A pair's mappings are, face after face, the points of a barycentric pattern (:fu
 subdivision level, the face's 3 vertices and the centroids of its ``L^2`` sub-triangles); the faces are
 grouped by level, ascending within a level. :func:`locate` finds the face and pattern point of picked
 mappings from the faces and levels alone (each level's faces are consecutive and hold the same number of
-mappings), and :func:`project_points` computes their pixel positions in the two views, perspective-
-correctly, for the picked mappings of many pairs in one vectorised pass (each face's corners projected
-once per pair and view). :class:`~o3d_seqcc.mappings.pairs.PairSource` builds pairs with them.
+mappings), and :func:`project_points` computes their pixel positions, perspective-correctly, for the
+picked mappings of many pairs in one vectorised pass (each face's corners projected once per pair and
+view). :class:`~o3d_seqcc.mappings.pairs.PairSource` builds pairs with them.
 """
 
 from __future__ import annotations
@@ -106,8 +106,8 @@ def locate(k: np.ndarray, lev: np.ndarray, count: np.ndarray, pick: Callable, *,
 
 
 def project_points(project: Callable, faces: np.ndarray, views: np.ndarray, bounds: np.ndarray, face: np.ndarray,
-                   weights: list[np.ndarray]) -> list[np.ndarray]:
-    """Pixel positions of points on faces in two views each, perspective-correctly, for several pairs at once.
+                   weights: list[np.ndarray]) -> np.ndarray:
+    """Pixel positions of points on faces, perspective-correctly, for several runs of points at once.
 
     Parameters
     ----------
@@ -116,57 +116,52 @@ def project_points(project: Callable, faces: np.ndarray, views: np.ndarray, boun
         and depths in view ``v`` (:meth:`o3d_seqcc.visibility.Visibility.vertex_projection`).
     faces : (F, 3) int
         The mesh's faces.
-    views : (P, 2) int
-        The two views of each pair.
+    views : (P,) int
+        The view of each run (a pair's points in one of its views).
     bounds : (P + 1,) int
-        Pair ``p``'s points are ``bounds[p]:bounds[p + 1]``.
-    face : (M,) int64
-        Face of every point.
+        Run ``p``'s points are ``bounds[p]:bounds[p + 1]``.
+    face : (M,) int
+        Face of every point (a face's points consecutive within a run: its corners projected once).
     weights : three (M,) float64
         Barycentric weights of every point.
 
     Returns
     -------
-    list of two (M, 2) float64
-        Positions in each pair's first and second view: the projection of ``sum_i w_i X_i``,
-        ``sum_i w_i z_i uv_i / sum_i w_i z_i``, every sum from 0 in the order i = 0, 1, 2 (the float64
-        values of the float32 projections), so a point's position does not depend on the others computed
-        with it. Each face's corners are projected once per pair and view, one ``project`` call per view.
+    (M, 2) float64
+        The projection of ``sum_i w_i X_i``, ``sum_i w_i z_i uv_i / sum_i w_i z_i``, every sum from 0 in the
+        order i = 0, 1, 2 (the float64 values of the float32 projections), so a point's position does not
+        depend on the others computed with it. One ``project`` call per view.
     """
     if len(face) == 0:
-        return [np.zeros((0, 2)), np.zeros((0, 2))]
+        return np.zeros((0, 2))
     size = np.diff(bounds)
-    pair_of = np.repeat(np.arange(len(views)), size)
-    new = np.ones(len(face), dtype=bool)  # a face's first point in its pair
+    new = np.ones(len(face), dtype=bool)  # a face's first point in its run
     new[1:] = face[1:] != face[:-1]
     new[bounds[:-1][size > 0]] = True
     first = np.flatnonzero(new)
     inv = np.cumsum(new) - 1
-    out = []
-    for side in range(2):
-        # the faces grouped by the view they are projected in (a slice each), then gathered per point
-        view_u = views[pair_of[first], side]
-        order = np.argsort(view_u, kind="stable")
-        cut = np.flatnonzero(np.diff(view_u[order])) + 1
-        block = np.empty((9, len(first)))  # per face and corner j: z_j u_j, z_j v_j, z_j
-        for s0, s1 in zip(np.concatenate([[0], cut]), np.concatenate([cut, [len(order)]])):
-            uv, z = project(int(view_u[order[s0]]), faces[face[first[order[s0:s1]]]].reshape(-1))
-            uv, z = uv.reshape(-1, 3, 2), z.reshape(-1, 3).astype(np.float64)
-            for j in range(3):
-                np.multiply(uv[:, j, 0], z[:, j], out=block[3 * j, s0:s1])
-                np.multiply(uv[:, j, 1], z[:, j], out=block[3 * j + 1, s0:s1])
-                block[3 * j + 2, s0:s1] = z[:, j]
-        at = np.empty(len(order), np.int64)
-        at[order] = np.arange(len(order))
-        g = np.take(block, at[inv], axis=1)  # (9, M)
-        sums = np.empty((3, len(face)))  # sum(w z u), sum(w z v), sum(w z)
-        for c in range(3):
-            np.multiply(weights[0], g[c], out=sums[c])
-            sums[c] += 0.0  # as 0 + w_0 ...: the same signed zeros
-            sums[c] += weights[1] * g[3 + c]
-            sums[c] += weights[2] * g[6 + c]
-        uv_out = np.empty((len(face), 2))
-        np.divide(sums[0], sums[2], out=uv_out[:, 0])
-        np.divide(sums[1], sums[2], out=uv_out[:, 1])
-        out.append(uv_out)
+    # the faces grouped by the view they are projected in (a slice each), then gathered per point
+    view_u = np.repeat(np.asarray(views, np.int64), size)[first]
+    order = np.argsort(view_u, kind="stable")
+    cut = np.flatnonzero(np.diff(view_u[order])) + 1
+    block = np.empty((9, len(first)))  # per face and corner j: z_j u_j, z_j v_j, z_j
+    for s0, s1 in zip(np.concatenate([[0], cut]), np.concatenate([cut, [len(order)]])):
+        uv, z = project(int(view_u[order[s0]]), faces[face[first[order[s0:s1]]]].reshape(-1))
+        uv, z = uv.reshape(-1, 3, 2), z.reshape(-1, 3).astype(np.float64)
+        for j in range(3):
+            np.multiply(uv[:, j, 0], z[:, j], out=block[3 * j, s0:s1])
+            np.multiply(uv[:, j, 1], z[:, j], out=block[3 * j + 1, s0:s1])
+            block[3 * j + 2, s0:s1] = z[:, j]
+    at = np.empty(len(order), np.int64)
+    at[order] = np.arange(len(order))
+    g = np.take(block, at[inv], axis=1)  # (9, M)
+    sums = np.empty((3, len(face)))  # sum(w z u), sum(w z v), sum(w z)
+    for c in range(3):
+        np.multiply(weights[0], g[c], out=sums[c])
+        sums[c] += 0.0  # as 0 + w_0 ...: the same signed zeros
+        sums[c] += weights[1] * g[3 + c]
+        sums[c] += weights[2] * g[6 + c]
+    out = np.empty((len(face), 2))
+    np.divide(sums[0], sums[2], out=out[:, 0])
+    np.divide(sums[1], sums[2], out=out[:, 1])
     return out

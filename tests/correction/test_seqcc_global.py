@@ -349,3 +349,32 @@ def test_edge_summary_rows_are_the_column_summary(n):
     for m in (1, 2, 5, 2000):
         x = rng.integers(0, 9, (3, m)).astype(np.float32) / np.float32(7)
         assert np.array_equal(_median_rows(x), np.median(x, axis=1))
+
+
+def test_edge_observations_from_located_lazy_pairs_are_those_of_the_built_pairs(tmp_path):
+    """Lazy pairs: each edge's picked mappings are located and projected inside its views' sampling tasks;
+    the summaries are bit for bit those of the same pairs built in full and thinned (max_mappings strided
+    picks, all mappings, -j 1 and 2)."""
+    import joblib
+
+    import o3d_seqcc as sc
+    from o3d_seqcc.imaging.sequences import FloatImages, scene_photos
+    from o3d_seqcc.mappings.compute import compute_mappings
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    lazy = compute_mappings(scene)
+    built = lazy.materialize()
+    edges = sorted(lazy.pairs)[::-1]  # any order, either direction
+    edges = [(b, a) if i % 2 else (a, b) for i, (a, b) in enumerate(edges)]
+    images = FloatImages(scene_photos(scene.views))
+    for cap in (300, None):
+        obs = []
+        for maps, jobs in ((built, 1), (lazy, 1), (lazy, 2)):
+            ctx = CorrectionContext(images=images, mappings=maps, reference=0, t_npm=1)
+            with joblib.parallel_config(n_jobs=jobs):
+                obs.append(edge_observations(ctx, edges, levels=16, max_mappings=cap))
+        assert obs[0].n.max() > (cap or 0) // 2
+        for o in obs[1:]:
+            for name in ("a", "b", "qa", "qb", "n"):
+                assert np.array_equal(getattr(o, name), getattr(obs[0], name)), (cap, name)

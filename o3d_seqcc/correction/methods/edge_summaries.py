@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import InputError
-from ...mappings.pairs import thinned_many
+from ...mappings.pairs import BATCH_PAIRS, LazyPairs, thinned_many
 from ..._shared.parallel import LocalExecutor, current as current_executor
 
 __all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
@@ -146,16 +146,26 @@ def _sample_image(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.nda
     return _sample_planes(planes, table, img.shape[:2], uv, interpolation)
 
 
-def _sample_view_task(item: tuple[int, np.ndarray], images, interpolation: str) -> np.ndarray:
+def _sample_view_task(item: tuple[int, list], images, interpolation: str, source=None) -> np.ndarray:
     """One view's task: read its image once and sample it at every position its edges need -> (3, n) float32.
 
-    ``images`` is the context's float sequence; over uint8 / uint16 photos
+    ``item`` is ``(v, parts)``, one part per edge in order: its (m, 2) positions in ``v``, or, with ``source``
+    (the lazy pairs' :class:`~o3d_seqcc.mappings.pairs.PairSource`), where its picked mappings lie (``(face,
+    point)``, :meth:`~o3d_seqcc.mappings.pairs.PairSource.locate_batch`), projected here into ``v``
+    (:meth:`~o3d_seqcc.mappings.pairs.PairSource.points`: the same values), so no edge's positions are held
+    beyond its view's task. ``images`` is the context's float sequence; over uint8 / uint16 photos
     (:class:`~o3d_seqcc.imaging.sequences.FloatImages`) the photo itself is sampled (the same values, no float
     copy of the photo).
     """
     from ...imaging.sequences import FloatImages
 
-    v, uv = item
+    v, parts = item
+    if source is None:
+        uv = np.concatenate(parts) if parts else np.zeros((0, 2))
+    else:
+        bounds = np.concatenate([[0], np.cumsum([len(face) for face, _ in parts])]).astype(np.int64)
+        uv = source.points(np.full(len(parts), v, np.int64), bounds, np.concatenate([f for f, _ in parts]),
+                           np.concatenate([p for _, p in parts]))
     if isinstance(images, FloatImages):
         raw = np.asarray(images.images[v])
         if raw.dtype in (np.uint8, np.uint16) and raw.ndim == 3 and raw.shape[2] == 3:
@@ -258,34 +268,46 @@ def edge_observations(
             return None
         return (np.arange(int(max_mappings)) * (n / float(max_mappings))).astype(np.int64)
 
-    # the positions each edge samples in its two views: only the strided max_mappings of a pair built, the pairs
-    # in vectorised batches on local threads (the lazy pairs live in this process)
+    # what each edge samples in its two views, only the strided max_mappings of a pair: with lazy pairs where they
+    # lie (the pairs located in batches on local threads, where the lazy pairs live), projected by each view's
+    # task; otherwise their positions
     ex = current_executor(n_jobs)
     local_jobs = n_jobs if not isinstance(ex, LocalExecutor) else ex.n_jobs
     keys = [(min(int(a), int(b)), max(int(a), int(b))) for a, b in edges]
-    uvs = []
-    for (a, b), (_, pm) in zip(edges, thinned_many(ctx.mappings.pairs, keys, pick, n_jobs=local_jobs)):
-        uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
-        uvs.append((np.asarray(uva, dtype=np.float64).reshape(-1, 2), np.asarray(uvb, dtype=np.float64).reshape(-1, 2)))
-    local = LocalExecutor(local_jobs)
+    pairs_map = ctx.mappings.pairs
+    source = getattr(pairs_map, "source", None) if isinstance(pairs_map, LazyPairs) else None
+    parts: dict[int, list] = {}
+    sizes = []
+    if source is not None and hasattr(source, "locate_batch"):
+        for k in keys:
+            if k not in pairs_map:
+                raise KeyError(k)
+        batches = [keys[i : i + BATCH_PAIRS] for i in range(0, len(keys), BATCH_PAIRS)]
+        located = LocalExecutor(local_jobs).imap(source.locate_batch, batches, pick, desc="edge mappings", unit="batch")
+        for (a, b), (_, face, point) in zip(edges, (x for part in located for x in part)):
+            parts.setdefault(int(a), []).append((face, point))
+            parts.setdefault(int(b), []).append((face, point))
+            sizes.append(len(face))
+    else:
+        source = None
+        for (a, b), (_, pm) in zip(edges, thinned_many(pairs_map, keys, pick, n_jobs=local_jobs)):
+            uva, uvb = (pm.uv_a, pm.uv_b) if int(a) <= int(b) else (pm.uv_b, pm.uv_a)
+            parts.setdefault(int(a), []).append(np.asarray(uva, dtype=np.float64).reshape(-1, 2))
+            parts.setdefault(int(b), []).append(np.asarray(uvb, dtype=np.float64).reshape(-1, 2))
+            sizes.append(len(uva))
     # one task per view: its image read once, sampled at all its edges' positions, released
-    parts: dict[int, list[np.ndarray]] = {}
-    for (a, b), (uva, uvb) in zip(edges, uvs):
-        parts.setdefault(int(a), []).append(uva)
-        parts.setdefault(int(b), []).append(uvb)
     views = sorted(parts)
-    sampled = ex.map(_sample_view_task, [(v, np.concatenate(parts[v])) for v in views],
-                     ex.share(ctx.images), ctx.interpolation, desc="sample views", unit="view")
+    sampled = ex.map(_sample_view_task, [(v, parts.pop(v)) for v in views], ex.share(ctx.images), ctx.interpolation,
+                     None if source is None else ex.share(source), desc="sample views", unit="view")
     offset = {v: 0 for v in views}
     colours: dict[int, np.ndarray] = dict(zip(views, sampled))
     pairs: list[tuple[np.ndarray, np.ndarray]] = []
-    for (a, b), (uva, uvb) in zip(edges, uvs):  # each edge's colours, channels as rows (3, n)
+    for (a, b), m in zip(edges, sizes):  # each edge's colours, channels as rows (3, m)
         a, b = int(a), int(b)
-        ca = colours[a][:, offset[a]:offset[a] + len(uva)]
-        offset[a] += len(uva)
-        cb = colours[b][:, offset[b]:offset[b] + len(uvb)]
-        offset[b] += len(uvb)
-        pairs.append((ca, cb))
+        pairs.append((colours[a][:, offset[a] : offset[a] + m], colours[b][:, offset[b] : offset[b] + m]))
+        offset[a] += m
+        offset[b] += m
+    local = LocalExecutor(local_jobs)
     # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
     live = [i for i in range(E) if pairs[i][0].shape[1]]
     for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [pairs[i] for i in live], q, outlier_k,
