@@ -501,10 +501,15 @@ class PairSource:
         face = np.asarray(face, np.int64)
         point = np.asarray(point, np.int64)
         faces = np.asarray(self.vis.mesh.faces)
-        if self.mode != "vertices":
-            return project_points(self.vis.vertex_projection, faces, views, bounds, face,
-                                  [np.take(col, point) for col in self._table_columns])
         out = np.empty((len(face), 2))
+        if self.mode != "vertices":  # runs in chunks of about BATCH_MAPPINGS points (their temporaries in cache)
+            bounds = np.asarray(bounds, np.int64)
+            cuts = np.unique(np.searchsorted(bounds, np.arange(0, bounds[-1], BATCH_MAPPINGS), side="right") - 1)
+            for r0, r1 in zip(cuts, np.append(cuts[1:], len(bounds) - 1)):
+                s0, s1 = bounds[r0], bounds[r1]
+                out[s0:s1] = project_points(self.vis.vertex_projection, faces, views[r0:r1], bounds[r0 : r1 + 1] - s0,
+                                            face[s0:s1], [np.take(col, point[s0:s1]) for col in self._table_columns])
+            return out
         view_of = np.repeat(np.asarray(views, np.int64), np.diff(bounds))
         for v in np.unique(view_of):
             rows = np.flatnonzero(view_of == v)
