@@ -537,12 +537,6 @@ class PairSource:
             flush()
         return out
 
-    def _corners(self, v: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(uv (m, 3, 2), depth (m, 3)) float64 of some faces' corners in view ``v`` (from the float32 projections)."""
-        tri = np.asarray(self.vis.mesh.faces)[faces].reshape(-1)
-        uv, z = self.vis.vertex_projection(v, tri)
-        return uv.reshape(-1, 3, 2).astype(np.float64), z.reshape(-1, 3).astype(np.float64)
-
     def size(self, a: int, b: int) -> int:
         """The number of mappings :meth:`build` gives the pair, without building them."""
         return int(self._plan(a, b)[2][-1])
@@ -587,7 +581,10 @@ class PairSource:
         """Every mapping of the pair, level group by level group (each group's faces times its fixed
         pattern, broadcast: faster than :meth:`_build`'s per-mapping gathers when all are wanted)."""
         k, lev, first = plan
-        proj = {v: self._corners(v, k) for v in (a, b)}
+        tri, proj = np.asarray(self.vis.mesh.faces)[k].reshape(-1), {}
+        for v in (a, b):  # every face's corners: (m, 3, 2) pixels, (m, 3) depths, float64 of the float32 projections
+            uv, z = self.vis.vertex_projection(v, tri)
+            proj[v] = (uv.reshape(-1, 3, 2).astype(np.float64), z.reshape(-1, 3).astype(np.float64))
         bounds = np.flatnonzero(np.diff(lev)) + 1
         uv_out: dict[int, list] = {a: [], b: []}
         fids, ws = [], []
