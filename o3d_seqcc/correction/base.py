@@ -86,22 +86,35 @@ class LutTransform:
             out[..., c] = np.interp(img[..., c], grid, self.lut[c])
         return out
 
+    def level_tables(self, dtype: np.dtype | type) -> np.ndarray:
+        """(3, 256) uint8 or (3, 65536) uint16: every integer level of ``dtype`` through the transform,
+        ``img_as_dtype(apply(level / top))`` (computed once per dtype)."""
+        dtype = np.dtype(dtype)
+        cache = self.__dict__.setdefault("_level_tables", {})  # not a field: frozen, compared by identity
+        if dtype not in cache:
+            top = np.iinfo(dtype).max
+            levels = np.arange(top + 1, dtype=np.float64) / float(top)
+            grid = np.linspace(0.0, 1.0, self.lut.shape[1])
+            cache[dtype] = np.stack([img_as_dtype(np.interp(levels, grid, self.lut[c]), dtype) for c in range(3)])
+        return cache[dtype]
+
     def apply_levels(self, img: np.ndarray) -> np.ndarray:
         """(H, W, 3) uint8/uint16 -> same dtype, equal to ``img_as_dtype(apply(img_as_float(img)))``.
 
-        Tabulates the transform once per integer level (256 or 65536) and indexes: no per-pixel
-        interpolation.
+        Tabulates the transform once per integer level (256 or 65536, :meth:`level_tables`) and looks
+        every pixel up (OpenCV's ``LUT`` for uint8): no per-pixel interpolation.
         """
         img = np.asarray(img)
         if img.dtype not in (np.uint8, np.uint16) or img.ndim != 3 or img.shape[2] != 3:
             raise ValueError(f"apply_levels expects (H, W, 3) uint8/uint16, got {img.shape} {img.dtype}")
-        top = np.iinfo(img.dtype).max
-        levels = np.arange(top + 1, dtype=np.float64) / float(top)
-        grid = np.linspace(0.0, 1.0, self.lut.shape[1])
+        tables = self.level_tables(img.dtype)
+        if img.dtype == np.uint8 and img.size:
+            import cv2
+
+            return cv2.LUT(np.ascontiguousarray(img), np.ascontiguousarray(tables.T).reshape(1, 256, 3))
         out = np.empty_like(img)
         for c in range(3):
-            table = img_as_dtype(np.interp(levels, grid, self.lut[c]), img.dtype)
-            out[..., c] = table[img[..., c]]
+            out[..., c] = np.take(tables[c], img[..., c])
         return out
 
 

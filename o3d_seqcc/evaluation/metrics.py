@@ -37,8 +37,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import INTERPOLATIONS, delta_e_2000, dtype_scale, img_as_float, sample_colors
-from ..mappings.pairs import thinned
-from .._shared.parallel import LocalExecutor
+from ..imaging.sequences import ImageSequence, image_dtypes
+from ..mappings.pairs import thinned_many
 
 __all__ = [
     "PSNR_CAP_DB",
@@ -286,15 +286,39 @@ class Evaluation:
 
 
 # ----------------------------------------------------------------------------- evaluate
-def _check_images(images: Sequence[np.ndarray], n_views: int) -> list[np.ndarray]:
-    images = [np.asarray(im) for im in images]
+def _rgb(im, i: int) -> np.ndarray:
+    im = np.asarray(im)
+    if im.ndim != 3 or im.shape[2] != 3:
+        raise InputError(f"evaluate: image {i} has shape {im.shape}; expected (H, W, 3) RGB")
+    return im
+
+
+class _CheckedImages(ImageSequence):
+    """A lazy sequence's images, each checked to be (H, W, 3) when it is read (its dtypes from the headers)."""
+
+    def __init__(self, images: ImageSequence) -> None:
+        self.images = images
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def _load(self, i: int) -> np.ndarray:
+        return _rgb(self.images[i], i)
+
+    def dtypes(self) -> list[np.dtype]:
+        return self.images.dtypes()
+
+
+def _check_images(images: Sequence[np.ndarray], n_views: int) -> Sequence[np.ndarray]:
+    """The images, one per view, checked: a list of arrays now; a lazy sequence (read when a view is sampled,
+    released after) by its dtypes now and each image's shape when it is read."""
     if len(images) != n_views:
         raise InputError(f"evaluate: got {len(images)} images for mappings over {n_views} views; pass one image per view")
-    for i, im in enumerate(images):
-        if im.ndim != 3 or im.shape[2] != 3:
-            raise InputError(f"evaluate: image {i} has shape {im.shape}; expected (H, W, 3) RGB")
-        dtype_scale(im.dtype)
+    images = _CheckedImages(images) if isinstance(images, ImageSequence) else [_rgb(im, i) for i, im in enumerate(images)]
+    for dt in image_dtypes(images):
+        dtype_scale(dt)
     return images
+
 
 def _pair_keys(mappings, pairs: Iterable[tuple[int, int]] | None) -> list[tuple[int, int]]:
     if pairs is None:
@@ -324,78 +348,85 @@ def thin_indices(n: int, k: int | None) -> np.ndarray | None:
 def _pair_items(mappings, keys, *, min_n: int, max_per_pair: int | None, skipped: list):
     """Yield ``(a, b, n, uv_a, uv_b)`` per pair with the (thinned) mappings; pairs below min_n go to ``skipped``.
 
-    A generator: the pairs of lazy mappings are built one at a time, so scoring every mapping
-    of a large scene never holds them all.
+    A generator: lazy pairs are built in batches of thinned pairs (:func:`~o3d_seqcc.mappings.pairs.thinned_many`),
+    one at a time when all their mappings are scored (a large scene's are never all held).
     """
     if max_per_pair is not None and int(max_per_pair) < 1:
         raise ValueError(f"max_per_pair must be >= 1 or None, got {max_per_pair!r}")
     lo = max(int(min_n), 1)
 
-    def one(key):  # only the mappings scored are built
-        return key, *thinned(mappings.pairs, key, lambda n: thin_indices(n, max_per_pair) if n >= lo
-                             else np.zeros(0, np.int64))
+    def pick(n: int) -> np.ndarray | None:  # only the mappings scored are built
+        return thin_indices(n, max_per_pair) if n >= lo else np.zeros(0, np.int64)
 
-    # pairs built on local threads (numpy releases the GIL), yielded in order, a few ahead of the scoring
-    for (a, b), n, pm in LocalExecutor().imap(one, list(keys), desc="pairs", unit="pair"):
+    # pairs built in vectorised batches on local threads (numpy releases the GIL), yielded in order
+    keys = list(keys)
+    batch = None if max_per_pair is not None else 1
+    for (a, b), (n, pm) in zip(keys, thinned_many(mappings.pairs, keys, pick, batch_pairs=batch)):
         if n < lo:
             skipped.append((a, b))
             continue
         yield a, b, n, pm.uv_a, pm.uv_b
 
 
-def _sample_batch(images: list[np.ndarray], scales: list[float], batch, interpolation: str):
-    """Colours of a batch of pairs at their mappings, in [0, 1]: one sampling call per view, not per pair."""
+def _sample_batch(images: Sequence[np.ndarray], scales: list[float], batch, interpolation: str):
+    """Colours of a batch of pairs at their mappings, in [0, 1] (each view read once and sampled once, at all
+    its positions in the batch), and where each pair starts."""
     views = np.concatenate([np.full(len(it[3]), it[0]) for it in batch] + [np.full(len(it[4]), it[1]) for it in batch])
     uv = np.concatenate([it[3] for it in batch] + [it[4] for it in batch])
     col = np.empty((len(uv), 3))
-    for v in np.unique(views):
-        m = views == v
-        col[m] = sample_colors(images[v], uv[m], interpolation=interpolation) / scales[v]
+    order = np.argsort(views, kind="stable")
+    cuts = np.flatnonzero(np.diff(views[order])) + 1
+    for rows in np.split(order, cuts) if len(order) else ():
+        v = int(views[rows[0]])
+        col[rows] = sample_colors(images[v], uv[rows], interpolation=interpolation) / scales[v]
     half = len(uv) // 2
-    return col[:half], col[half:]
+    return col[:half], col[half:], np.concatenate([[0], np.cumsum([len(it[3]) for it in batch])[:-1]]).astype(np.int64)
 
 
-def _score(images: list[np.ndarray], items, *, interpolation: str, psnr_cap: float, names, skipped,
-           max_per_pair: int | None) -> Evaluation:
-    """PSNR / CIEDE2000 of the images at the pairs' (thinned) mappings, vectorised in batches of pairs."""
-    scales = [dtype_scale(im.dtype) for im in images]
-    sse_parts: list[np.ndarray] = []
-    de_parts: list[np.ndarray] = []
-    meta: list[tuple[int, int, int, int]] = []
+def _colour_batches(images: Sequence[np.ndarray], items, interpolation: str, meta: list):
+    """Yield ``(batch, ca, cb, starts)``: the items in batches of about :data:`_BATCH` mappings, their colours
+    in [0, 1] (each view read once per batch) and where each item's start; ``meta`` collects ``(a, b, n,
+    n scored)`` per item."""
+    scales = [dtype_scale(dt) for dt in image_dtypes(images)]
     batch: list = []
-
-    def flush() -> None:
-        # per-pair sums of squared errors and of Delta E 2000 over a batch of pairs (vectorised)
-        if not batch:
-            return
-        ca, cb = _sample_batch(images, scales, batch, interpolation)
-        starts = np.concatenate([[0], np.cumsum([len(it[3]) for it in batch])[:-1]])
-        sse_parts.append(np.add.reduceat(((ca - cb) ** 2).sum(axis=1), starts))
-        de_parts.append(np.add.reduceat(delta_e_2000(ca, cb), starts))
-        batch.clear()
-
     size = 0
     for it in items:
         batch.append(it)
         meta.append((it[0], it[1], it[2], len(it[3])))
         size += len(it[3])
         if size >= _BATCH:
-            flush()
-            size = 0
-    flush()
+            yield batch, *_sample_batch(images, scales, batch, interpolation)
+            batch, size = [], 0
+    if batch:
+        yield batch, *_sample_batch(images, scales, batch, interpolation)
 
+
+def _score(images: Sequence[np.ndarray], items, *, interpolation: str, psnr_cap: float, names, skipped,
+           max_per_pair: int | None, colours=None) -> Evaluation:
+    """PSNR / CIEDE2000 of the images at the pairs' (thinned) mappings, vectorised in batches of pairs.
+
+    ``colours(item, ca, cb)``, when given, sees every pair's colours (n, 3) in [0, 1] (the contrast ratios
+    of :func:`before_after` come from the same samples).
+    """
+    sse_parts: list[np.ndarray] = []
+    de_parts: list[np.ndarray] = []
+    meta: list[tuple[int, int, int, int]] = []  # (a, b, n, n scored) per pair
+    for batch, ca, cb, starts in _colour_batches(images, items, interpolation, meta):
+        # per-pair sums of squared errors and of Delta E 2000 over a batch of pairs (vectorised)
+        sse_parts.append(np.add.reduceat(((ca - cb) ** 2).sum(axis=1), starts))
+        de_parts.append(np.add.reduceat(delta_e_2000(ca, cb), starts))
+        for it, s0 in zip(batch, starts) if colours is not None else ():
+            colours(it, ca[s0 : s0 + len(it[3])], cb[s0 : s0 + len(it[3])])
     if not meta:
         logger.warning("evaluate: no pair with enough mappings to score")
         nan = MetricSummary(float("nan"), float("nan"), float("nan"))
         return Evaluation((), nan, nan, float(psnr_cap), names, tuple(skipped), max_per_pair)
-
     counts = np.array([m[2] for m in meta], dtype=np.int64)
     n_scored = np.array([m[3] for m in meta], dtype=np.int64)
     mse = np.concatenate(sse_parts) / (3.0 * n_scored)  # over all channel values
     de_mean = np.concatenate(de_parts) / n_scored
     with np.errstate(divide="ignore"):
         psnr_vals = np.where(mse > 0, 20.0 * np.log10(1.0 / np.sqrt(np.maximum(mse, 1e-300))), np.inf)
-
     records = tuple(
         PairScore(a=a, b=b, n=n, psnr=float(p), ciede2000=float(d), n_scored=None if k == n else int(k))
         for (a, b, n, k), p, d in zip(meta, psnr_vals, de_mean)
@@ -465,16 +496,20 @@ def evaluate(
                   names=tuple(getattr(mappings, "view_names", ()) or ()), max_per_pair=max_per_pair)
 
 
-def _contrast(images: list[np.ndarray], items, hops: dict[int, int]) -> np.ndarray:
-    out = []
-    for a, b, _, ua, ub in items:
-        if a not in hops or b not in hops or hops[a] == hops[b]:
-            continue
-        (t, uvt), (s, uvs) = ((a, ua), (b, ub)) if hops[a] > hops[b] else ((b, ub), (a, ua))
-        ct = sample_colors(images[t], np.asarray(uvt)) / dtype_scale(images[t].dtype)
-        cs = sample_colors(images[s], np.asarray(uvs)) / dtype_scale(images[s].dtype)
-        out.append(float(np.mean(ct.std(0) / np.maximum(cs.std(0), 1e-6))))
-    return np.array(out)
+def _ratio(item, ca: np.ndarray, cb: np.ndarray, hops: dict[int, int]) -> float | None:
+    """A pair's contrast ratio from its colours (None when its views are not at different hops)."""
+    a, b = item[0], item[1]
+    if a not in hops or b not in hops or hops[a] == hops[b]:
+        return None
+    ct, cs = (ca, cb) if hops[a] > hops[b] else (cb, ca)
+    return float(np.mean(ct.std(0) / np.maximum(cs.std(0), 1e-6)))
+
+
+def _contrast(images: Sequence[np.ndarray], items, hops: dict[int, int]) -> np.ndarray:
+    """The contrast ratios of the pairs of ``items`` at different hops, in their order (sampled in batches)."""
+    out = [_ratio(it, ca[s0 : s0 + len(it[3])], cb[s0 : s0 + len(it[3])], hops)
+           for batch, ca, cb, starts in _colour_batches(images, items, "bilinear", []) for it, s0 in zip(batch, starts)]
+    return np.array([r for r in out if r is not None])
 
 
 def contrast_ratios(
@@ -535,7 +570,8 @@ def before_after(
 ) -> dict[str, Any]:
     """Table 2 of a correction: PSNR / CIEDE2000 summaries and contrast ratios, before and after.
 
-    Every pair is built (and thinned) once for the four scorings.
+    Every pair is built (and thinned) once for the four scorings; per image set each view is read and
+    sampled once (lazy sequences: one image held at a time), the contrast ratios from the same samples.
 
     Parameters
     ----------
@@ -566,16 +602,19 @@ def before_after(
     items = list(_pair_items(mappings, keys, min_n=1, max_per_pair=max_per_pair, skipped=skipped)) \
         if max_per_pair is not None else None
     out: dict[str, Any] = {}
+    contrast: dict[str, Any] = {}  # ("contrast" after "before" and "after", as report.json holds them)
     for key, images in (("before", originals), ("after", corrected)):
+        ratios: list[float] = []
+
+        def keep(item, ca: np.ndarray, cb: np.ndarray) -> None:  # the contrast ratios from the same samples
+            r = _ratio(item, ca, cb, hops) if item[2] >= min_n_contrast else None
+            if r is not None:
+                ratios.append(r)
+
         it = items if items is not None else _pair_items(mappings, keys, min_n=1, max_per_pair=None, skipped=[])
         ev = _score(images, it, interpolation="bilinear", psnr_cap=PSNR_CAP_DB, names=names,
-                    skipped=skipped if items is not None else [], max_per_pair=max_per_pair)
+                    skipped=skipped if items is not None else [], max_per_pair=max_per_pair, colours=keep)
         out[key] = ev.to_dict(per_pair=per_pair)
-    deep = [k for k in keys if k[0] in hops and k[1] in hops and hops[k[0]] != hops[k[1]]]
-    deep_set = set(deep)
-    out["contrast"] = {}
-    for key, images in (("before", originals), ("after", corrected)):
-        it = [x for x in items if x[2] >= min_n_contrast and (x[0], x[1]) in deep_set] if items is not None else \
-            _pair_items(mappings, deep, min_n=min_n_contrast, max_per_pair=None, skipped=[])
-        out["contrast"][key] = _contrast_summary(_contrast(images, it, hops))
+        contrast[key] = _contrast_summary(np.array(ratios))
+    out["contrast"] = contrast
     return out

@@ -152,8 +152,23 @@ def sample_bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarr
     if img.ndim == 3:
         fx = fx[..., None]
         fy = fy[..., None]
-    top = img[y0, x0].astype(np.float64) * (1.0 - fx) + img[y0, x1].astype(np.float64) * fx
-    bot = img[y1, x0].astype(np.float64) * (1.0 - fx) + img[y1, x1].astype(np.float64) * fx
+    if img.flags.c_contiguous:  # the four neighbours gathered from the flat image (np.take: several times faster)
+        flat = img.reshape((h * w,) + img.shape[2:])
+        shape = x0.shape + img.shape[2:]
+        r0, r1 = y0 * w, y1 * w
+
+        def at(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            return np.take(flat, (rows + cols).reshape(-1), axis=0).reshape(shape)
+    else:
+        r0, r1 = y0, y1
+
+        def at(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            return img[rows, cols]
+
+    # the neighbours' values as float64 (exact) in the products: value * (1 - fx) + value * fx, per row then column
+    gx = 1.0 - fx
+    top = np.multiply(at(r0, x0), gx, dtype=np.float64) + np.multiply(at(r0, x1), fx, dtype=np.float64)
+    bot = np.multiply(at(r1, x0), gx, dtype=np.float64) + np.multiply(at(r1, x1), fx, dtype=np.float64)
     return top * (1.0 - fy) + bot * fy
 
 

@@ -24,13 +24,18 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
-__all__ = ["SURFACE_MAX_LEVEL", "LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key", "shared_area",
-           "shared_counts", "thinned"]
+from ..imaging.sequences import LRUCache
+from .sampling import SURFACE_MAX_LEVEL, bary_table, level_dtype, locate, project_points, tri_area
+
+__all__ = ["BATCH_PAIRS", "SURFACE_MAX_LEVEL", "LazyPairs", "Pair", "PairMapping", "PairSource", "norm_key",
+           "shared_area", "shared_counts", "thinned", "thinned_many"]
 
 Pair = tuple[int, int]
 
-#: surface mode: cap on a face's subdivision level (at most ``SURFACE_MAX_LEVEL**2`` samples per face and pair)
-SURFACE_MAX_LEVEL = 64
+#: pairs planned together by :func:`thinned_many` (a task of its local threads)
+BATCH_PAIRS = 32
+#: mappings computed together by :meth:`PairSource.thinned_batch` (~5 MB of temporaries)
+BATCH_MAPPINGS = 2**15
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,6 +116,24 @@ def thinned(pairs: Any, key: Any, pick) -> tuple[int, PairMapping]:
     return pm.n, (pm if idx is None else pm.take(idx))
 
 
+def thinned_many(pairs: Any, keys: Iterable[Any], pick, *, n_jobs: int | None = None,
+                 batch_pairs: int | None = None) -> Iterator[tuple[int, PairMapping]]:
+    """:func:`thinned` of every key of ``keys``, yielded in their order: lazy pairs are planned and their
+    picked mappings built ``batch_pairs`` (default :data:`BATCH_PAIRS`) pairs at a time, in vectorised
+    passes on local threads (``n_jobs``, joblib semantics) -- the same values as one :func:`thinned` per pair."""
+    keys = [norm_key(k) for k in keys]
+    if not isinstance(pairs, LazyPairs):
+        for k in keys:
+            yield thinned(pairs, k, pick)
+        return
+    from .._shared.parallel import LocalExecutor
+
+    step = max(1, int(batch_pairs or BATCH_PAIRS))
+    batches = [keys[i : i + step] for i in range(0, len(keys), step)]
+    for part in LocalExecutor(n_jobs).imap(pairs.thinned_batch, batches, pick, desc="pairs", unit="batch"):
+        yield from part
+
+
 def norm_key(key: Any) -> Pair:
     """``(a, b)`` as a pair of ints; anything else raises ``KeyError``."""
     try:
@@ -163,6 +186,26 @@ class LazyPairs(_MappingABC):
         idx = pick(pm.n)
         return pm.n, (pm if idx is None else pm.take(idx))
 
+    def thinned_batch(self, keys: list[Any], pick) -> list[tuple[int, PairMapping]]:
+        """:meth:`thinned` of several pairs, the uncached ones built together (:meth:`PairSource.thinned_batch`)."""
+        keys = [norm_key(k) for k in keys]
+        for k in keys:
+            if k not in self._keyset:
+                raise KeyError(k)
+        with self._lock:
+            held = {k: self._cache[k] for k in keys if k in self._cache}
+        if not hasattr(self.source, "thinned_batch"):
+            return [self.thinned(k, pick) for k in keys]
+        built = iter(self.source.thinned_batch([k for k in keys if k not in held], pick))
+        out = []
+        for k in keys:
+            if k in held:
+                idx = pick(held[k].n)
+                out.append((held[k].n, held[k] if idx is None else held[k].take(idx)))
+            else:
+                out.append(next(built))
+        return out
+
     def __contains__(self, key: object) -> bool:
         try:
             return norm_key(key) in self._keyset
@@ -187,38 +230,6 @@ class LazyPairs(_MappingABC):
     def __setstate__(self, d: dict) -> None:
         self.__dict__.update(d)
         self._lock = threading.Lock()
-
-
-def _centroids(L: int) -> np.ndarray:
-    """(L^2, 3) float64 barycentric centroids of the L^2 sub-triangles of a level-L subdivision."""
-    i, j = np.meshgrid(np.arange(L), np.arange(L), indexing="ij")
-    up = (i + j) <= L - 1
-    down = (i + j) <= L - 2
-    b1 = np.concatenate([i[up] + 1 / 3, i[down] + 2 / 3]) / L
-    b2 = np.concatenate([j[up] + 1 / 3, j[down] + 2 / 3]) / L
-    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
-
-
-def _bary_table(max_level: int, *, vertices: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Dense sampling patterns for levels 1..max_level, concatenated.
-
-    Level L has the 3 vertices (first, in face order, as in ``"vertices"`` mode; not with
-    ``vertices=False``) followed by the centroids of the L^2 sub-triangles of the level-L
-    subdivision of the face (strictly inside the face, so no two faces share a dense sample):
-    3 + L^2 points. Returns (table (T, 3) float64 barycentric weights, start (max_level+1,),
-    count (max_level+1,)).
-    """
-    rows = []
-    start = np.zeros(max_level + 1, dtype=np.int64)
-    count = np.zeros(max_level + 1, dtype=np.int64)
-    off = 0
-    for L in range(1, max_level + 1):
-        w = np.concatenate([np.eye(3), _centroids(L)]) if vertices else _centroids(L)
-        start[L] = off
-        count[L] = len(w)
-        rows.append(w)
-        off += len(w)
-    return np.concatenate(rows), start, count
 
 
 def _packed(rows: list[np.ndarray], n: int) -> np.ndarray:
@@ -313,10 +324,8 @@ def shared_area(rows: list[np.ndarray], areas: list[np.ndarray], n: int) -> np.n
     return np.asarray((A @ B.T).toarray(), dtype=np.float64)
 
 
-def _tri_area(uv: np.ndarray) -> np.ndarray:
-    """(m,) float64 areas in px^2 of (m, 3, 2) projected triangles."""
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+#: byte budget of a :class:`PairSource`'s per-view face levels (one byte per usable face and view; rebuilt when dropped)
+LEVEL_CACHE_BYTES = 64 * 2**20
 
 
 class PairSource:
@@ -326,6 +335,11 @@ class PairSource:
     ``n_faces``, ``mesh``, ``usable_faces(v)`` and ``vertex_projection(v, vertex_ids)``;
     ``usable_area(v)`` is used when present). ``spacing`` is the surface mode's sample spacing
     in pixels.
+
+    A pair is planned from per-view data only (:meth:`view_levels`: every usable face's sampling level
+    in the view, computed once per view), and only the faces of the mappings asked for are projected,
+    so sizing a pair and building a few thousand of its mappings costs about one pass over the two
+    views' usable faces.
     """
 
     def __init__(self, vis, mode: str, level: np.ndarray | None, face_mask: np.ndarray | None, *,
@@ -336,14 +350,19 @@ class PairSource:
         self.face_mask = face_mask  # (F,) bool or None
         self.spacing = float(spacing)
         if mode == "dense":
-            self.table, self.start, self.count = _bary_table(int(level.max()) if len(level) else 1)
+            self.table, self.start, self.count = bary_table(int(level.max()) if len(level) else 1)
         elif mode == "surface":  # level 0: the vertices alone; level L: the vertices and L^2 centroids
-            table, start, count = _bary_table(SURFACE_MAX_LEVEL)
+            table, start, count = bary_table(SURFACE_MAX_LEVEL)
             self.table = np.concatenate([np.eye(3), table])
             self.start, self.count = start + 3, count.copy()
             self.start[0], self.count[0] = 0, 3
         else:
             self.count = np.array([0, 3])
+        self._level_dtype = level_dtype(len(self.count) - 1)
+        if mode != "vertices":  # the table's columns (gathered per mapping) and its float32 copy (the weights kept)
+            self._table_columns = [np.ascontiguousarray(self.table[:, j]) for j in range(3)]
+            self._table32 = self.table.astype(np.float32)
+        self._levels = LRUCache(LEVEL_CACHE_BYTES)
 
     def usable_faces(self, v: int) -> np.ndarray:
         """(k,) int64 ascending faces usable in view ``v`` (within the face mask)."""
@@ -391,9 +410,8 @@ class PairSource:
         mark[ua] = True
         return ub[mark[ub]]
 
-    def _surface_levels(self, uv: list[np.ndarray]) -> np.ndarray:
-        """Surface mode: the subdivision level of a pair's faces, from their corners' (m, 3, 2) float64
-        pixel coordinates in the two views.
+    def _area_levels(self, area: np.ndarray) -> np.ndarray:
+        """Surface mode: the subdivision level of faces from their (m,) projected areas (px^2) in a view.
 
         Every face gives its 3 vertices (as the paper's mappings); a face whose smaller projection
         of the two views holds ``m = area / spacing^2 >= 1`` sample cells gives, besides, the
@@ -401,30 +419,123 @@ class PairSource:
         sqrt(m)), 1, SURFACE_MAX_LEVEL)``: so a large face is sampled at the photos' resolution
         and a dense mesh as the paper samples it (on Fountain the vertices' weighting of the
         detailed surface scores better against the semi-real truth than area samples alone:
-        2.78 vs 2.86 CIEDE2000, benchmarks/table2.py).
+        2.78 vs 2.86 CIEDE2000, benchmarks/table2.py). The level is a non-decreasing function of
+        the area, so a pair's level, that of its smaller projection, is the smaller of its two
+        views' levels: each view's are computed once (:meth:`view_levels`).
         """
-        m = np.minimum(_tri_area(uv[0]), _tri_area(uv[1])) / self.spacing**2
-        return np.where(m >= 1.0, np.clip(np.rint(np.sqrt(np.maximum(m, 1.0))), 1, SURFACE_MAX_LEVEL), 0).astype(np.int64)
+        m = area / self.spacing**2
+        return np.where(m >= 1.0, np.clip(np.rint(np.sqrt(np.maximum(m, 1.0))), 1, SURFACE_MAX_LEVEL),
+                        0).astype(self._level_dtype)
 
-    def _plan(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    def view_levels(self, v: int) -> tuple[np.ndarray, np.ndarray]:
+        """The faces usable in view ``v`` and their sampling level there (cached per view).
+
+        Returns
+        -------
+        faces : (k,) int64
+            :meth:`usable_faces`.
+        level : (k,) small signed int
+            Surface mode: the level of the face's projection in ``v`` (:meth:`_area_levels`);
+            dense mode: the face's level; vertex mode: 1. A pair's level is the smaller of its two views'.
+        """
+        def make() -> tuple[np.ndarray, np.ndarray]:
+            ids = self.usable_faces(v)
+            if self.mode == "surface":
+                tri = np.asarray(self.vis.mesh.faces)[ids].reshape(-1)
+                uv = self.vis.vertex_projection(v, tri)[0].reshape(-1, 3, 2)
+                return ids, self._area_levels(tri_area(uv.astype(np.float64)))
+            if self.mode == "dense":
+                return ids, self.level[ids].astype(self._level_dtype)
+            return ids, np.ones(len(ids), dtype=self._level_dtype)
+
+        return self._levels.get(v, make)
+
+    def _pair_levels(self, a: int, b: int, mark: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(faces usable in both views, ascending (m,) int64; their level in the pair (m,)). ``mark``: an
+        (F,) array holding view ``a``'s levels and -1 elsewhere (several pairs of ``a`` reuse it)."""
+        ib, lb = self.view_levels(b)
+        if mark is None:
+            ia, la = self.view_levels(a)
+            mark = np.full(self.vis.n_faces, -1, dtype=self._level_dtype)
+            mark[ia] = la
+        at_b = mark[ib]
+        both = at_b >= 0
+        return ib[both], np.minimum(at_b[both], lb[both])
+
+    def _plan(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The pair's faces grouped by level: (faces (m,), level (m,) ascending, first mapping of every
-        face (m + 1,), {view: (corners' uv (m, 3, 2) float32, depth (m, 3) float32)}); the mappings are
-        face after face, each its level's pattern (the vertices alone in vertex mode)."""
-        k = self.faces(a, b)
-        tri = np.asarray(self.vis.mesh.faces)[k].reshape(-1)  # (3 m,)
-        proj = {}
-        for v in (a, b):
-            uv_v, z_v = self.vis.vertex_projection(v, tri)
-            proj[v] = (uv_v.reshape(-1, 3, 2), z_v.reshape(-1, 3))
+        face (m + 1,)); the mappings are face after face, each its level's pattern (the vertices alone in
+        vertex mode). Within a level the faces are ascending."""
+        k, lev = self._pair_levels(a, b)
         if self.mode == "vertices":
-            return k, np.ones(len(k), np.int64), 3 * np.arange(len(k) + 1), proj
-        if self.mode == "surface":
-            lev = self._surface_levels([proj[v][0].astype(np.float64) for v in (a, b)])
-        else:
-            lev = self.level[k]
+            return k, np.ones(len(k), np.int64), 3 * np.arange(len(k) + 1)
         order = np.argsort(lev, kind="stable")
-        proj = {v: (uv_v[order], z_v[order]) for v, (uv_v, z_v) in proj.items()}
-        return k[order], lev[order], np.concatenate([[0], np.cumsum(self.count[lev[order]])]), proj
+        lev = lev[order].astype(np.int64)
+        return k[order], lev, np.concatenate([[0], np.cumsum(self.count[lev])])
+
+    def locate_batch(self, keys: list[Pair], pick) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Where the picked mappings of several pairs are, without computing them: per pair ``(n, face (s,),
+        point (s,))`` int32, mapping ``i`` being row ``point[i]`` of the barycentric table (vertex mode: vertex
+        ``point[i]``) on face ``face[i]``, a face's mappings consecutive (:meth:`points` gives their positions).
+        Each pair is sized from its two views' levels (``keys`` sorted by their first view share its levels)."""
+        out = []
+        mark, held = None, None
+        for a, b in keys:
+            if held != a:  # view a's levels on the faces, for all its pairs
+                if mark is None:
+                    mark = np.full(self.vis.n_faces, -1, dtype=self._level_dtype)
+                elif held is not None:
+                    mark[self.view_levels(held)[0]] = -1
+                ia, la = self.view_levels(a)
+                mark[ia] = la
+                held = a
+            k, lev = self._pair_levels(a, b, mark)
+            n, face, level, point = locate(k, lev, self.count, pick, sort=self.mode != "vertices")
+            row = point if self.mode == "vertices" else self.start[level] + point
+            out.append((n, face.astype(np.int32), row.astype(np.int32)))
+        return out
+
+    def points(self, views: np.ndarray, bounds: np.ndarray, face: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """(M, 2) float64 pixel positions of located mappings (:meth:`locate_batch`) in runs: run ``p``, the
+        mappings ``bounds[p]:bounds[p + 1]``, in view ``views[p]`` (bit for bit :meth:`build`'s values)."""
+        face = np.asarray(face, np.int64)
+        point = np.asarray(point, np.int64)
+        faces = np.asarray(self.vis.mesh.faces)
+        out = np.empty((len(face), 2))
+        if self.mode != "vertices":  # runs in chunks of about BATCH_MAPPINGS points (their temporaries in cache)
+            bounds = np.asarray(bounds, np.int64)
+            cuts = np.unique(np.searchsorted(bounds, np.arange(0, bounds[-1], BATCH_MAPPINGS), side="right") - 1)
+            for r0, r1 in zip(cuts, np.append(cuts[1:], len(bounds) - 1)):
+                s0, s1 = bounds[r0], bounds[r1]
+                out[s0:s1] = project_points(self.vis.vertex_projection, faces, views[r0:r1], bounds[r0 : r1 + 1] - s0,
+                                            face[s0:s1], [np.take(col, point[s0:s1]) for col in self._table_columns])
+            return out
+        view_of = np.repeat(np.asarray(views, np.int64), np.diff(bounds))
+        for v in np.unique(view_of):
+            rows = np.flatnonzero(view_of == v)
+            out[rows] = self.vis.vertex_projection(int(v), faces[face[rows], point[rows]])[0]
+        return out
+
+    def thinned_batch(self, keys: list[Pair], pick) -> list[tuple[int, PairMapping]]:
+        """:meth:`thinned` of several pairs in vectorised passes (:meth:`locate_batch`, then the mappings of
+        up to :data:`BATCH_MAPPINGS` of them computed together by :meth:`points`)."""
+        out: list = []
+        parts: list[tuple] = []  # (a, b, n, face, point) of the pairs not built yet
+        pending = 0
+
+        def flush() -> None:
+            out.extend(zip((p[2] for p in parts), self._build_located(parts)))
+            parts.clear()
+
+        for (a, b), located in zip(keys, self.locate_batch(keys, pick)):
+            parts.append((a, b) + located)
+            pending += len(located[1])
+            if pending >= BATCH_MAPPINGS:
+                flush()
+                pending = 0
+        if parts:
+            flush()
+        return out
 
     def size(self, a: int, b: int) -> int:
         """The number of mappings :meth:`build` gives the pair, without building them."""
@@ -445,33 +556,35 @@ class PairSource:
 
     def _build(self, a: int, b: int, plan: tuple, index: np.ndarray | None) -> PairMapping:
         """:meth:`build` from :meth:`_plan`'s groups. Mapping ``i`` is point ``i - first[f]`` of face ``f``'s
-        pattern (a row of the barycentric table), projected perspective-correctly; all at once, whatever
-        their face's level."""
-        k, lev, first, proj = plan
+        pattern (a row of the barycentric table), projected perspective-correctly (:meth:`_build_located`)."""
+        k, lev, first = plan
         if self.mode != "vertices" and index is None:
             return self._build_all(a, b, plan)
         sel = np.arange(first[-1]) if index is None else index
         f = np.searchsorted(first, sel, side="right") - 1  # the face of every mapping
-        if self.mode == "vertices":
-            return PairMapping(a, b, proj[a][0].reshape(-1, 2)[sel], proj[b][0].reshape(-1, 2)[sel], k[f])
-        W = self.table[self.start[lev[f]] + sel - first[f]]  # (n, 3) barycentric weights
-        uv_out = {}
-        for v in (a, b):
-            z = proj[v][1].astype(np.float64)  # (m, 3) per face, then per mapping
-            uvz = (proj[v][0].astype(np.float64) * z[:, :, None])[f]  # (n, 3, 2)
-            z = z[f]
-            num, den = np.zeros((len(sel), 2)), np.zeros(len(sel))
-            for j in range(3):
-                num += W[:, j, None] * uvz[:, j, :]
-                den += W[:, j] * z[:, j]
-            # perspective-correct: projection of sum(w_i X_i) = sum(w_i z_i uv_i) / sum(w_i z_i)
-            uv_out[v] = num / den[:, None]
-        return PairMapping(a, b, uv_out[a], uv_out[b], k[f], W.astype(np.float32))
+        row = sel - first[f] if self.mode == "vertices" else self.start[lev[f]] + sel - first[f]
+        return self._build_located([(a, b, int(first[-1]), k[f], row)])[0]
+
+    def _build_located(self, parts: list[tuple]) -> list[PairMapping]:
+        """The located mappings (:meth:`locate_batch`) of one or several pairs ``(a, b, n, face, point)``, all
+        at once (:meth:`points` in each pair's two views)."""
+        size = np.array([len(p[3]) for p in parts], dtype=np.int64)
+        bounds = np.concatenate([[0], np.cumsum(size)])
+        face = np.concatenate([p[3] for p in parts]).astype(np.int64, copy=False)
+        point = np.concatenate([p[4] for p in parts]).astype(np.int64, copy=False)
+        uv = [self.points(np.array([p[side] for p in parts], np.int64), bounds, face, point) for side in (0, 1)]
+        W32 = None if self.mode == "vertices" else self._table32[point]
+        return [PairMapping(p[0], p[1], uv[0][s0:s1], uv[1][s0:s1], face[s0:s1], None if W32 is None else W32[s0:s1])
+                for p, s0, s1 in zip(parts, bounds[:-1], bounds[1:])]
 
     def _build_all(self, a: int, b: int, plan: tuple) -> PairMapping:
         """Every mapping of the pair, level group by level group (each group's faces times its fixed
         pattern, broadcast: faster than :meth:`_build`'s per-mapping gathers when all are wanted)."""
-        k, lev, first, proj = plan
+        k, lev, first = plan
+        tri, proj = np.asarray(self.vis.mesh.faces)[k].reshape(-1), {}
+        for v in (a, b):  # every face's corners: (m, 3, 2) pixels, (m, 3) depths, float64 of the float32 projections
+            uv, z = self.vis.vertex_projection(v, tri)
+            proj[v] = (uv.reshape(-1, 3, 2).astype(np.float64), z.reshape(-1, 3).astype(np.float64))
         bounds = np.flatnonzero(np.diff(lev)) + 1
         uv_out: dict[int, list] = {a: [], b: []}
         fids, ws = [], []
@@ -481,8 +594,8 @@ class PairSource:
             L = int(lev[s0])  # (surface mode: level 0 = the vertices alone)
             Wl = self.table[self.start[L] : self.start[L] + self.count[L]]  # (p, 3)
             for v in (a, b):
-                z = proj[v][1][s0:s1].astype(np.float64)  # (m, 3)
-                uvz = proj[v][0][s0:s1].astype(np.float64) * z[:, :, None]  # (m, 3, 2)
+                z = proj[v][1][s0:s1]  # (m, 3)
+                uvz = proj[v][0][s0:s1] * z[:, :, None]  # (m, 3, 2)
                 num, den = np.zeros((s1 - s0, len(Wl), 2)), np.zeros((s1 - s0, len(Wl)))
                 for j in range(3):
                     num += Wl[None, :, j, None] * uvz[:, None, j, :]
@@ -501,4 +614,5 @@ class PairSource:
         src = PairSource.__new__(PairSource)
         src.__dict__.update(self.__dict__)
         src.face_mask = fm
+        src._levels = LRUCache(LEVEL_CACHE_BYTES)  # the levels follow the usable faces, which the mask changes
         return src

@@ -242,6 +242,14 @@ def test_lut_apply_levels_matches_float_path(rng, dtype):
     lut = np.stack([np.linspace(0, 1, 300) ** g for g in (1.3, 0.7, 1.0)])
     t = LutTransform(lut)
     np.testing.assert_array_equal(t.apply_levels(img), from_float(t.apply(to_float(img)), dtype))
+    # every level, twice (the tables are kept), and a non-contiguous view (OpenCV's LUT for uint8)
+    every = np.arange(top + 1, dtype=dtype)[::-1].reshape(-1, 256, 1).repeat(3, axis=2)
+    every[..., 1] = np.roll(every[..., 1], 7)
+    for _ in range(2):
+        got = t.apply_levels(every)
+        assert got.dtype == dtype and got.shape == every.shape
+        np.testing.assert_array_equal(got, from_float(t.apply(to_float(every)), dtype))
+    np.testing.assert_array_equal(t.apply_levels(img[::2, 1::3]), from_float(t.apply(to_float(img[::2, 1::3])), dtype))
 
 
 def test_seqcc_on_a_synthetic_room_gets_close_to_ground_truth(tmp_path):

@@ -12,7 +12,7 @@ import skimage.data
 from o3d_seqcc.correction import DEFAULT_METHOD, METHODS, CorrectionContext, available_methods, correct
 from o3d_seqcc.correction.methods.edge_summaries import (
     EdgeObservations,
-    _sample_flat,
+    _sample_image,
     edge_observations,
     edge_quantiles,
 )
@@ -244,7 +244,7 @@ def test_edge_quantiles_and_flat_sampler_match_the_reference_implementations(rng
     uv = np.column_stack([rng.uniform(-1, 64, 400), rng.uniform(-1, 48, 400)])
     uv[:3] = [[63, 47], [0, 0], [62.5, 46.5]]
     for interp in ("bilinear", "nearest"):
-        np.testing.assert_allclose(_sample_flat(img, uv, interp), sample_colors(img, uv, interpolation=interp), atol=1e-6)
+        np.testing.assert_allclose(_sample_image(img, uv, interp).T, sample_colors(img, uv, interpolation=interp), atol=1e-6)
 
 
 def test_edge_observations_drop_wrong_correspondences(albedo):
@@ -301,3 +301,80 @@ def test_method_options_are_validated(albedo):
     a = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global")
     b = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global")
     np.testing.assert_array_equal(a.images[1], b.images[1])  # deterministic
+
+
+def _summary_columns(ca, cb, q, k):
+    """An edge summary as first written, channels as columns (the reference for the rows layout)."""
+    def quantiles(sorted_cols):
+        n = sorted_cols.shape[0]
+        pos = np.clip(q * n - 0.5, 0.0, n - 1.0)
+        i0 = np.minimum(np.floor(pos).astype(np.int64), max(n - 2, 0))
+        t = (pos - i0)[:, None]
+        return (sorted_cols[i0] * (1.0 - t) + sorted_cols[np.minimum(i0 + 1, n - 1)] * t).T
+
+    sb = np.sort(cb, axis=0)
+    oa = np.argsort(ca, axis=0)
+    sa = np.take_along_axis(ca, oa, axis=0)
+    rank = np.empty_like(oa)
+    np.put_along_axis(rank, oa, np.arange(len(ca))[:, None], axis=0)
+    r = cb - np.take_along_axis(sb, rank, axis=0)
+    sub = r[:: max(1, len(ca) // 2000)]
+    med = np.median(sub, axis=0)
+    mad = 1.4826 * np.median(np.abs(sub - med), axis=0)
+    z = (r - med) / np.maximum(mad, np.float32(1.0 / 255))
+    keep = np.sqrt((z**2).sum(1)) <= k * np.sqrt(3.0)
+    if 10 <= keep.sum() < len(keep):
+        sa = np.stack([sa[keep[oa[:, c]], c] for c in range(3)], axis=1)
+        sb = np.sort(cb[keep], axis=0)
+    return quantiles(sa), quantiles(sb), len(sa)
+
+
+@pytest.mark.parametrize("n", [37, 2000, 8000, 8001])
+def test_edge_summary_rows_are_the_column_summary(n):
+    """An edge's summary on channel rows (contiguous sorts, partition medians) is bit for bit the summary on
+    colour columns, ties (8-bit levels, bilinear mixes of them) and wrong correspondences included."""
+    from o3d_seqcc.correction.methods.edge_summaries import TRIM, _median_rows, _summary_task
+
+    rng = np.random.default_rng(n)
+    levels = (np.arange(256) / 255.0).astype(np.float32)
+    ca = levels[rng.integers(0, 256, (n, 3))]
+    cb = np.clip(ca * np.float32(0.8) + levels[rng.integers(0, 12, (n, 3))], 0, 1).astype(np.float32)
+    cb[rng.random(n) < 0.1] = levels[rng.integers(0, 256, 3)]
+    ca[: n // 3] = (ca[: n // 3] + ca[1 : n // 3 + 1]) / np.float32(2)
+    q = np.linspace(TRIM, 1 - TRIM, 32)
+    want = _summary_columns(ca, cb, q, 3.0)
+    got = _summary_task((np.ascontiguousarray(ca.T), np.ascontiguousarray(cb.T)), q, 3.0)
+    assert got[2] == want[2] < n
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    for m in (1, 2, 5, 2000):
+        x = rng.integers(0, 9, (3, m)).astype(np.float32) / np.float32(7)
+        assert np.array_equal(_median_rows(x), np.median(x, axis=1))
+
+
+def test_edge_observations_from_located_lazy_pairs_are_those_of_the_built_pairs(tmp_path):
+    """Lazy pairs: each edge's picked mappings are located and projected inside its views' sampling tasks;
+    the summaries are bit for bit those of the same pairs built in full and thinned (max_mappings strided
+    picks, all mappings, -j 1 and 2)."""
+    import joblib
+
+    import o3d_seqcc as sc
+    from o3d_seqcc.imaging.sequences import FloatImages, scene_photos
+    from o3d_seqcc.mappings.compute import compute_mappings
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    lazy = compute_mappings(scene)
+    built = lazy.materialize()
+    edges = sorted(lazy.pairs)[::-1]  # any order, either direction
+    edges = [(b, a) if i % 2 else (a, b) for i, (a, b) in enumerate(edges)]
+    images = FloatImages(scene_photos(scene.views))
+    for cap in (300, None):
+        obs = []
+        for maps, jobs in ((built, 1), (lazy, 1), (lazy, 2)):
+            ctx = CorrectionContext(images=images, mappings=maps, reference=0, t_npm=1)
+            with joblib.parallel_config(n_jobs=jobs):
+                obs.append(edge_observations(ctx, edges, levels=16, max_mappings=cap))
+        assert obs[0].n.max() > (cap or 0) // 2
+        for o in obs[1:]:
+            for name in ("a", "b", "qa", "qb", "n"):
+                assert np.array_equal(getattr(o, name), getattr(obs[0], name)), (cap, name)

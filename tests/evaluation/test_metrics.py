@@ -317,3 +317,36 @@ def test_before_after_thinned_scores_weight_pairs_by_their_full_counts():
     assert ratios[0] == pytest.approx(np.mean([1.3, 1.1, 0.9]), rel=0.02)  # (0, 1): target 1, source 0
     assert full["contrast"]["before"]["mean"] == pytest.approx(ratios.mean())
     assert full["contrast"]["after"]["mean"] == pytest.approx(1.0)
+
+
+def test_before_after_reads_lazy_images_once_per_set_with_the_same_numbers():
+    """Lazy image sequences: each view is read once per image set (sampled at all its pairs' mappings, the
+    contrast ratios from the same samples), and Table 2 is the one of the image lists, to the bit."""
+    from o3d_seqcc.evaluation.metrics import before_after
+    from o3d_seqcc.imaging.sequences import ImageSequence
+
+    class Counted(ImageSequence):
+        def __init__(self, images):
+            self.images, self.reads = images, []
+
+        def __len__(self):
+            return len(self.images)
+
+        def _load(self, i):
+            self.reads.append(i)
+            return self.images[i]
+
+        def dtypes(self):  # as a file sequence: from the headers, no read
+            return [im.dtype for im in self.images]
+
+    images, maps = _gained_setup()
+    corrected = [np.clip(im.astype(np.int64) * 3 // 4 + 9, 0, 255).astype(im.dtype) for im in images]
+    paths = {0: [0], 1: [1, 0], 2: [2, 1, 0]}
+    for cap in (None, 50):
+        want = before_after(images, corrected, maps, paths, max_per_pair=cap, per_pair=True)
+        lazy = Counted(images), Counted(corrected)
+        got = before_after(*lazy, maps, paths, max_per_pair=cap, per_pair=True)
+        assert json.dumps(got) == json.dumps(want)
+        assert got["contrast"]["before"]["n_pairs"] == 3
+        for seq in lazy:
+            assert sorted(seq.reads) == [0, 1, 2], seq.reads

@@ -61,9 +61,29 @@ def test_png_exif_orientation_found_without_decoding_twice(tmp_path, monkeypatch
     assert len(msgs) == 1 and "rot.png has EXIF orientation 6" in msgs[0]
 
 
+def _float32_samples(img: np.ndarray, uv: np.ndarray, interp: str) -> np.ndarray:
+    """(n, 3): the colour samples as first written, on a float32 copy of the float image (the reference)."""
+    H, W = img.shape[:2]
+    flat = np.ascontiguousarray(img, dtype=np.float32).reshape(-1, 3)
+    x, y = np.clip(uv[:, 0], 0.0, W - 1.0), np.clip(uv[:, 1], 0.0, H - 1.0)
+    if interp == "nearest":
+        xi = np.minimum(np.floor(x + 0.5).astype(np.int64), W - 1)
+        yi = np.minimum(np.floor(y + 0.5).astype(np.int64), H - 1)
+        return np.take(flat, yi * W + xi, axis=0)
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    dx = (x0 < W - 1).astype(np.int64)
+    i00 = y0 * W + x0
+    i10 = i00 + np.where(y0 < H - 1, W, 0)
+    fx, fy = (x - x0).astype(np.float32)[:, None], (y - y0).astype(np.float32)[:, None]
+    top = np.take(flat, i00, axis=0) * (1.0 - fx) + np.take(flat, i00 + dx, axis=0) * fx
+    bot = np.take(flat, i10, axis=0) * (1.0 - fx) + np.take(flat, i10 + dx, axis=0) * fx
+    return top * (1.0 - fy) + bot * fy
+
+
 def test_colour_samples_from_uint8_are_the_float_samples():
-    """The colour sampling of seqcc-global reads uint8 / uint16 photos directly, bit for bit the float path."""
-    from o3d_seqcc.correction.methods.edge_summaries import _sample_flat, _sample_levels
+    """The colour sampling of seqcc-global reads uint8 / uint16 photos directly, channel planes and a level
+    table, bit for bit the float32 samples of the float image."""
+    from o3d_seqcc.correction.methods.edge_summaries import _sample_image
     from o3d_seqcc.imaging.arrays import img_as_float
 
     rng = np.random.default_rng(1)
@@ -71,10 +91,41 @@ def test_colour_samples_from_uint8_are_the_float_samples():
         img = rng.integers(0, top, (37, 53, 3)).astype(dtype)
         uv = np.concatenate([rng.uniform(-2, 55, (500, 2)), [[0, 0], [52, 36], [52.5, 36.7], [51.999, 35.2]]])
         for interp in ("bilinear", "nearest"):
-            want = _sample_flat(img_as_float(img), uv, interp)
-            got = _sample_levels(img, uv, interp)
-            assert got.dtype == want.dtype == np.float32
-            assert np.array_equal(got, want), (dtype, interp)
+            want = _float32_samples(img_as_float(img), uv, interp).T
+            for got in (_sample_image(img, uv, interp), _sample_image(img_as_float(img), uv, interp)):
+                assert got.dtype == want.dtype == np.float32
+                assert np.array_equal(got, want), (dtype, interp)
+
+
+def test_bilinear_samples_from_the_flat_image_are_the_indexed_ones():
+    """sample_bilinear gathers the four neighbours from the flattened image and multiplies them as float64 in
+    the products: bit for bit the 2-D indexed, converted-first samples, any dtype, channels, query shape."""
+    from o3d_seqcc.imaging.arrays import sample_bilinear
+
+    def indexed(img, x, y):  # as first written
+        h, w = img.shape[:2]
+        x = np.clip(np.asarray(x, dtype=np.float64), 0.0, w - 1.0)
+        y = np.clip(np.asarray(y, dtype=np.float64), 0.0, h - 1.0)
+        x0, y0 = np.floor(x).astype(np.intp), np.floor(y).astype(np.intp)
+        x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+        fx, fy = x - x0, y - y0
+        if img.ndim == 3:
+            fx, fy = fx[..., None], fy[..., None]
+        top = img[y0, x0].astype(np.float64) * (1.0 - fx) + img[y0, x1].astype(np.float64) * fx
+        bot = img[y1, x0].astype(np.float64) * (1.0 - fx) + img[y1, x1].astype(np.float64) * fx
+        return top * (1.0 - fy) + bot * fy
+
+    rng = np.random.default_rng(4)
+    for dtype in (np.uint8, np.uint16, np.float32, np.float64):
+        for shape in ((31, 47, 3), (31, 47), (9, 6, 4), (1, 1, 3)):
+            img = (rng.random(shape) * (1000 if dtype == np.uint16 else 255 if dtype == np.uint8 else 1)).astype(dtype)
+            for image in (img, img[::2, ::-1]):
+                h, w = image.shape[:2]
+                for q in ((500,), (40, 9), ()):
+                    x, y = rng.uniform(-2, w + 1, q), rng.uniform(-2, h + 1, q)
+                    want, got = indexed(image, x, y), sample_bilinear(image, x, y)
+                    assert got.dtype == want.dtype == np.float64 and got.shape == want.shape
+                    assert np.array_equal(got, want), (dtype, shape, q)
 
 
 def test_raycast_in_chunks_is_the_whole_image_cast(monkeypatch, tmp_path):

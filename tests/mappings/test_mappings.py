@@ -218,6 +218,58 @@ def test_split_by_face(plane_scene, mode):
         M.split(1.0)
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_thinned_many_is_thinned_pair_by_pair(occluder_scene, mode):
+    """The pairs planned together and their picked mappings computed in one vectorised pass (batches split
+    anywhere, pairs of the same first view sharing its face levels) are bit for bit one thinned pair at a
+    time: strided picks, all mappings, none."""
+    import o3d_seqcc.mappings.pairs as pairs_mod
+
+    scene = occluder_scene
+    vis = compute_visibility(scene)
+    m = compute_mappings(scene, visibility=vis, mappings=mode)
+    keys = list(m.pairs)
+    rng = np.random.default_rng(5)
+    for pick in (lambda n: np.sort(rng.choice(n, min(n, 37), replace=False)), lambda n: None,
+                 lambda n: np.zeros(0, np.int64)):
+        state = rng.bit_generator.state
+        want = [pairs_mod.thinned(m.pairs, k, pick) for k in keys]
+        for batch, mappings in ((1, 10**6), (3, 50), (len(keys), 10**6)):
+            rng.bit_generator.state = state
+            old = pairs_mod.BATCH_MAPPINGS
+            pairs_mod.BATCH_MAPPINGS = mappings
+            try:
+                got = list(pairs_mod.thinned_many(m.pairs, keys, pick, batch_pairs=batch, n_jobs=2))
+            finally:
+                pairs_mod.BATCH_MAPPINGS = old
+            assert len(got) == len(want)
+            for (n0, p0), (n1, p1) in zip(want, got):
+                assert n0 == n1 and p0.key == p1.key
+                for name in ("uv_a", "uv_b", "face_ids", "weights"):
+                    x, y = getattr(p0, name), getattr(p1, name)
+                    assert (x is None) == (y is None) and (x is None or (x.dtype == y.dtype and np.array_equal(x, y)))
+
+
+@pytest.mark.parametrize("cells", [3, 30])
+def test_surface_levels_are_the_smaller_projections_levels(tmp_path, cells):
+    """A pair's faces and their sampling levels, from the two views' levels (each view's computed once), are
+    the level of the smaller of the face's two projected areas (the definition), face by face."""
+    from o3d_seqcc.mappings.sampling import SURFACE_MAX_LEVEL, tri_area
+
+    scene = make_scene(tmp_path, plane(cells), down_cameras() + [look_at((0.6, 0.5, 1.5), (0.0, 0.0, 0.0))])
+    vis = compute_visibility(scene)
+    m = compute_mappings(scene, visibility=vis, mappings="surface")
+    src, faces = m.pairs.source, np.asarray(vis.mesh.faces)
+    for a, b in m.pairs:
+        k, lev = src._pair_levels(a, b)
+        assert np.array_equal(k, src.faces(a, b))
+        area = [tri_area(vis.vertex_projection(v, faces[k].reshape(-1))[0].reshape(-1, 3, 2).astype(np.float64))
+                for v in (a, b)]
+        m_ = np.minimum(*area) / src.spacing**2
+        want = np.where(m_ >= 1.0, np.clip(np.rint(np.sqrt(np.maximum(m_, 1.0))), 1, SURFACE_MAX_LEVEL), 0)
+        assert np.array_equal(lev, want) and lev.max() >= (2 if cells == 3 else 0)
+
+
 def test_subset(plane_scene):
     M = compute_mappings(plane_scene)
     S = M.subset([(2, 0)])

@@ -450,12 +450,12 @@ def _adjust_channel(
     ew = np.ones(E)
 
     def evaluate(phi_, u_):
-        k0, fr = _knot_index(u_[r_lat], uk)
-        g = phi_[r_view, k0] * (1.0 - fr) + phi_[r_view, k0 + 1] * fr
-        return g - r_meas, k0, fr, (phi_[r_view, k0 + 1] - phi_[r_view, k0]) / (uk[k0 + 1] - uk[k0])
+        k0, fr = _knot_index(np.take(u_, r_lat), uk)
+        at = r_view * K + k0  # phi_[r_view, k0], phi_[r_view, k0 + 1] from the flat array
+        p0, p1 = np.take(phi_, at), np.take(phi_, at + 1)
+        return p0 * (1.0 - fr) + p1 * fr - r_meas, k0, fr, (p1 - p0) / (uk[k0 + 1] - uk[k0])
 
-    def cost(phi_, u_, w_):
-        r = evaluate(phi_, u_)[0]
+    def cost(r, phi_, w_):  # r: evaluate(phi_, u_)[0]
         d = phi_[free] - phi_start
         return float(
             np.sum(w_ * r * r) + smooth * np.sum((phi_[free] @ D.T) ** 2) + prior * np.sum(d * d)
@@ -466,8 +466,9 @@ def _adjust_channel(
     # two phases: a few plain least-squares steps from the start, then per-edge robust weights
     # (re-estimated every iteration) to convergence
     robust, it_phase = edge_robust_c is not None and plain_iterations == 0, 0
+    state = evaluate(phi, u)  # (r, k0, fr, slope) at (phi, u): an accepted step's evaluation carries over
     for it in range(plain_iterations + iterations):
-        r, k0, fr, sl = evaluate(phi, u)
+        r, k0, fr, sl = state
         if robust:
             e_rms = np.sqrt(np.bincount(r_edge, weights=r * r, minlength=E) / np.maximum(rows_per_edge, 1.0))
             m = float(np.median(e_rms[rows_per_edge > 0])) + 1e-9
@@ -495,23 +496,25 @@ def _adjust_channel(
         hpu = w[:, None] * vals * sl[:, None]
         cols4 = np.concatenate([idx[first], np.where(two[:, None], idx[second], -1)], axis=1)  # (J, 4)
         vals4 = np.where(cols4 >= 0, np.concatenate([hpu[first], hpu[second]], axis=1), 0.0)
-        ok4 = cols4 >= 0
-        pair_ok = ok4[:, :, None] & ok4[:, None, :]
-        pair_idx = (cols4[:, :, None] * U + cols4[:, None, :])[pair_ok]
+        # the fixed columns (-1) sent to a spare column U, dropped after the sums: every entry of a column
+        # pair is summed in the same order as over the valid entries alone, without masks
+        c4 = np.where(cols4 >= 0, cols4, U)
+        pair_idx = (c4[:, :, None] * (U + 1) + c4[:, None, :]).reshape(-1)
+        pair_vv = vals4[:, :, None] * vals4[:, None, :]  # (J, 4, 4)
         h0u = float(np.median(Huu[Huu > 0])) if np.any(Huu > 0) else 1.0
         dpp = Hpp[:: U + 1].copy()
         h0p = float(np.median(dpp[dpp > 0])) if np.any(dpp > 0) else 1.0
-        c0 = cost(phi, u, w)
+        c0 = cost(r, phi, w)
         accepted = False
         for _ in range(8):
             # Levenberg-Marquardt: damped latents (one on a flat stretch of a response would
             # otherwise jump) and knots; the latents are eliminated by their Schur complement
             # S = H_pp - H_pu diag(1 / H_uu) H_up, which couples the views sharing latents (edges)
             inv = 1.0 / (Huu + mu * (Huu + h0u))
-            sw = (vals4[:, :, None] * vals4[:, None, :] * inv[:, None, None])[pair_ok]
-            S = Hpp - np.bincount(pair_idx, weights=sw, minlength=U * U)
+            sw = (pair_vv * inv[:, None, None]).reshape(-1)  # vals4 vals4^T * inv, entry by entry
+            S = Hpp - np.bincount(pair_idx, weights=sw, minlength=(U + 1) ** 2).reshape(U + 1, U + 1)[:U, :U].reshape(-1)
             S[:: U + 1] += mu * (dpp + h0p)
-            rhs = -gp + np.bincount(cols4[ok4], weights=(vals4 * (inv * gu)[:, None])[ok4], minlength=U)
+            rhs = -gp + np.bincount(c4.reshape(-1), weights=(vals4 * (inv * gu)[:, None]).reshape(-1), minlength=U + 1)[:U]
             S = S.reshape(U, U)
             try:
                 dphi = cho_solve(cho_factor(S, check_finite=False), rhs, check_finite=False)
@@ -523,7 +526,8 @@ def _adjust_channel(
             if monotone_steps:
                 ph[free] = _monotone(ph[free])
             un = np.clip(u + du, 0.0, 1.0)
-            c1 = cost(ph, un, w)
+            trial = evaluate(ph, un)
+            c1 = cost(trial[0], ph, w)
             if c1 <= c0:
                 accepted = True
                 mu = max(mu / 3.0, 1e-9)
@@ -531,7 +535,7 @@ def _adjust_channel(
             mu *= 10.0
         rel = (c0 - c1) / max(c0, 1e-300) if accepted else 0.0
         if accepted:
-            phi, u = ph, un
+            phi, u, state = ph, un, trial
             logger.debug("refine_curves: channel %d iteration %d cost %.4e -> %.4e (damping %.1e)", channel, it, c0, c1, mu)
         it_phase += 1
         if robust or edge_robust_c is None:
@@ -539,7 +543,7 @@ def _adjust_channel(
                 break
         elif rel < 1e-4 or it_phase >= plain_iterations:
             robust, it_phase = True, 0
-    r = evaluate(phi, u)[0]
+    r = state[0]
     logger.debug("refine_curves: channel %d: %d of %d latents at 0, %d at 1", channel, int((u <= 0).sum()), u.size, int((u >= 1).sum()))
     residual = np.sqrt(np.bincount(r_edge, weights=r * r, minlength=E) / np.maximum(rows_per_edge, 1.0))
     phi[free] = _monotone(phi[free])
