@@ -49,7 +49,6 @@ from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
-from .report.figures import warm_up
 from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
@@ -237,8 +236,7 @@ class RunResult:
                                     save_images=save_images, report=report)
 
     def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
-        """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
-        warm_up()
+        """What the report needs beside the files: Table 2, the selection seams' steps."""
         if not table2:
             return None, None
         bg = self._table2
@@ -266,7 +264,7 @@ class _BackgroundTable2:
     paths), and the selection and the bake leave a core idle much of the time: started right
     after the correction, it is ready when :meth:`RunResult.save` writes the report instead of
     being computed there, ahead of the page. The same function on the same inputs: the same
-    numbers as computing it in ``save``. matplotlib (the report's figures) is imported there too.
+    numbers as computing it in ``save``.
     """
 
     def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
@@ -281,7 +279,6 @@ class _BackgroundTable2:
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-table2")
 
         def work() -> dict:
-            warm_up()
             return _table2(images, maps, res.paths)
 
         # the thread ends after its one task; the interpreter's exit waits for it (no native code cut off)

@@ -27,10 +27,10 @@ At run time everything comes from memory: the page is drawn from the result obje
 returns (:class:`~o3d_seqcc.report.page.PageInputs`: the images, the correction with its per-edge
 lookup tables, the mappings, the selection, the textured mesh, the visibility's usable counts),
 and no stage runs again (``tests/test_report_schema.py`` makes every stage raise while a run is
-saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
-matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
-and measures the selection seams' steps in a thread beside the export; the page then draws the
-figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
+saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` scores Table 2 on at most
+:data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`; :func:`~o3d_seqcc.pipeline.run`
+starts it in the background) and measures the selection seams' steps in a thread beside the export; the page then
+draws the figures (the joint histograms with numpy and OpenCV, the graph as SVG text), the viewer's textures,
 the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
 :func:`regenerate_report` (a folder, not a result) reloads the scene, recomputes only what the
 folder does not hold (visibility, mappings and correction, with the settings ``report.json``

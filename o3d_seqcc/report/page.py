@@ -2,7 +2,7 @@
 
 :class:`PageInputs` is what a page is drawn from (the ``report.json`` content and the run's data,
 in memory or recomputed); :func:`render_page` draws it. Figures come from
-:mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs.
+:mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs, the graph as inline SVG.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..evaluation.render import render_selection, render_textured, resized_view,
 from ..scene import Scene
 from ..evaluation.seams import selection_seams
 from .comparison import correction_section
-from .figures import graph_figure, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
+from .figures import graph_svg, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
 from .html import esc, img, num
 from .viewer import model_section
 
@@ -114,7 +114,7 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     xy = view_layout(np.array([v.center for v in inp.scene.views]))
     n_paths = sum(1 for v in c.paths if v != ref)
     title = f"reference: {names[ref]} (#{ref}); {len(c.graph_edges)} edges, {n_paths} paths"
-    fig = graph_figure(xy, c.graph_edges, c.paths, ref, title=title)
+    fig = graph_svg(xy, c.graph_edges, c.paths, ref, title=title)
     weight = c.settings.get("graph_weight", "paper")
     total = inp.mappings.total if inp.mappings is not None else None
     formula = "w = 1 − n / N" if weight == "paper" else "w = log(N / n)"
@@ -134,7 +134,7 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
         for t, s in _path_edges(c.paths))
     table = (f"<details><summary>{len(_path_edges(c.paths))} path edges (target → source)</summary><table>"
              f"<tr><th>target</th><th>source</th><th>mappings n</th><th>weight w</th></tr>{rows}</table></details>")
-    return (f'<figure data-fig="4-5">{_img(fig, "image/png", "colour-correction graph")}<figcaption>{cap}'
+    return (f'<figure data-fig="4-5">{fig}<figcaption>{cap}'
             f"</figcaption></figure>{table}")
 
 
@@ -465,7 +465,7 @@ h2{font-size:17px;border-bottom:1px solid #ddd;padding-bottom:3px;margin-top:28p
 nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
 .cards{display:flex;flex-wrap:wrap;gap:10px;margin:10px 0}.card{background:#fff;border:1px solid #ddd;
 border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
-figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}
+figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}svg.graph{display:block;max-width:100%;height:auto}
 .grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
 .grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}
 .grid.panels{grid-template-columns:repeat(3,226px)}.grid figure,.row figure{margin:0;background:#fff;
@@ -494,8 +494,8 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
 
     What the correction did first (Figure 10, Table 2), then how (Figures 4-8), then the texturing
     (Figures 9, 12-13, seams), then timings and settings. The sections are built side by side on
-    ``pool``'s threads (numpy, OpenCV and Open3D release the GIL; matplotlib draws one section
-    only) and joined in this order; only this thread waits for a result another part needs.
+    ``pool``'s threads (numpy, OpenCV and Open3D release the GIL) and joined in this order; only
+    this thread waits for a result another part needs.
     """
     c = inp.correction
     out: list = []
