@@ -34,6 +34,7 @@ the Khronos glTF-Validator without errors or warnings (see ``tests/io/test_expor
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import os
@@ -45,7 +46,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import sample_bilinear
-from .files import atomic_write_bytes
+from .files import atomic_path, atomic_write_bytes
+from .obj_text import obj_lines
 from ..geometry.meshops import float32_offset, vertex_normals
 from ..geometry.orientation import UP_AXES
 
@@ -208,11 +210,12 @@ def texture_file_names(stem: str, texture_format: str, pages: int) -> list[str]:
     return [f"{stem}.{ext}"] if pages == 1 else [f"{stem}_{p}.{ext}" for p in range(pages)]
 
 
-def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
-    if len(a) == 0:
-        return ""
-    row = prefix + " " + " ".join([fmt] * a.shape[1]) + "\n"
-    return (row * len(a)) % tuple(a.ravel().tolist())
+def _write_parts(path: Path, parts: Iterable[bytes]) -> Path:
+    """Write ``parts`` one after the other to ``path`` atomically (never the whole file in memory at once)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        for b in parts:
+            fh.write(b)
+    return path
 
 
 def export_obj(
@@ -264,20 +267,10 @@ def export_obj(
         f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
     atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
     verts, normals = _geometry(textured, transform)
-    vt = _page_uv(textured)
-    f1 = np.asarray(textured.faces, dtype=np.int64) + 1
-    face_page = _face_page(textured)
-    parts = [
-        "# o3d_seqcc textured mesh\n",
-        f"mtllib {mtl_name}\n",
-        _fmt_rows("v", verts, f"%.{_digits(verts)}g"),
-        _fmt_rows("vt", vt, "%.7f"),
-        _fmt_rows("vn", normals, "%.5f"),
-    ]
-    for p in range(len(names)):  # faces grouped by page, one material each
-        fidx = np.repeat(f1[face_page == p], 3, axis=1)  # a/a/a b/b/b c/c/c
-        parts += [f"usemtl material_{p}\n", (("f" + " %d/%d/%d" * 3 + "\n") * len(fidx)) % tuple(fidx.ravel().tolist())]
-    atomic_write_bytes(path, "".join(parts).encode("ascii"))
+    head = f"# o3d_seqcc textured mesh\nmtllib {mtl_name}\n".encode("ascii")
+    _write_parts(path, itertools.chain([head], obj_lines(verts, _page_uv(textured), normals,
+                                                         np.asarray(textured.faces, dtype=np.int64),
+                                                         _face_page(textured), len(names), digits=_digits(verts))))
     logger.info("wrote %s (+ %s, %s)", path, mtl_name, ", ".join(names))
     return path
 
@@ -292,6 +285,15 @@ def glb_bytes(
     encoded: list[bytes] | None = None,
 ) -> bytes:
     """The GLB file content of a textured mesh (see :func:`export_glb`)."""
+    return b"".join(_glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png,
+                               texture_format=texture_format, quality=quality, transform=transform, encoded=encoded))
+
+
+def _glb_parts(
+    textured: Any, *, unlit: bool, png_compression: int, png: bytes | None, texture_format: str, quality: int,
+    transform: np.ndarray | None, encoded: list[bytes] | None,
+) -> list[bytes]:
+    """The GLB file as consecutive parts (the textures' bytes among them as given, not copied)."""
     _check(textured)
     fmt = _check_format(texture_format, quality)
     if png is not None and encoded is None and fmt == "png":
@@ -317,9 +319,8 @@ def glb_bytes(
         if target is not None:
             view["target"] = target
         views.append(view)
-        padded = _pad4(data)
-        blobs.append(padded)
-        offset += len(padded)
+        blobs.extend((data, b"\x00" * ((-len(data)) % 4)))
+        offset += len(data) + (-len(data)) % 4
         return len(views) - 1
 
     n = len(pos)
@@ -374,13 +375,9 @@ def glb_bytes(
     if fmt == "webp":
         gltf["extensionsRequired"] = ["EXT_texture_webp"]
     js = _pad4(json.dumps(gltf, separators=(",", ":")).encode("utf-8"), b" ")
-    binc = b"".join(blobs)
-    total = 12 + 8 + len(js) + 8 + len(binc)
-    out = bytearray()
-    out += struct.pack("<4sII", b"glTF", 2, total)
-    out += struct.pack("<I4s", len(js), b"JSON") + js
-    out += struct.pack("<I4s", len(binc), b"BIN\x00") + binc
-    return bytes(out)
+    total = 12 + 8 + len(js) + 8 + offset
+    return [struct.pack("<4sII", b"glTF", 2, total), struct.pack("<I4s", len(js), b"JSON"), js,
+            struct.pack("<I4s", offset, b"BIN\x00"), *blobs]
 
 
 def export_glb(
@@ -416,9 +413,9 @@ def export_glb(
     pathlib.Path
     """
     path = Path(path)
-    atomic_write_bytes(path, glb_bytes(textured, unlit=unlit, png_compression=png_compression, png=png,
-                                       texture_format=texture_format, quality=quality, transform=transform,
-                                       encoded=encoded))
+    _write_parts(path, _glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png,
+                                  texture_format=texture_format, quality=quality, transform=transform,
+                                  encoded=encoded))
     logger.info("wrote %s", path)
     return path
 
