@@ -52,7 +52,7 @@ from .report import REPORT_FILE, metrics_sample, write_report
 from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
-from .evaluation.seams import SeamReport, seam_metric, selection_seams
+from .evaluation.seams import SeamReport, seam_metric, selection_seams_of
 from .texturing import TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility.compute import Visibility, compute_visibility
 
@@ -246,8 +246,8 @@ class RunResult:
             metrics = _table2(images, self.mappings, self.correction.paths)
         photos, corrected = images
         mesh = self.visibility.mesh
-        steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
-                 for k, imgs in (("photos", photos), ("corrected", corrected))}
+        steps = selection_seams_of(mesh.vertices, mesh.faces, self.selection, self.scene.views,
+                                   {"photos": photos, "corrected": corrected})
         return metrics, steps
 
 

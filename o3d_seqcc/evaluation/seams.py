@@ -27,7 +27,7 @@ from ..imaging.arrays import delta_e_2000
 from ..geometry.meshops import edge_topology, weld_vertices
 from ..texturing.textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
 
-__all__ = ["SeamReport", "SelectionSeams", "mip_bleed", "photo_colors", "seam_metric", "selection_seams"]
+__all__ = ["SeamReport", "SelectionSeams", "mip_bleed", "photo_colors", "seam_metric", "selection_seams", "selection_seams_of"]
 
 logger = logging.getLogger(__name__)
 
@@ -491,6 +491,32 @@ def selection_seams(
     -------
     SelectionSeams
     """
+    return selection_seams_of(vertices, faces, selection, views, {"images": images},
+                              samples_per_edge=samples_per_edge)["images"]
+
+
+def selection_seams_of(
+    vertices: np.ndarray, faces: np.ndarray, selection: np.ndarray, views: Any, image_sets: dict[str, Any], *,
+    samples_per_edge: int = 3,
+) -> dict[str, SelectionSeams]:
+    """:func:`selection_seams` in several image sets at once (e.g. the photos and the corrected images).
+
+    The seam edges and their sample points are found once and projected once per view, and each
+    view's images of every set are read together (:func:`photo_colors`); each set's result is the
+    one :func:`selection_seams` gives for it.
+
+    Parameters
+    ----------
+    vertices, faces, selection, views, samples_per_edge
+        As :func:`selection_seams`.
+    image_sets : dict
+        Name -> one image per view.
+
+    Returns
+    -------
+    dict
+        Name -> :class:`SelectionSeams`.
+    """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     sel = np.asarray(selection, dtype=np.int64).reshape(-1)
@@ -505,8 +531,13 @@ def selection_seams(
     s = max(int(samples_per_edge), 1)
     t = (np.arange(s) + 0.5) / s
     pts = (p0[:, None] * (1.0 - t)[None, :, None] + p1[:, None] * t[None, :, None]).reshape(-1, 3)
-    both = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
-                        images)  # each image read once for both sides
-    ca, cb = both[:len(pts)], both[len(pts):]
-    de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
-    return SelectionSeams(delta_e=de, segments=np.stack([p0, p1], axis=1), faces=np.stack([fa, fb], axis=1))
+    names = list(image_sets)
+    cols = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
+                        *(image_sets[n] for n in names))  # each image read once for both sides
+    segments, pair = np.stack([p0, p1], axis=1), np.stack([fa, fb], axis=1)
+    out = {}
+    for name, both in zip(names, cols if len(names) > 1 else [cols]):
+        ca, cb = both[:len(pts)], both[len(pts):]
+        de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
+        out[name] = SelectionSeams(delta_e=de, segments=segments, faces=pair)
+    return out

@@ -20,9 +20,9 @@ from ..imaging.arrays import dtype_scale, img_as_uint8, sample_colors
 from ..evaluation.metrics import thin_indices
 from ..mappings.pairs import thinned
 from .._shared.parallel import carried
-from ..evaluation.render import render_selection, render_textured, resized_view, selection_palette
+from ..evaluation.render import Casters, render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
-from ..evaluation.seams import selection_seams
+from ..evaluation.seams import selection_seams_of
 from .comparison import correction_section
 from .figures import graph_svg, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
 from .html import esc, img, num
@@ -59,6 +59,7 @@ class PageInputs:
     usable: np.ndarray | None = None  # (V,) faces usable per view
     selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
     selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
+    casters: Any = None  # evaluation.render.Casters: the meshes' ray-casting scenes, each built once (made when absent)
 
 
 _esc, _img, _num = esc, img, num
@@ -69,8 +70,7 @@ def _selection_seams(inp: PageInputs) -> dict:
     if inp.selection_seams is not None:
         return inp.selection_seams
     v, f = inp.mesh
-    return {k: selection_seams(v, f, inp.selection, inp.scene.views, imgs)
-            for k, imgs in (("photos", inp.photos), ("corrected", inp.corrected))}
+    return selection_seams_of(v, f, inp.selection, inp.scene.views, {"photos": inp.photos, "corrected": inp.corrected})
 
 
 def _name(inp: PageInputs, v: int) -> str:
@@ -356,7 +356,8 @@ def _selection_section(inp: PageInputs, view: int) -> str:
         picture = _img(inp.selection_png, "image/png", "selection")  # the folder's selection.png: the same picture
     else:
         cam = inp.scene.views[view]
-        img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n)
+        img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n,
+                               caster=inp.casters.get(inp.mesh))
         picture = _img(jpeg(img, quality=90), "image/jpeg", "selection")
     pal = selection_palette(n)
     counts = np.bincount(inp.selection[inp.selection >= 0], minlength=n)
@@ -374,7 +375,8 @@ def _renders_section(inp: PageInputs, views: tuple[int, int], width: int) -> str
     rows = []
     for v in dict.fromkeys(views):
         view = inp.scene.views[v]
-        render = render_textured(inp.textured, resized_view(view, min(view.width, width)))
+        render = render_textured(inp.textured, resized_view(view, min(view.width, width)),
+                                 caster=inp.casters.get(inp.textured))
         cells = [("photo", inp.photos[v])]
         if inp.corrected is not None:
             cells.append(("corrected photo", inp.corrected[v]))
@@ -511,7 +513,8 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         if c is not None and inp.corrected is not None:
             seams = _selection_seams(inp)
             add("correction", "What the correction changes", correction_section, inp.textured, inp.scene.views[a],
-                inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method)
+                inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method,
+                casters=inp.casters)
     thumbs = [pool.submit(carried(lambda ims: [thumbnail(im, width) for im in ims]), ims) if ims is not None else None
               for ims in (inp.photos, inp.corrected if inp.photos is not None else None)]
     before, after = (None if t is None else t.result() for t in thumbs)
@@ -594,7 +597,7 @@ def render_page(inp: PageInputs, *, width: int = 160) -> str:
 
     f = facts(inp.rep)
     photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
-    inp = replace(inp, photos=photos, corrected=corrected)
+    inp = replace(inp, photos=photos, corrected=corrected, casters=inp.casters or Casters())
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
             and inp.corrected is not None and inp.selection_seams is None:
         inp = replace(inp, selection_seams=_selection_seams(inp))  # the cards and two sections show them
