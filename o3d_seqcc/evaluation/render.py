@@ -91,7 +91,7 @@ def _arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: rays cast per chunk by :func:`raycast` (about 150 bytes each while a chunk is in flight)
-RAY_CHUNK = 1 << 19
+RAY_CHUNK = 1 << 17
 
 
 class RayCaster:

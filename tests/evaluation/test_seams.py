@@ -272,3 +272,27 @@ def test_selection_seams_of_several_image_sets_are_each_sets_seams():
         one = selection_seams(v, f, sel, views, imgs)
         for name in ("delta_e", "segments", "faces"):
             assert np.array_equal(getattr(both[k], name), getattr(one, name)), (k, name)
+
+
+def test_photo_colors_in_bands_of_rows_are_the_whole_images_remap(monkeypatch):
+    """photo_colors converts REMAP_BAND_ROWS rows at a time for OpenCV's remap: the values of the whole image's."""
+    from o3d_seqcc.evaluation import seams
+    from o3d_seqcc.scene import View
+
+    rng = np.random.default_rng(7)
+    K = np.array([[90.0, 0, 59.5], [0, 90.0, 44.5], [0, 0, 1]])
+    views = [View(name=f"v{i}", image="x.png", intrinsic=K, extrinsic=np.eye(4), width=120, height=90) for i in range(2)]
+    n = 4000
+    uv = np.c_[rng.uniform(-3, 123, n), rng.uniform(-3, 93, n)]
+    uv[:200, 1] = np.repeat(np.arange(0, 90, 9), 20) + rng.choice([-1e-3, 0.0, 0.97, 0.999, 0.9999], 200)  # band edges
+    pts = np.c_[(uv - K[:2, 2]) / 90.0, np.ones(n)]
+    ids = rng.integers(-1, 2, n)
+    sets = [[rng.integers(0, 256, (90, 120, 3), dtype=np.uint8) for _ in views],
+            [rng.integers(0, 65536, (90, 120, 3), dtype=np.uint16) for _ in views]]
+    monkeypatch.setattr(seams, "REMAP_BAND_ROWS", 10 ** 6)
+    whole = seams.photo_colors(views, pts, ids, *sets)
+    for rows in (1, 7, 9, 16):
+        monkeypatch.setattr(seams, "REMAP_BAND_ROWS", rows)
+        banded = seams.photo_colors(views, pts, ids, *sets)
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(whole, banded)), rows
+    assert np.isnan(whole[0][ids < 0]).all() and not np.isnan(whole[0][ids >= 0]).any()
