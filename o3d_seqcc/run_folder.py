@@ -112,11 +112,11 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
         rep = page = None
         t = time.perf_counter()
         if report:  # the page, while the files are written: everything but the export's seconds is known
-            metrics, steps = prelude.result()
+            metrics, steps, parts = prelude.result()
             name = None if pic is None else pic.result()[1]
             rep = res.report({}, picture_view=name, export=export, metrics=metrics, selection_seams=steps)
             page = write_report(res, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images,
-                                write=False, casters=casters)
+                                write=False, casters=casters, parts=parts)
         t_report = time.perf_counter() - t
         written, after, t_export = files.result()
         picture_path = None if pic is None else pic.result()

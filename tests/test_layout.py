@@ -34,7 +34,7 @@ TREE: dict[str, set[str]] = {
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "mappings_npz", "output", "result_files", "export", "obj_text", "gltf_validator"},
-    "report": {"__init__", "schema", "page", "viewer", "comparison", "figures", "html", "validate"},
+    "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate"},
     "synthetic": {"__init__", "room", "generate"},
     "cli": {"__init__", "common", "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info",
             "demo", "synthetic"},

@@ -119,7 +119,7 @@ def _selection_png(folder: Path | None) -> bytes | None:
 
 def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
                         selection_seams: dict | None = None, images: tuple | None = None,
-                        casters: Any = None) -> PageInputs:
+                        casters: Any = None, parts: Any = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
@@ -131,7 +131,7 @@ def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = 
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
             usable=vis.usable_counts(), selection_png=_selection_png(folder), selection_seams=selection_seams,
-            casters=casters)
+            casters=casters, parts=parts)
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
@@ -166,7 +166,7 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
                  selection_seams: dict | None = None, images: tuple | None = None, write: bool = True,
-                 casters: Any = None) -> Path | str:
+                 casters: Any = None, parts: Any = None) -> Path | str:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
@@ -175,12 +175,13 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`, computed when
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
     result's (e.g. :func:`cached_images` shared with whoever read them before); ``casters``
-    (:class:`~o3d_seqcc.evaluation.render.Casters`) the meshes' ray-casting scenes built before. ``write=False``
+    (:class:`~o3d_seqcc.evaluation.render.Casters`) the meshes' ray-casting scenes built before; ``parts``
+    (:class:`~o3d_seqcc.report.parts.CorrectionParts`) the correction's figures computed before. ``write=False``
     returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).
     """
     path = Path(path)
     inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images,
-                              casters=casters)
+                              casters=casters, parts=parts)
     page = render_page(inp, width=int(thumb_width))
     return atomic_write_bytes(path, page_bytes(page)) if write else page
 

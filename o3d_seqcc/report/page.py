@@ -7,7 +7,6 @@ in memory or recomputed); :func:`render_page` draws it. Figures come from
 
 from __future__ import annotations
 
-import inspect
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -16,15 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from ..imaging.arrays import dtype_scale, img_as_uint8, sample_colors
-from ..evaluation.metrics import thin_indices
-from ..mappings.pairs import thinned
+from ..imaging.arrays import img_as_uint8
 from .._shared.parallel import carried
 from ..evaluation.render import Casters, render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
 from ..evaluation.seams import selection_seams_of
 from .comparison import correction_section
-from .figures import graph_svg, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
+from .figures import graph_svg, jih_panel, jpeg, png, thumbnail, view_layout
+from .parts import JIH_BITS, JIH_MAX_MAPPINGS, edge_jihs, jih_thumbnails, path_edges, view_thumbnails
 from .html import esc, img, num
 from .viewer import model_section
 
@@ -33,10 +31,6 @@ __all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH"
 
 logger = logging.getLogger(__name__)
 
-#: bit depth of the JIH drawn (2**bits bins per axis)
-JIH_BITS = 7
-#: mappings per edge drawn in a JIH (evenly spaced)
-JIH_MAX_MAPPINGS = 2000
 #: width in pixels of the selection picture drawn when the folder holds no selection.png of the same view (reused as is)
 SELECTION_WIDTH = 640
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
@@ -60,6 +54,7 @@ class PageInputs:
     selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
     selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
     casters: Any = None  # evaluation.render.Casters: the meshes' ray-casting scenes, each built once (made when absent)
+    parts: Any = None  # parts.CorrectionParts: the JIHs and thumbnails computed before the page (computed when absent)
 
 
 _esc, _img, _num = esc, img, num
@@ -104,10 +99,6 @@ def t_npm_text(f: dict) -> str:
 
 
 # -------------------------------------------------------------------------------- graph (Fig 4-5)
-def _path_edges(paths: dict) -> list[tuple[int, int]]:
-    return list(dict.fromkeys((t, s) for v in sorted(paths) for t, s in zip(paths[v][:-1], paths[v][1:])))
-
-
 def _graph_section(inp: PageInputs, f: dict) -> str:
     c = inp.correction
     ref, names = c.reference, inp.scene.names
@@ -131,53 +122,14 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     rows = "".join(
         f"<tr><td>{_esc(_name(inp, t))}</td><td>{_esc(_name(inp, s))}</td>"
         f"<td>{by_pair[(min(t, s), max(t, s))]['n']}</td><td>{by_pair[(min(t, s), max(t, s))]['weight']:.6f}</td></tr>"
-        for t, s in _path_edges(c.paths))
-    table = (f"<details><summary>{len(_path_edges(c.paths))} path edges (target → source)</summary><table>"
+        for t, s in path_edges(c.paths))
+    table = (f"<details><summary>{len(path_edges(c.paths))} path edges (target → source)</summary><table>"
              f"<tr><th>target</th><th>source</th><th>mappings n</th><th>weight w</th></tr>{rows}</table></details>")
     return (f'<figure data-fig="4-5">{fig}<figcaption>{cap}'
             f"</figcaption></figure>{table}")
 
 
 # --------------------------------------------------------------------------- JIH / CMF (Fig 6-7)
-def _outlier_k(c) -> float | None:
-    """The outlier threshold the correction's fit used (seqcc's ``outlier_k``), None for methods without one."""
-    from ..correction import METHODS
-
-    p = inspect.signature(METHODS[c.method]).parameters.get("outlier_k") if c.method in METHODS else None
-    return None if p is None else c.settings.get("options", {}).get("outlier_k", p.default)
-
-
-def _thinned_pair(mappings, t: int, s: int, k: int):
-    """``mappings.pair(t, s)`` at :func:`~o3d_seqcc.evaluation.metrics.thin_indices` ``(n, k)`` of its mappings:
-    only those built (:func:`~o3d_seqcc.mappings.pairs.thinned`: the same values as the whole pair, thinned)."""
-    lo, hi = (t, s) if t < s else (s, t)
-    if (lo, hi) not in mappings.pairs:
-        return mappings.pair(t, s)  # no mappings: the empty pair
-    _, pm = thinned(mappings.pairs, (lo, hi), lambda n: thin_indices(n, k))
-    return pm if t < s else pm.swapped()
-
-
-def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
-    """(t, s) -> (inlier JIH, outlier JIH or None), from the photos' colours at the pair's mappings."""
-    from ..correction.methods.seqcc import colour_inliers, quantile_luts
-    from ..correction.jih import joint_histogram
-
-    k = _outlier_k(inp.correction)
-    out = {}
-    for t, s in edges:
-        pm = _thinned_pair(inp.mappings, t, s, JIH_MAX_MAPPINGS)
-        ct = sample_colors(inp.photos[t], pm.uv_a) / dtype_scale(inp.photos[t].dtype)
-        cs = sample_colors(inp.photos[s], pm.uv_b) / dtype_scale(inp.photos[s].dtype)
-        if k is not None and len(ct):
-            lut = inp.correction.edge_luts.get((t, s))
-            keep = colour_inliers(ct, cs, quantile_luts(ct, cs, n_out=256 if lut is None else lut.shape[1]), k=float(k))
-            out[(t, s)] = (joint_histogram(ct[keep], cs[keep], bits=JIH_BITS),
-                           joint_histogram(ct[~keep], cs[~keep], bits=JIH_BITS))
-        else:
-            out[(t, s)] = (joint_histogram(ct, cs, bits=JIH_BITS), None)
-    return out
-
-
 def _jih_section(inp: PageInputs, path: list[int] | None, jihs: dict, thumbs: dict) -> str:
     c = inp.correction
     luts = c.edge_luts
@@ -515,9 +467,10 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
             add("correction", "What the correction changes", correction_section, inp.textured, inp.scene.views[a],
                 inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method,
                 casters=inp.casters)
-    thumbs = [pool.submit(carried(lambda ims: [thumbnail(im, width) for im in ims]), ims) if ims is not None else None
-              for ims in (inp.photos, inp.corrected if inp.photos is not None else None)]
-    before, after = (None if t is None else t.result() for t in thumbs)
+    given = inp.parts if inp.parts is not None and inp.parts.width == width and inp.photos is not None else None
+    before, after = given.thumbs if given is not None else pool.submit(
+        carried(view_thumbnails, "report thumbnails"), inp.photos, inp.corrected if inp.photos is not None else None,
+        width).result() if inp.photos is not None else (None, None)
     if before is not None:
         add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
             [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
@@ -532,8 +485,12 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         path = c.paths[max(longest, key=lambda v: (change[v], -v))] if longest else None
         add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp, f)
         if inp.mappings is not None and c.paths:
-            edges = _path_edges(c.paths)
-            jihs, thumbs = pool.submit(carried(_jihs_and_thumbs, "report JIH"), inp, edges).result()
+            edges = path_edges(c.paths)
+            if inp.parts is not None:
+                jihs, thumbs = inp.parts.jihs, inp.parts.jih_thumbs
+            else:
+                jihs = pool.submit(carried(edge_jihs, "report JIH"), inp.photos, c, inp.mappings, edges).result()
+                thumbs = jih_thumbnails(jihs, c.edge_luts)
             add("jih", "Joint image histograms and colour mapping functions (Figures 6-7)", _jih_section, inp, path,
                 jihs, thumbs)
             if path:
@@ -546,11 +503,6 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
     out.append(("timings", "Timings (s)", timings_block(inp.rep)))
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
     return [(sid, title, body if isinstance(body, str) else body.result()) for sid, title, body in out]
-
-
-def _jihs_and_thumbs(inp: PageInputs, edges: list) -> tuple[dict, dict]:
-    jihs = _edge_jihs(inp, edges)
-    return jihs, {e: png(jih_thumbnail(jihs[e][0], inp.correction.edge_luts.get(e), jihs[e][1])) for e in edges}
 
 
 def timings_block(rep: dict) -> str:

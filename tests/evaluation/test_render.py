@@ -240,3 +240,14 @@ def test_selection_streamed_in_row_chunks_is_the_whole_cast_coloured(monkeypatch
     assert all(np.array_equal(s, whole) for s in shots)
     hits = render.raycast(mesh, view, caster=got[0])
     assert np.array_equal(hits.face_ids, render.raycast(mesh, view).face_ids)
+
+
+def test_the_written_palette_is_the_greedy_choice():
+    from o3d_seqcc.evaluation import render
+
+    full = render._distinct_palette(64)
+    assert np.array_equal(render._PALETTE, full)
+    for n in (1, 2, 5, 33, 64):
+        assert np.array_equal(render._distinct_palette(n), full[:n])
+        assert np.array_equal(selection_palette(n), full[:n])
+    assert np.array_equal(selection_palette(70), np.resize(full, (70, 3)))
