@@ -32,6 +32,7 @@ __all__ = [
     "RayCaster",
     "RayHits",
     "gradient_similarity",
+    "picture_view",
     "plot_pair",
     "raycast",
     "render_selection",
@@ -597,8 +598,12 @@ def write_selection_picture(scene, visibility, labels: np.ndarray, path, view: s
     (pathlib.Path, str)
         The path and the view's name.
     """
-    counts = visibility.usable_counts()
-    k = int(np.argmax(counts)) if view is None else scene.index(view)
+    k = picture_view(scene, visibility, view)
     img = render_selection(visibility.mesh, labels, scene.views[k], n_views=len(scene.views), caster=caster)
     write_image(path, img)
     return Path(path), scene.names[k]
+
+
+def picture_view(scene, visibility, view: str | int | None = None) -> int:
+    """The view :func:`write_selection_picture` renders from: ``view``, or the one in which the most faces are usable."""
+    return int(np.argmax(visibility.usable_counts())) if view is None else scene.index(view)

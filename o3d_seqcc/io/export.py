@@ -40,7 +40,8 @@ import logging
 import os
 import struct
 from pathlib import Path
-from typing import Any, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
@@ -154,9 +155,9 @@ def encode_texture(image: np.ndarray, texture_format: str = "png", *, quality: i
 
 
 def _encoded_pages(textured: Any, texture_format: str, quality: int, png_compression: int,
-                   encoded: list[bytes] | None) -> list[bytes]:
-    if encoded is not None:
-        return list(encoded)
+                   encoded: list[bytes] | Callable[[], list[bytes]] | None) -> list[bytes]:
+    if encoded is not None:  # given, or being encoded on another thread (a callable waiting for it)
+        return list(encoded() if callable(encoded) else encoded)
     return [encode_texture(p, texture_format, quality=quality, png_compression=png_compression)
             for p in _pages(textured)]
 
@@ -210,14 +211,6 @@ def texture_file_names(stem: str, texture_format: str, pages: int) -> list[str]:
     return [f"{stem}.{ext}"] if pages == 1 else [f"{stem}_{p}.{ext}" for p in range(pages)]
 
 
-def _write_parts(path: Path, parts: Iterable[bytes]) -> Path:
-    """Write ``parts`` one after the other to ``path`` atomically (never the whole file in memory at once)."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        for b in parts:
-            fh.write(b)
-    return path
-
-
 def export_obj(
     textured: Any, path: str | os.PathLike, *, png_compression: int = 1, png: bytes | None = None,
     texture_format: str = "png", quality: int = 90, transform: np.ndarray | None = None,
@@ -242,13 +235,14 @@ def export_obj(
         JPEG / WebP quality.
     transform : (3, 3) float, optional
         Rotation applied to positions and normals.
-    encoded : list of bytes, optional
-        Already encoded textures, one per page, in ``texture_format``.
+    encoded : list of bytes, or a callable returning it, optional
+        Already encoded textures, one per page, in ``texture_format`` (a callable is called once the
+        OBJ's text is written: the textures may be encoded meanwhile).
 
     Returns
     -------
     pathlib.Path
-        The OBJ path.
+        The OBJ path (written after its textures and material).
     """
     _check(textured)
     fmt = _check_format(texture_format, quality)
@@ -256,21 +250,25 @@ def export_obj(
     stem = path.stem
     if png is not None and encoded is None and fmt == "png":
         encoded = [png]
-    images = _encoded_pages(textured, fmt, quality, png_compression, encoded)
-    names = texture_file_names(stem, fmt, len(images))
+    n_pages = len(encoded) if isinstance(encoded, (list, tuple)) else int(getattr(textured, "pages", 1))
+    names = texture_file_names(stem, fmt, n_pages)
     mtl_name = f"{stem}.mtl"
-    for name, data in zip(names, images):
-        atomic_write_bytes(path.with_name(name), data)
-    mtl = "# o3d_seqcc texture atlas\n" + "".join(
-        f"newmtl material_{p}\n"
-        "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
-        f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
-    atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
     verts, normals = _geometry(textured, transform)
     head = f"# o3d_seqcc textured mesh\nmtllib {mtl_name}\n".encode("ascii")
-    _write_parts(path, itertools.chain([head], obj_lines(verts, _page_uv(textured), normals,
-                                                         np.asarray(textured.faces, dtype=np.int64),
-                                                         _face_page(textured), len(names), digits=_digits(verts))))
+    with atomic_path(path) as tmp:  # the text first (while the textures may still be encoded), renamed last
+        with open(tmp, "wb") as fh:
+            for b in itertools.chain([head], obj_lines(verts, _page_uv(textured), normals,
+                                                       np.asarray(textured.faces, dtype=np.int64),
+                                                       _face_page(textured), len(names), digits=_digits(verts))):
+                fh.write(b)
+        images = _encoded_pages(textured, fmt, quality, png_compression, encoded)
+        for name, data in zip(names, images):
+            atomic_write_bytes(path.with_name(name), data)
+        mtl = "# o3d_seqcc texture atlas\n" + "".join(
+            f"newmtl material_{p}\n"
+            "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
+            f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
+        atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
     logger.info("wrote %s (+ %s, %s)", path, mtl_name, ", ".join(names))
     return path
 
@@ -413,9 +411,11 @@ def export_glb(
     pathlib.Path
     """
     path = Path(path)
-    _write_parts(path, _glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png,
-                                  texture_format=texture_format, quality=quality, transform=transform,
-                                  encoded=encoded))
+    parts = _glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png, texture_format=texture_format,
+                       quality=quality, transform=transform, encoded=encoded)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # part by part: the textures' bytes are not copied
+        for b in parts:
+            fh.write(b)
     logger.info("wrote %s", path)
     return path
 
@@ -568,7 +568,7 @@ def export_textured_mesh(
 ) -> dict[str, Path]:
     """Write ``out_dir/<stem>.glb``, ``<stem>.obj`` (+ .mtl, textures), ``<stem>_colors.ply`` as asked.
 
-    The textures are encoded once for GLB and OBJ.
+    The textures are encoded once for GLB and OBJ, on a thread, while the OBJ's text is written.
 
     Parameters
     ----------
@@ -594,14 +594,22 @@ def export_textured_mesh(
         raise InputError(f"unknown export format(s) {bad or fmts}; valid: {', '.join(FORMATS)}")
     fmt = _check_format(texture_format, quality)
     out_dir = Path(out_dir)
-    out: dict[str, Path] = {}
-    encoded = _encoded_pages(textured, fmt, quality, 1, None) if {"glb", "obj"} & set(fmts) else None
-    for f in dict.fromkeys(fmts):
-        name, fn = _WRITERS[f]
-        kw: dict[str, Any] = {"transform": transform}
-        if f in ("glb", "obj"):
-            kw.update(encoded=encoded, texture_format=fmt, quality=quality)
-        if f == "glb" and unlit:
-            kw["unlit"] = True
-        out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+    out: dict[str, Path] = dict.fromkeys(fmts)
+    # the textures are encoded on a thread (OpenCV releases the interpreter) while the OBJ's text is formatted and
+    # written; the GLB waits for them
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-texture") if {"glb", "obj"} & set(fmts) \
+        else None
+    try:
+        encoded = None if pool is None else pool.submit(_encoded_pages, textured, fmt, quality, 1, None).result
+        for f in sorted(out, key=lambda f: f != "obj"):
+            name, fn = _WRITERS[f]
+            kw: dict[str, Any] = {"transform": transform}
+            if f in ("glb", "obj"):
+                kw.update(encoded=encoded, texture_format=fmt, quality=quality)
+            if f == "glb" and unlit:
+                kw["unlit"] = True
+            out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     return out

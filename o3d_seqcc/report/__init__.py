@@ -119,7 +119,7 @@ def _selection_png(folder: Path | None) -> bytes | None:
 
 def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
                         selection_seams: dict | None = None, images: tuple | None = None,
-                        casters: Any = None, parts: Any = None) -> PageInputs:
+                        casters: Any = None, parts: Any = None, selection_png: Any = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
@@ -130,8 +130,8 @@ def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = 
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
-            usable=vis.usable_counts(), selection_png=_selection_png(folder), selection_seams=selection_seams,
-            casters=casters, parts=parts)
+            usable=vis.usable_counts(), selection_seams=selection_seams, casters=casters, parts=parts,
+            selection_png=_selection_png(folder) if selection_png is None else selection_png)
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
@@ -166,7 +166,7 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
                  selection_seams: dict | None = None, images: tuple | None = None, write: bool = True,
-                 casters: Any = None, parts: Any = None) -> Path | str:
+                 casters: Any = None, parts: Any = None, selection_png: Any = None) -> Path | str:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
@@ -176,12 +176,13 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
     result's (e.g. :func:`cached_images` shared with whoever read them before); ``casters``
     (:class:`~o3d_seqcc.evaluation.render.Casters`) the meshes' ray-casting scenes built before; ``parts``
-    (:class:`~o3d_seqcc.report.parts.CorrectionParts`) the correction's figures computed before. ``write=False``
+    (:class:`~o3d_seqcc.report.parts.CorrectionParts`) the correction's figures computed before;
+    ``selection_png`` a callable returning that picture's bytes (while it is being written). ``write=False``
     returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).
     """
     path = Path(path)
     inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images,
-                              casters=casters, parts=parts)
+                              casters=casters, parts=parts, selection_png=selection_png)
     page = render_page(inp, width=int(thumb_width))
     return atomic_write_bytes(path, page_bytes(page)) if write else page
 

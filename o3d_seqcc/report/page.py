@@ -51,7 +51,8 @@ class PageInputs:
     mesh: tuple | None = None  # (vertices, faces) of the scene's mesh
     textured: Any = None  # TexturedMesh
     usable: np.ndarray | None = None  # (V,) faces usable per view
-    selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
+    selection_png: Any = None  # selection.png of the folder (rendered from the view report.json names), or a callable
+    # returning it (the picture still being written beside the page)
     selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
     casters: Any = None  # evaluation.render.Casters: the meshes' ray-casting scenes, each built once (made when absent)
     parts: Any = None  # parts.CorrectionParts: the JIHs and thumbnails computed before the page (computed when absent)
@@ -304,8 +305,9 @@ def _render_views(inp: PageInputs) -> tuple[int, int]:
 def _selection_section(inp: PageInputs, view: int) -> str:
     n = len(inp.scene.views)
     same = (inp.rep.get("selection") or {}).get("picture_view") == inp.scene.names[view]
-    if inp.selection_png is not None and same:
-        picture = _img(inp.selection_png, "image/png", "selection")  # the folder's selection.png: the same picture
+    given = inp.selection_png() if callable(inp.selection_png) else inp.selection_png
+    if given is not None and same:
+        picture = _img(given, "image/png", "selection")  # the folder's selection.png: the same picture
     else:
         cam = inp.scene.views[view]
         img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n,

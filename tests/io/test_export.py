@@ -254,3 +254,18 @@ def test_obj_lines_are_the_python_formatted_obj(rng, monkeypatch, shift):
 
 def test_glb_file_is_glb_bytes(tmp_path, textured):
     assert export_glb(textured, tmp_path / "m.glb").read_bytes() == glb_bytes(textured)
+
+
+def test_textures_encoded_beside_the_obj_text_give_the_same_files(tmp_path, textured):
+    """export_textured_mesh encodes on a thread while the OBJ's text is written: the files of one writer after the
+    other; export_obj takes the encoded pages as a callable too."""
+    from o3d_seqcc.io.export import _encoded_pages
+
+    out = export_textured_mesh(textured, tmp_path / "a", formats=("glb", "obj"))
+    assert list(out) == ["glb", "obj"]
+    enc = _encoded_pages(textured, "png", 90, 1, None)
+    export_glb(textured, tmp_path / "b" / "mesh.glb", encoded=enc)
+    export_obj(textured, tmp_path / "b" / "mesh.obj", encoded=lambda: enc)
+    for name in ("mesh.glb", "mesh.obj", "mesh.mtl", "mesh.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["mesh.glb", "mesh.mtl", "mesh.obj", "mesh.png"]
