@@ -442,16 +442,15 @@ def render_selection(
 
 def _colour_rows(out: np.ndarray, face_ids: np.ndarray, cos_angle: np.ndarray, sel: np.ndarray, pal: np.ndarray,
                  n: int, bg: np.ndarray, shade: bool) -> None:
-    """``out`` (rows, W, 3) uint8: each hit pixel its face's view colour (shaded), the others ``bg``."""
-    rgb = np.empty(out.shape, dtype=np.float64)
-    rgb[:] = bg
+    """``out`` (rows, W, 3) uint8: each hit pixel its face's view colour (shaded), the others ``bg`` (rounded and
+    clipped per pixel: the background's value once, the hits' from their colours)."""
     m = face_ids >= 0
+    out[~m] = np.clip(np.rint(bg), 0, 255).astype(np.uint8)
     s = sel[face_ids[m]]
     col = pal[np.where((s >= 0) & (s < n), s, n)]
     if shade:
         col = col * (0.55 + 0.45 * np.abs(cos_angle[m]))[:, None]
-    rgb[m] = col
-    out[:] = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+    out[m] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
 
 
 def _stage_pairs(mappings, a: int, b: int) -> list[tuple[str, np.ndarray, np.ndarray]]:

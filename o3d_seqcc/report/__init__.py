@@ -72,6 +72,8 @@ METRICS_ALL_UP_TO = 100_000
 IMAGE_CACHE_BYTES = 256 << 20
 #: the most a report's image cache grows to (10 photos of 6 MP and their corrections: 360 MB)
 IMAGE_CACHE_MAX_BYTES = 768 << 20
+#: bytes of corrected images a run's report keeps while it is made (its photos are the run's cached ones)
+CORRECTED_CACHE_BYTES = 64 << 20
 
 
 def _bytes(images: Any) -> int:
@@ -90,15 +92,18 @@ def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
     """``photos`` and ``corrected`` read through one shared cache; lazily corrected images from the cached photos.
 
     What :meth:`~o3d_seqcc.pipeline.RunResult.save` hands to Table 2, the seam steps and the page,
-    so that together they read each photo once (``None`` stays ``None``).
+    so that together they read each photo once (``None`` stays ``None``). A run's photos keep their
+    own cache, and its corrected images get one of :data:`CORRECTED_CACHE_BYTES`.
     """
     from ..correction.base import CorrectedImages
     from ..imaging.sequences import CachedImages, LRUCache
 
-    if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos): the corrections join their cache
+    if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos), cached already
         if corrected is None or isinstance(corrected, CachedImages):
             return photos, corrected
-        return photos, CachedImages(corrected, photos.cache, "corrected")
+        # the corrections (a lookup table applied to a cached photo: cheap) in a small cache of their own: the page
+        # reads most views' twice at most, and keeping them all would add their size to the run's memory
+        return photos, CachedImages(corrected, LRUCache(CORRECTED_CACHE_BYTES), "corrected")
     cache = LRUCache(max(IMAGE_CACHE_BYTES, min(IMAGE_CACHE_MAX_BYTES, _bytes(photos) + _bytes(corrected))))
     p = None if photos is None else CachedImages(photos, cache, "photos")
     if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
