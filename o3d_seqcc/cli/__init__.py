@@ -275,10 +275,35 @@ def _freeze_at_exit() -> None:
 
 _FREEZE_REGISTERED = False
 
+#: glibc malloc arenas a command uses (``MALLOC_ARENA_MAX`` in the environment overrides it)
+MALLOC_ARENAS = 2
+
+
+def _fewer_malloc_arenas() -> None:
+    """Let glibc's malloc keep :data:`MALLOC_ARENAS` arenas instead of eight per core (Linux; before any thread).
+
+    Each thread that allocates while another holds an arena gets an arena of its own, and memory
+    freed in an arena mostly stays with the process: a run's worker threads (visibility, bake,
+    save) left hundreds of megabytes of freed pages resident. With two arenas the 300k Fountain
+    run peaked at 1217 MB instead of 1479 MB, with no more CPU time (numpy's arrays are few and
+    large; Python's small objects do not use malloc's arenas). Set before the command starts
+    threads; a ``MALLOC_ARENA_MAX`` the user set is left as it is.
+    """
+    if not sys.platform.startswith("linux") or "MALLOC_ARENA_MAX" in os.environ:
+        return
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # not glibc (or no mallopt): nothing to set
+        return
+    mallopt(-8, MALLOC_ARENAS)  # M_ARENA_MAX (malloc.h)
+
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``o3d-seqcc`` console script; returns the exit code."""
     _freeze_at_exit()
+    _fewer_malloc_arenas()
     problem = _environment_problem()
     if problem:
         print(f"o3d-seqcc: error: {problem}", file=sys.stderr)

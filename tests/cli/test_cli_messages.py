@@ -165,3 +165,29 @@ def test_the_interpreter_exit_skips_its_cycle_collections():
             "assert gc.get_freeze_count() == 0\natexit._run_exitfuncs()\nprint(gc.get_freeze_count() > 0)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "True"
+
+
+def test_a_command_limits_mallocs_arenas_unless_the_user_did(monkeypatch):
+    import ctypes
+    import sys
+
+    import o3d_seqcc.cli as cli
+
+    calls = []
+
+    class Libc:
+        def mallopt(self, option, value):
+            calls.append((option, value))
+            return 1
+
+    monkeypatch.setattr(ctypes, "CDLL", lambda name: Libc())
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    cli._fewer_malloc_arenas()
+    assert calls == [(-8, cli.MALLOC_ARENAS)]  # M_ARENA_MAX
+    monkeypatch.setenv("MALLOC_ARENA_MAX", "4")
+    cli._fewer_malloc_arenas()
+    monkeypatch.delenv("MALLOC_ARENA_MAX")
+    monkeypatch.setattr(sys, "platform", "darwin")
+    cli._fewer_malloc_arenas()
+    assert len(calls) == 1
