@@ -14,6 +14,7 @@ import inspect
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 
 from ..evaluation.metrics import thin_indices
 from ..imaging.arrays import dtype_scale, sample_colors
@@ -38,7 +39,7 @@ class CorrectionParts:
     Attributes
     ----------
     jihs : dict
-        Path edge (t, s) -> (inlier JIH (3, B, B), outlier JIH or None) (:func:`edge_jihs`).
+        Path edge (t, s) -> (inlier JIH (3, B, B) uint16 counts, outlier JIH or None) (:func:`edge_jihs`).
     jih_thumbs : dict
         Path edge -> PNG bytes of its thumbnail (:func:`jih_thumbnails`).
     thumbs : (list, list or None)
@@ -94,11 +95,17 @@ def edge_jihs(photos, correction, mappings, edges: list[tuple[int, int]]) -> dic
         if k is not None and len(ct):
             lut = correction.edge_luts.get((t, s))
             keep = colour_inliers(ct, cs, quantile_luts(ct, cs, n_out=256 if lut is None else lut.shape[1]), k=float(k))
-            out[(t, s)] = (joint_histogram(ct[keep], cs[keep], bits=JIH_BITS),
-                           joint_histogram(ct[~keep], cs[~keep], bits=JIH_BITS))
+            out[(t, s)] = (_counts(joint_histogram(ct[keep], cs[keep], bits=JIH_BITS)),
+                           _counts(joint_histogram(ct[~keep], cs[~keep], bits=JIH_BITS)))
         else:
-            out[(t, s)] = (joint_histogram(ct, cs, bits=JIH_BITS), None)
+            out[(t, s)] = (_counts(joint_histogram(ct, cs, bits=JIH_BITS)), None)
     return out
+
+
+def _counts(jih: np.ndarray) -> np.ndarray:
+    """The histogram's counts (at most :data:`JIH_MAX_MAPPINGS`) as uint16: the same values, a quarter of the bytes
+    (a run keeps every path edge's from its correction to its save)."""
+    return jih.astype(np.uint16) if jih.max(initial=0) <= np.iinfo(np.uint16).max else jih
 
 
 def jih_thumbnails(jihs: dict, edge_luts: dict) -> dict:
