@@ -49,11 +49,11 @@ from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder import write_run_folder
 from .report import REPORT_FILE, metrics_sample, write_report
-from .report.figures import warm_up
+from .report.parts import correction_parts
 from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
-from .evaluation.seams import SeamReport, seam_metric, selection_seams
+from .evaluation.seams import SeamReport, seam_metric, selection_seams_of
 from .texturing import TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility.compute import Visibility, compute_visibility
 
@@ -139,8 +139,9 @@ class RunResult:
     images_from: str = "scene"
     originals: list | None = None
     run_settings: RunSettings | None = None
-    #: Table 2 started on a background thread by :func:`run` (:class:`_BackgroundTable2`), used by :meth:`save`
-    _table2: Any = field(default=None, repr=False, compare=False)
+    #: Table 2 and the report's figures started on a background thread by :func:`run` (:class:`_BackgroundReport`),
+    #: used by :meth:`save`
+    _background: Any = field(default=None, repr=False, compare=False)
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
                export: dict[str, Any] | None = None, metrics: dict | None = None,
@@ -236,21 +237,21 @@ class RunResult:
                                     picture=selection_view is None or view is not None, view=view,
                                     save_images=save_images, report=report)
 
-    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None]:
-        """What the report needs beside the files: matplotlib loaded, Table 2, the selection seams' steps."""
-        warm_up()
+    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None, Any]:
+        """What the report needs beside the files: Table 2, the selection seams' steps, the correction's figures
+        (:class:`~o3d_seqcc.report.parts.CorrectionParts`, None: the page draws them); from :func:`run`'s
+        background thread when it computed them for this result."""
         if not table2:
-            return None, None
-        bg = self._table2
-        if bg is not None and bg.matches(self):
-            metrics = bg.result()
-        else:
-            metrics = _table2(images, self.mappings, self.correction.paths)
-        photos, corrected = images
-        mesh = self.visibility.mesh
-        steps = {k: selection_seams(mesh.vertices, mesh.faces, self.selection, self.scene.views, imgs)
-                 for k, imgs in (("photos", photos), ("corrected", corrected))}
-        return metrics, steps
+            return None, None, None
+        bg = self._background if self._background is not None and self._background.matches(self) else None
+        metrics = bg.result() if bg is not None else _table2(images, self.mappings, self.correction.paths)
+        steps = bg.seams(self.selection) if bg is not None else None
+        if steps is None:
+            photos, corrected = images
+            mesh = self.visibility.mesh
+            steps = selection_seams_of(mesh.vertices, mesh.faces, self.selection, self.scene.views,
+                                       {"photos": photos, "corrected": corrected})
+        return metrics, steps, None if bg is None else bg.parts()
 
 
 def _table2(images: tuple, maps: Mappings, paths: dict) -> dict:
@@ -259,14 +260,16 @@ def _table2(images: tuple, maps: Mappings, paths: dict) -> dict:
     return before_after(photos, corrected, maps, paths, max_per_pair=metrics_sample(maps))
 
 
-class _BackgroundTable2:
-    """Table 2 of :func:`run`'s report, computed on one background thread while the texturing works.
+class _BackgroundReport:
+    """The parts of :func:`run`'s report that need no atlas, computed on one background thread while it textures.
 
-    It depends on the correction alone (the photos, the corrected images, the mappings and the
-    paths), and the selection and the bake leave a core idle much of the time: started right
-    after the correction, it is ready when :meth:`RunResult.save` writes the report instead of
-    being computed there, ahead of the page. The same function on the same inputs: the same
-    numbers as computing it in ``save``. matplotlib (the report's figures) is imported there too.
+    Table 2 and the page's correction figures (the path edges' joint histograms, the views'
+    thumbnails: :func:`~o3d_seqcc.report.parts.correction_parts`) depend on the correction
+    alone, the selection seams' colour steps also on the selection; the selection and the bake
+    leave a core idle much of the time. Started right after the correction (the seams right
+    after the selection), they are ready when :meth:`RunResult.save` writes the report instead
+    of being computed there. The same functions on the same inputs: the same numbers and
+    pictures as computing them in ``save``.
     """
 
     def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
@@ -277,16 +280,26 @@ class _BackgroundTable2:
         self._key = (originals, res, maps)
         # the photos through the run's cache, the corrections applied on access: caching them here, next to the
         # texturing's arrays, would raise the run's peak memory (save() caches them for the page, as before)
-        images = (originals, res.images)
-        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-table2")
+        self._images = (originals, res.images)
+        self._carried = carried
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-report")
+        self._table2 = self._pool.submit(carried(_table2, "background: table 2"), self._images, maps, res.paths)
+        self._parts = self._pool.submit(carried(correction_parts, "background: report figures"), originals,
+                                        res.images, res, maps)
+        self._seams: tuple | None = None
 
-        def work() -> dict:
-            warm_up()
-            return _table2(images, maps, res.paths)
+    def selected(self, mesh: Any, selection: np.ndarray, views: Sequence) -> None:
+        """The selection is known: measure its seams' steps next, then let the thread end."""
+        photos, corrected = self._images
+        self._seams = (selection, self._pool.submit(
+            self._carried(selection_seams_of, "background: selection seams"), mesh.vertices, mesh.faces, selection,
+            views, {"photos": photos, "corrected": corrected}))
+        self.close(cancel=False)
 
-        # the thread ends after its one task; the interpreter's exit waits for it (no native code cut off)
-        self._future = pool.submit(carried(work, "background: table 2"))
-        pool.shutdown(wait=False)
+    def close(self, *, cancel: bool = True) -> None:
+        """No more work (``cancel``: drop what has not started, e.g. after an error); the thread ends after its task
+        (the interpreter's exit waits for it: no native code cut off)."""
+        self._pool.shutdown(wait=False, cancel_futures=cancel)
 
     def matches(self, result: "RunResult") -> bool:
         """Whether ``result`` holds the correction this was started for (not another one put in by ``replace``)."""
@@ -294,16 +307,30 @@ class _BackgroundTable2:
         return result.originals is originals and result.correction is res and result.mappings is maps
 
     def result(self) -> dict:
-        return self._future.result()
+        """Table 2."""
+        return self._table2.result()
+
+    def parts(self) -> Any:
+        """The page's correction figures (:class:`~o3d_seqcc.report.parts.CorrectionParts`)."""
+        return self._parts.result()
+
+    def seams(self, selection: np.ndarray) -> dict | None:
+        """The selection seams' steps (photos, corrected), when measured for this ``selection``."""
+        if self._seams is None or self._seams[0] is not selection:
+            return None
+        return self._seams[1].result()
 
 
-def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool):
+def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool,
+                   selected: Any = None):
     mesh = vis.mesh
     with _stage("selection", timings):
         adjacency = face_adjacency(mesh.faces, mesh.vertices)
         opts = {"adjacency": adjacency, "smoothness": s.smoothness} if s.selection == "mrf" else {}
         labels = select_views(vis, method=s.selection, seed=s.seed, images=images, data_term=s.data_term,
                               outlier_removal=s.outlier_removal, **opts)
+    if selected is not None:  # the report's background thread measures the selection seams while the bake works
+        selected(mesh, labels, scene.views)
     with _stage("bake", timings):
         tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
     seams = None
@@ -434,18 +461,24 @@ def run(
             res = correct(sc, mappings=maps, images=originals, settings=cs)
         # the report's Table 2 needs the correction alone: on a spare thread while the texturing runs (local only:
         # a Dask client may be closed before save())
-        bg = _BackgroundTable2(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
-        labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=rs.seams)
-        sm0 = None
-        if rs.compare_original:
-            with _stage("compare_original", timings):
-                # the same settings pack the same charts (they do not depend on the images) into the same atlas
-                sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
+        bg = _BackgroundReport(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
+        try:
+            labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=rs.seams,
+                                                   selected=None if bg is None else bg.selected)
+            sm0 = None
+            if rs.compare_original:
+                with _stage("compare_original", timings):
+                    # the same settings pack the same charts (they do not depend on the images) into the same atlas
+                    sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
+        except BaseException:
+            if bg is not None:
+                bg.close()
+            raise
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
                      command="run", source=source, images_from="corrected", originals=originals, run_settings=rs,
-                     _table2=bg)
+                     _background=bg)
 
 
 @dataclass(frozen=True, eq=False)

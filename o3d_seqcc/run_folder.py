@@ -2,9 +2,11 @@
 
 The parts of a run's folder do not wait for each other: the textured mesh's files (texture
 pages encoded by OpenCV, GLB / OBJ / PLY written, the MeshLab project), ``selection.png`` (a
-ray-cast render), the report's Table 2 and selection seams, and the report page (figures, the
-viewer's textures, renders) run side by side on threads (OpenCV, Open3D and numpy release the
-GIL), so the export and the report share the machine's cores instead of following each other.
+ray-cast render), the report's Table 2 and selection seams (ready from :func:`~o3d_seqcc.pipeline.run`'s
+background thread, else computed here), and the report page (figures, the viewer's textures,
+renders; its Figure 9 is ``selection.png``, taken when written) run side by side on threads
+(OpenCV, Open3D and numpy release the GIL), so the export and the report share the machine's
+cores instead of following each other.
 Only the page's timings table waits for the export (it shows the export's seconds): the page
 is built with the timings known then, and that one table is filled in at the end. Every file
 is written into the staging folder of :func:`o3d_seqcc.io.output.output_folder`, which is
@@ -28,7 +30,7 @@ from .io.files import atomic_write_bytes, write_json
 from .io.result_files import meshlab_project, write_images
 from ._shared.interrupts import held
 from ._shared.parallel import carried
-from .evaluation.render import write_selection_picture
+from .evaluation.render import Casters, picture_view, write_selection_picture
 from .report import REPORT_FILE, cached_images
 from .report.validate import page_bytes
 
@@ -66,6 +68,10 @@ def _mesh_files(res: Any, stage: Path, *, fmts: list[str], tfmt: str, quality: i
     return written, after, time.perf_counter() - t
 
 
+def _selection_picture(res: Any, path: Path, view: Any, casters: Casters, mesh: tuple) -> tuple[Path, str]:
+    return write_selection_picture(res.scene, res.visibility, res.selection, path, view, caster=casters.get(mesh))
+
+
 def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt: str, quality: int, unlit: bool,
                      rotation: Any, orientation: dict, picture: bool, view: Any, save_images: bool,
                      report: bool) -> dict[str, str]:
@@ -94,23 +100,26 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
     images = cached_images(*((res.originals, res.images) if res.originals else (res.images, None)))
     export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(quality), "unlit": bool(unlit),
               "orientation": {**orientation, "applies_to": [f for f in fmts]}}
+    casters = Casters()  # the ray-casting scenes of the mesh and the textured mesh: built once for the picture and the page
+    mesh = (res.visibility.mesh.vertices, res.visibility.mesh.faces)
     pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="o3d_seqcc-save")
     try:
         with held():  # a signal inside submit's Thread.start would leave a writer that shutdown does not join
             files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, fmts=fmts, tfmt=tfmt,
                                 quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
-            pic = pool.submit(carried(write_selection_picture, "save: selection picture"), res.scene,
-                              res.visibility, res.selection, stage / "selection.png", view) if picture else None
+            pic = pool.submit(carried(_selection_picture, "save: selection picture"), res, stage / "selection.png",
+                              view, casters, mesh) if picture else None
             prelude = pool.submit(carried(res._report_prelude, "save: table 2 and seam steps"), table2,
                                   images) if report else None
         rep = page = None
         t = time.perf_counter()
         if report:  # the page, while the files are written: everything but the export's seconds is known
-            metrics, steps = prelude.result()
-            name = None if pic is None else pic.result()[1]
+            metrics, steps, parts = prelude.result()
+            name = None if pic is None else res.scene.names[picture_view(res.scene, res.visibility, view)]
             rep = res.report({}, picture_view=name, export=export, metrics=metrics, selection_seams=steps)
             page = write_report(res, stage / REPORT_FILE, report=rep, selection_seams=steps, images=images,
-                                write=False)
+                                write=False, casters=casters, parts=parts,
+                                selection_png=None if pic is None else lambda: pic.result()[0].read_bytes())
         t_report = time.perf_counter() - t
         written, after, t_export = files.result()
         picture_path = None if pic is None else pic.result()

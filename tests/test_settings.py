@@ -183,7 +183,7 @@ def _record_stages(monkeypatch, seen: dict) -> None:
         return SimpleNamespace(images=[], timings={}, method="", reference=0, t_npm=1, graph_edges=[], paths={},
                                unreachable=[], transforms=[], settings={})
 
-    def tex(scene, images, v, s, timings, *, want_seams):
+    def tex(scene, images, v, s, timings, *, want_seams, **kw):
         seen["texture"], seen["seams"] = s, want_seams
         return None, {}, None, None
 

@@ -27,7 +27,7 @@ from ..imaging.arrays import delta_e_2000
 from ..geometry.meshops import edge_topology, weld_vertices
 from ..texturing.textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
 
-__all__ = ["SeamReport", "SelectionSeams", "mip_bleed", "photo_colors", "seam_metric", "selection_seams"]
+__all__ = ["SeamReport", "SelectionSeams", "mip_bleed", "photo_colors", "seam_metric", "selection_seams", "selection_seams_of"]
 
 logger = logging.getLogger(__name__)
 
@@ -417,23 +417,54 @@ def photo_colors(views: Any, points: np.ndarray, view_ids: np.ndarray, *image_se
         if len(idx) == 0:
             continue
         uv, _ = project_points(pts[idx], views[v].intrinsic, views[v].extrinsic)
-        n, k = len(idx), 4096
-        pad = (-n) % k
-        maps = None
+        n = len(idx)
+        bands = None
         for images, out in zip(image_sets, outs):
             img = np.asarray(images[v])
             if n < img.shape[0] * img.shape[1] // 20:  # a few points: numpy, without a float copy of the image
                 out[idx] = sample_colors(img, np.nan_to_num(uv)) / dtype_scale(img.dtype)
                 continue
-            if maps is None:
-                h, w = img.shape[:2]
-                x = np.clip(np.nan_to_num(uv[:, 0], nan=0.0), 0.0, w - 1.0).astype(np.float32)
-                y = np.clip(np.nan_to_num(uv[:, 1], nan=0.0), 0.0, h - 1.0).astype(np.float32)
-                maps = [np.concatenate([a, np.zeros(pad, np.float32)]).reshape(-1, min(k, n + pad)) for a in (x, y)]
-            col = cv2.remap(img.astype(np.float32), maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            out[idx] = col.reshape(-1, img.shape[2])[:n].astype(np.float64) / dtype_scale(img.dtype)
+            if bands is None:
+                bands = _remap_bands(uv, *img.shape[:2])
+            col = np.empty((n, img.shape[2]), dtype=np.float32)
+            for r0, r1, which, maps in bands:  # a float copy of a band of rows at a time, not of the whole image
+                part = cv2.remap(img[r0:r1].astype(np.float32), maps[0], maps[1], cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_REPLICATE)
+                col[which] = part.reshape(-1, img.shape[2])[:len(which)]
+            out[idx] = col.astype(np.float64) / dtype_scale(img.dtype)
     outs = [np.clip(o, 0.0, 1.0) for o in outs]
     return outs[0] if len(outs) == 1 else outs
+
+
+#: image rows converted to float32 at a time by :func:`photo_colors` (OpenCV's remap reads them)
+REMAP_BAND_ROWS = 128
+
+
+def _remap_bands(uv: np.ndarray, h: int, w: int, k: int = 4096) -> list[tuple[int, int, np.ndarray, tuple]]:
+    """The points ``uv`` (n, 2), clamped to the image, grouped by bands of :data:`REMAP_BAND_ROWS` rows:
+    ``(r0, r1, which, (map_x, map_y))`` per band, the maps relative to row ``r0`` in rows of ``k``.
+
+    OpenCV's bilinear remap reads the rows of a point's 1/32-pixel position and the next one: at
+    most ``floor(y) + 2``, all inside the band's rows ``r0 .. r1`` (two beyond the band), so every
+    point's value is the one the whole image gives (the same weights, the same pixels; the image's
+    own last rows are the band's, with the same border).
+    """
+    x = np.clip(np.nan_to_num(uv[:, 0], nan=0.0), 0.0, w - 1.0).astype(np.float32)
+    y = np.clip(np.nan_to_num(uv[:, 1], nan=0.0), 0.0, h - 1.0).astype(np.float32)
+    band = np.floor(y).astype(np.int64) // REMAP_BAND_ROWS
+    order = np.argsort(band, kind="stable")
+    starts = np.searchsorted(band[order], np.arange(band.max(initial=0) + 2))
+    out = []
+    for b in np.flatnonzero(np.diff(starts)):
+        which = order[starts[b]:starts[b + 1]]
+        r0 = int(b) * REMAP_BAND_ROWS
+        r1 = min(h, r0 + REMAP_BAND_ROWS + 2)
+        m = len(which)
+        pad = (-m) % k
+        maps = tuple(np.concatenate([a, np.zeros(pad, np.float32)]).reshape(-1, min(k, m + pad))
+                     for a in (x[which], y[which] - np.float32(r0)))  # exact: r0 is an integer below y
+        out.append((r0, r1, which, maps))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -491,6 +522,32 @@ def selection_seams(
     -------
     SelectionSeams
     """
+    return selection_seams_of(vertices, faces, selection, views, {"images": images},
+                              samples_per_edge=samples_per_edge)["images"]
+
+
+def selection_seams_of(
+    vertices: np.ndarray, faces: np.ndarray, selection: np.ndarray, views: Any, image_sets: dict[str, Any], *,
+    samples_per_edge: int = 3,
+) -> dict[str, SelectionSeams]:
+    """:func:`selection_seams` in several image sets at once (e.g. the photos and the corrected images).
+
+    The seam edges and their sample points are found once and projected once per view, and each
+    view's images of every set are read together (:func:`photo_colors`); each set's result is the
+    one :func:`selection_seams` gives for it.
+
+    Parameters
+    ----------
+    vertices, faces, selection, views, samples_per_edge
+        As :func:`selection_seams`.
+    image_sets : dict
+        Name -> one image per view.
+
+    Returns
+    -------
+    dict
+        Name -> :class:`SelectionSeams`.
+    """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     sel = np.asarray(selection, dtype=np.int64).reshape(-1)
@@ -505,8 +562,13 @@ def selection_seams(
     s = max(int(samples_per_edge), 1)
     t = (np.arange(s) + 0.5) / s
     pts = (p0[:, None] * (1.0 - t)[None, :, None] + p1[:, None] * t[None, :, None]).reshape(-1, 3)
-    both = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
-                        images)  # each image read once for both sides
-    ca, cb = both[:len(pts)], both[len(pts):]
-    de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
-    return SelectionSeams(delta_e=de, segments=np.stack([p0, p1], axis=1), faces=np.stack([fa, fb], axis=1))
+    names = list(image_sets)
+    cols = photo_colors(views, np.concatenate([pts, pts]), np.concatenate([np.repeat(a[k], s), np.repeat(b[k], s)]),
+                        *(image_sets[n] for n in names))  # each image read once for both sides
+    segments, pair = np.stack([p0, p1], axis=1), np.stack([fa, fb], axis=1)
+    out = {}
+    for name, both in zip(names, cols if len(names) > 1 else [cols]):
+        ca, cb = both[:len(pts)], both[len(pts):]
+        de = delta_e_2000(ca, cb).reshape(-1, s).mean(axis=1) if len(k) else np.zeros(0)
+        out[name] = SelectionSeams(delta_e=de, segments=segments, faces=pair)
+    return out

@@ -34,18 +34,21 @@ the Khronos glTF-Validator without errors or warnings (see ``tests/io/test_expor
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import os
 import struct
 from pathlib import Path
-from typing import Any, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import sample_bilinear
-from .files import atomic_write_bytes
+from .files import atomic_path, atomic_write_bytes
+from .obj_text import obj_lines
 from ..geometry.meshops import float32_offset, vertex_normals
 from ..geometry.orientation import UP_AXES
 
@@ -152,9 +155,9 @@ def encode_texture(image: np.ndarray, texture_format: str = "png", *, quality: i
 
 
 def _encoded_pages(textured: Any, texture_format: str, quality: int, png_compression: int,
-                   encoded: list[bytes] | None) -> list[bytes]:
-    if encoded is not None:
-        return list(encoded)
+                   encoded: list[bytes] | Callable[[], list[bytes]] | None) -> list[bytes]:
+    if encoded is not None:  # given, or being encoded on another thread (a callable waiting for it)
+        return list(encoded() if callable(encoded) else encoded)
     return [encode_texture(p, texture_format, quality=quality, png_compression=png_compression)
             for p in _pages(textured)]
 
@@ -208,13 +211,6 @@ def texture_file_names(stem: str, texture_format: str, pages: int) -> list[str]:
     return [f"{stem}.{ext}"] if pages == 1 else [f"{stem}_{p}.{ext}" for p in range(pages)]
 
 
-def _fmt_rows(prefix: str, a: np.ndarray, fmt: str) -> str:
-    if len(a) == 0:
-        return ""
-    row = prefix + " " + " ".join([fmt] * a.shape[1]) + "\n"
-    return (row * len(a)) % tuple(a.ravel().tolist())
-
-
 def export_obj(
     textured: Any, path: str | os.PathLike, *, png_compression: int = 1, png: bytes | None = None,
     texture_format: str = "png", quality: int = 90, transform: np.ndarray | None = None,
@@ -239,13 +235,14 @@ def export_obj(
         JPEG / WebP quality.
     transform : (3, 3) float, optional
         Rotation applied to positions and normals.
-    encoded : list of bytes, optional
-        Already encoded textures, one per page, in ``texture_format``.
+    encoded : list of bytes, or a callable returning it, optional
+        Already encoded textures, one per page, in ``texture_format`` (a callable is called once the
+        OBJ's text is written: the textures may be encoded meanwhile).
 
     Returns
     -------
     pathlib.Path
-        The OBJ path.
+        The OBJ path (written after its textures and material).
     """
     _check(textured)
     fmt = _check_format(texture_format, quality)
@@ -253,31 +250,25 @@ def export_obj(
     stem = path.stem
     if png is not None and encoded is None and fmt == "png":
         encoded = [png]
-    images = _encoded_pages(textured, fmt, quality, png_compression, encoded)
-    names = texture_file_names(stem, fmt, len(images))
+    n_pages = len(encoded) if isinstance(encoded, (list, tuple)) else int(getattr(textured, "pages", 1))
+    names = texture_file_names(stem, fmt, n_pages)
     mtl_name = f"{stem}.mtl"
-    for name, data in zip(names, images):
-        atomic_write_bytes(path.with_name(name), data)
-    mtl = "# o3d_seqcc texture atlas\n" + "".join(
-        f"newmtl material_{p}\n"
-        "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
-        f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
-    atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
     verts, normals = _geometry(textured, transform)
-    vt = _page_uv(textured)
-    f1 = np.asarray(textured.faces, dtype=np.int64) + 1
-    face_page = _face_page(textured)
-    parts = [
-        "# o3d_seqcc textured mesh\n",
-        f"mtllib {mtl_name}\n",
-        _fmt_rows("v", verts, f"%.{_digits(verts)}g"),
-        _fmt_rows("vt", vt, "%.7f"),
-        _fmt_rows("vn", normals, "%.5f"),
-    ]
-    for p in range(len(names)):  # faces grouped by page, one material each
-        fidx = np.repeat(f1[face_page == p], 3, axis=1)  # a/a/a b/b/b c/c/c
-        parts += [f"usemtl material_{p}\n", (("f" + " %d/%d/%d" * 3 + "\n") * len(fidx)) % tuple(fidx.ravel().tolist())]
-    atomic_write_bytes(path, "".join(parts).encode("ascii"))
+    head = f"# o3d_seqcc textured mesh\nmtllib {mtl_name}\n".encode("ascii")
+    with atomic_path(path) as tmp:  # the text first (while the textures may still be encoded), renamed last
+        with open(tmp, "wb") as fh:
+            for b in itertools.chain([head], obj_lines(verts, _page_uv(textured), normals,
+                                                       np.asarray(textured.faces, dtype=np.int64),
+                                                       _face_page(textured), len(names), digits=_digits(verts))):
+                fh.write(b)
+        images = _encoded_pages(textured, fmt, quality, png_compression, encoded)
+        for name, data in zip(names, images):
+            atomic_write_bytes(path.with_name(name), data)
+        mtl = "# o3d_seqcc texture atlas\n" + "".join(
+            f"newmtl material_{p}\n"
+            "Ka 1.000000 1.000000 1.000000\nKd 1.000000 1.000000 1.000000\nKs 0.000000 0.000000 0.000000\n"
+            f"d 1.0\nillum 1\nmap_Kd {name}\n" for p, name in enumerate(names))
+        atomic_write_bytes(path.with_name(mtl_name), mtl.encode("utf-8"))
     logger.info("wrote %s (+ %s, %s)", path, mtl_name, ", ".join(names))
     return path
 
@@ -292,6 +283,15 @@ def glb_bytes(
     encoded: list[bytes] | None = None,
 ) -> bytes:
     """The GLB file content of a textured mesh (see :func:`export_glb`)."""
+    return b"".join(_glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png,
+                               texture_format=texture_format, quality=quality, transform=transform, encoded=encoded))
+
+
+def _glb_parts(
+    textured: Any, *, unlit: bool, png_compression: int, png: bytes | None, texture_format: str, quality: int,
+    transform: np.ndarray | None, encoded: list[bytes] | None,
+) -> list[bytes]:
+    """The GLB file as consecutive parts (the textures' bytes among them as given, not copied)."""
     _check(textured)
     fmt = _check_format(texture_format, quality)
     if png is not None and encoded is None and fmt == "png":
@@ -317,9 +317,8 @@ def glb_bytes(
         if target is not None:
             view["target"] = target
         views.append(view)
-        padded = _pad4(data)
-        blobs.append(padded)
-        offset += len(padded)
+        blobs.extend((data, b"\x00" * ((-len(data)) % 4)))
+        offset += len(data) + (-len(data)) % 4
         return len(views) - 1
 
     n = len(pos)
@@ -374,13 +373,9 @@ def glb_bytes(
     if fmt == "webp":
         gltf["extensionsRequired"] = ["EXT_texture_webp"]
     js = _pad4(json.dumps(gltf, separators=(",", ":")).encode("utf-8"), b" ")
-    binc = b"".join(blobs)
-    total = 12 + 8 + len(js) + 8 + len(binc)
-    out = bytearray()
-    out += struct.pack("<4sII", b"glTF", 2, total)
-    out += struct.pack("<I4s", len(js), b"JSON") + js
-    out += struct.pack("<I4s", len(binc), b"BIN\x00") + binc
-    return bytes(out)
+    total = 12 + 8 + len(js) + 8 + offset
+    return [struct.pack("<4sII", b"glTF", 2, total), struct.pack("<I4s", len(js), b"JSON"), js,
+            struct.pack("<I4s", offset, b"BIN\x00"), *blobs]
 
 
 def export_glb(
@@ -416,9 +411,11 @@ def export_glb(
     pathlib.Path
     """
     path = Path(path)
-    atomic_write_bytes(path, glb_bytes(textured, unlit=unlit, png_compression=png_compression, png=png,
-                                       texture_format=texture_format, quality=quality, transform=transform,
-                                       encoded=encoded))
+    parts = _glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png, texture_format=texture_format,
+                       quality=quality, transform=transform, encoded=encoded)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:  # part by part: the textures' bytes are not copied
+        for b in parts:
+            fh.write(b)
     logger.info("wrote %s", path)
     return path
 
@@ -571,7 +568,7 @@ def export_textured_mesh(
 ) -> dict[str, Path]:
     """Write ``out_dir/<stem>.glb``, ``<stem>.obj`` (+ .mtl, textures), ``<stem>_colors.ply`` as asked.
 
-    The textures are encoded once for GLB and OBJ.
+    The textures are encoded once for GLB and OBJ, on a thread, while the OBJ's text is written.
 
     Parameters
     ----------
@@ -597,14 +594,22 @@ def export_textured_mesh(
         raise InputError(f"unknown export format(s) {bad or fmts}; valid: {', '.join(FORMATS)}")
     fmt = _check_format(texture_format, quality)
     out_dir = Path(out_dir)
-    out: dict[str, Path] = {}
-    encoded = _encoded_pages(textured, fmt, quality, 1, None) if {"glb", "obj"} & set(fmts) else None
-    for f in dict.fromkeys(fmts):
-        name, fn = _WRITERS[f]
-        kw: dict[str, Any] = {"transform": transform}
-        if f in ("glb", "obj"):
-            kw.update(encoded=encoded, texture_format=fmt, quality=quality)
-        if f == "glb" and unlit:
-            kw["unlit"] = True
-        out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+    out: dict[str, Path] = dict.fromkeys(fmts)
+    # the textures are encoded on a thread (OpenCV releases the interpreter) while the OBJ's text is formatted and
+    # written; the GLB waits for them
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-texture") if {"glb", "obj"} & set(fmts) \
+        else None
+    try:
+        encoded = None if pool is None else pool.submit(_encoded_pages, textured, fmt, quality, 1, None).result
+        for f in sorted(out, key=lambda f: f != "obj"):
+            name, fn = _WRITERS[f]
+            kw: dict[str, Any] = {"transform": transform}
+            if f in ("glb", "obj"):
+                kw.update(encoded=encoded, texture_format=fmt, quality=quality)
+            if f == "glb" and unlit:
+                kw["unlit"] = True
+            out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     return out

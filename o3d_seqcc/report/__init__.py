@@ -27,10 +27,10 @@ At run time everything comes from memory: the page is drawn from the result obje
 returns (:class:`~o3d_seqcc.report.page.PageInputs`: the images, the correction with its per-edge
 lookup tables, the mappings, the selection, the textured mesh, the visibility's usable counts),
 and no stage runs again (``tests/test_report_schema.py`` makes every stage raise while a run is
-saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` imports
-matplotlib's Figure, scores Table 2 on at most :data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`)
-and measures the selection seams' steps in a thread beside the export; the page then draws the
-figures (the joint histograms with numpy, the graph with matplotlib), the viewer's textures,
+saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` scores Table 2 on at most
+:data:`METRICS_MAX_PER_PAIR` mappings per pair (all of them up to :data:`METRICS_ALL_UP_TO`; :func:`~o3d_seqcc.pipeline.run`
+starts it in the background) and measures the selection seams' steps in a thread beside the export; the page then
+draws the figures (the joint histograms with numpy and OpenCV, the graph as SVG text), the viewer's textures,
 the close-ups and two ray-cast renders (selection.png is reused), reading each photo once.
 :func:`regenerate_report` (a folder, not a result) reloads the scene, recomputes only what the
 folder does not hold (visibility, mappings and correction, with the settings ``report.json``
@@ -72,6 +72,8 @@ METRICS_ALL_UP_TO = 100_000
 IMAGE_CACHE_BYTES = 256 << 20
 #: the most a report's image cache grows to (10 photos of 6 MP and their corrections: 360 MB)
 IMAGE_CACHE_MAX_BYTES = 768 << 20
+#: bytes of corrected images a run's report keeps while it is made (its photos are the run's cached ones)
+CORRECTED_CACHE_BYTES = 64 << 20
 
 
 def _bytes(images: Any) -> int:
@@ -90,15 +92,18 @@ def cached_images(photos: Any, corrected: Any) -> tuple[Any, Any]:
     """``photos`` and ``corrected`` read through one shared cache; lazily corrected images from the cached photos.
 
     What :meth:`~o3d_seqcc.pipeline.RunResult.save` hands to Table 2, the seam steps and the page,
-    so that together they read each photo once (``None`` stays ``None``).
+    so that together they read each photo once (``None`` stays ``None``). A run's photos keep their
+    own cache, and its corrected images get one of :data:`CORRECTED_CACHE_BYTES`.
     """
     from ..correction.base import CorrectedImages
     from ..imaging.sequences import CachedImages, LRUCache
 
-    if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos): the corrections join their cache
+    if isinstance(photos, CachedImages):  # a run's photos (images.scene_photos), cached already
         if corrected is None or isinstance(corrected, CachedImages):
             return photos, corrected
-        return photos, CachedImages(corrected, photos.cache, "corrected")
+        # the corrections (a lookup table applied to a cached photo: cheap) in a small cache of their own: the page
+        # reads most views' twice at most, and keeping them all would add their size to the run's memory
+        return photos, CachedImages(corrected, LRUCache(CORRECTED_CACHE_BYTES), "corrected")
     cache = LRUCache(max(IMAGE_CACHE_BYTES, min(IMAGE_CACHE_MAX_BYTES, _bytes(photos) + _bytes(corrected))))
     p = None if photos is None else CachedImages(photos, cache, "photos")
     if isinstance(corrected, CorrectedImages) and p is not None and corrected.originals is photos:
@@ -118,7 +123,8 @@ def _selection_png(folder: Path | None) -> bytes | None:
 
 
 def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = None,
-                        selection_seams: dict | None = None, images: tuple | None = None) -> PageInputs:
+                        selection_seams: dict | None = None, images: tuple | None = None,
+                        casters: Any = None, parts: Any = None, selection_png: Any = None) -> PageInputs:
     if hasattr(result, "textured"):  # pipeline.RunResult
         vis = result.visibility
         corrected = result.images if result.correction is not None else None
@@ -129,7 +135,8 @@ def _inputs_from_result(result: Any, report: dict | None, folder: Path | None = 
             rep=result.report() if report is None else report, scene=result.scene, photos=photos, corrected=corrected,
             correction=result.correction, mappings=result.mappings, selection=np.asarray(result.selection),
             mesh=(vis.mesh.vertices, vis.mesh.faces), textured=result.textured,
-            usable=vis.usable_counts(), selection_png=_selection_png(folder), selection_seams=selection_seams)
+            usable=vis.usable_counts(), selection_seams=selection_seams, casters=casters, parts=parts,
+            selection_png=_selection_png(folder) if selection_png is None else selection_png)
     if hasattr(result, "result") and hasattr(result, "originals"):  # pipeline.CorrectionRun
         vis = getattr(result.mappings, "visibility", None)
         return PageInputs(
@@ -163,7 +170,8 @@ def html_report(result: Any, *, report: dict | None = None, thumb_width: int = 1
 
 
 def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160,
-                 selection_seams: dict | None = None, images: tuple | None = None, write: bool = True) -> Path | str:
+                 selection_seams: dict | None = None, images: tuple | None = None, write: bool = True,
+                 casters: Any = None, parts: Any = None, selection_png: Any = None) -> Path | str:
     """Write :func:`html_report` of ``result`` to ``path`` atomically; returns the path.
 
     A ``selection.png`` beside ``path`` rendered from the view the report names
@@ -171,11 +179,15 @@ def write_report(result: Any, path: str | os.PathLike, *, report: dict | None = 
     writes it) is embedded as Figure 9 instead of being rendered again; ``selection_seams``
     (``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`, computed when
     not given) are the colour steps the page shows; ``images`` (photos, corrected) replace the
-    result's (e.g. :func:`cached_images` shared with whoever read them before). ``write=False``
+    result's (e.g. :func:`cached_images` shared with whoever read them before); ``casters``
+    (:class:`~o3d_seqcc.evaluation.render.Casters`) the meshes' ray-casting scenes built before; ``parts``
+    (:class:`~o3d_seqcc.report.parts.CorrectionParts`) the correction's figures computed before;
+    ``selection_png`` a callable returning that picture's bytes (while it is being written). ``write=False``
     returns the page (str) without writing it (the caller writes :func:`page_bytes` of it).
     """
     path = Path(path)
-    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images)
+    inp = _inputs_from_result(result, report, folder=path.parent, selection_seams=selection_seams, images=images,
+                              casters=casters, parts=parts, selection_png=selection_png)
     page = render_page(inp, width=int(thumb_width))
     return atomic_write_bytes(path, page_bytes(page)) if write else page
 

@@ -24,7 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..evaluation.render import RayHits, raycast, render_textured, resized_view
+from ..evaluation.render import Casters, RayHits, raycast, render_textured, resized_view
 from ..scene import View
 from ..evaluation.seams import SelectionSeams, photo_colors
 
@@ -55,12 +55,13 @@ def seam_scale_css() -> str:
 
 
 def closeup_view(view: View, mesh: tuple, seams: SelectionSeams | None, *, zoom: float = 2.5,
-                 width: int = CLOSEUP_WIDTH) -> View:
+                 width: int = CLOSEUP_WIDTH, casters: Casters | None = None) -> View:
     """The camera of ``view`` zoomed ``zoom`` times onto the window where the visible seams step most.
 
     Seam midpoints are projected into the view (those hidden behind the mesh left out, by a
     small ray cast) and weighted by their step; the window of 1 / ``zoom`` of the image with the
-    largest sum is the close-up (the image centre when no seam is visible).
+    largest sum is the close-up (the image centre when no seam is visible). ``casters``: the
+    meshes' ray-casting scenes, shared with the report's other renders.
     """
     w_win, h_win = view.width / zoom, view.height / zoom
     cx, cy = (view.width - 1) / 2.0, (view.height - 1) / 2.0
@@ -75,7 +76,7 @@ def closeup_view(view: View, mesh: tuple, seams: SelectionSeams | None, *, zoom:
             v = small.intrinsic[1, 1] * cam[:, 1] / z + small.intrinsic[1, 2]
         inside = (z > 0) & (u >= -0.5) & (u < small.width - 0.5) & (v >= -0.5) & (v < small.height - 0.5)
         if inside.any():
-            hits = raycast(mesh, small)
+            hits = raycast(mesh, small, caster=None if casters is None else casters.get(mesh))
             k = np.flatnonzero(inside)
             r = np.clip(np.floor(v[k] + 0.5).astype(int), 0, small.height - 1)
             c = np.clip(np.floor(u[k] + 0.5).astype(int), 0, small.width - 1)
@@ -152,7 +153,7 @@ def _seam_overlay(render: np.ndarray, hits: RayHits, view: View, seams: Selectio
 
 
 def closeup_renders(tm: Any, view: View, views, photos, corrected, seams_photos: SelectionSeams,
-                    seams_corrected: SelectionSeams) -> dict[str, np.ndarray]:
+                    seams_corrected: SelectionSeams, *, casters: Casters | None = None) -> dict[str, np.ndarray]:
     """The close-up from ``view`` four ways, (H, W, 3) uint8 each.
 
     ``result`` (the textured mesh as written), ``corrected`` / ``photos`` (each face its
@@ -160,7 +161,7 @@ def closeup_renders(tm: Any, view: View, views, photos, corrected, seams_photos:
     ``seams_corrected`` (the visible selection seams in the colour of their step, on a grey
     render).
     """
-    hits = raycast(tm, view)
+    hits = raycast(tm, view, caster=None if casters is None else casters.get(tm))
     result = render_textured(tm, view, hits=hits)
     c, p = _photo_renders(tm, hits, views, result, corrected, photos)
     out = {"result": result, "corrected": c, "photos": p}
@@ -170,13 +171,14 @@ def closeup_renders(tm: Any, view: View, views, photos, corrected, seams_photos:
 
 
 def correction_section(tm: Any, view: View, views, photos, corrected, mesh: tuple,
-                       seams_photos: SelectionSeams, seams_corrected: SelectionSeams, method: str) -> str:
+                       seams_photos: SelectionSeams, seams_corrected: SelectionSeams, method: str, *,
+                       casters: Casters | None = None) -> str:
     """The report's section "What the correction changes": the close-ups and the seam steps, as HTML."""
     from .figures import jpeg
     from .html import esc, img, num
 
-    cv = closeup_view(view, mesh, seams_photos)
-    shots = closeup_renders(tm, cv, views, photos, corrected, seams_photos, seams_corrected)
+    cv = closeup_view(view, mesh, seams_photos, casters=casters)
+    shots = closeup_renders(tm, cv, views, photos, corrected, seams_photos, seams_corrected, casters=casters)
     a, b = seams_photos.summary(), seams_corrected.summary()
     cells = [("result", "the result: corrected, atlas, seams levelled"),
              ("corrected", f"each face its photo corrected ({esc(method)}), no leveling"),

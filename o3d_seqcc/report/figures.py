@@ -1,14 +1,13 @@
 """Figures of the HTML report (:mod:`o3d_seqcc.report`): the paper's Figures 4-8 for one run.
 
-Plots are drawn with matplotlib's object API on an Agg canvas (no pyplot, no global state) and
-returned as PNG bytes; photos as JPEG bytes; the joint-image-histogram thumbnails of every path
-edge are drawn with numpy and OpenCV (about a millisecond each, so hundreds of edges stay
-cheap). Nothing is written to disk, and the same input gives the same bytes.
+No plotting library: the colour-correction graph is written directly as SVG text (the page
+draws it), the joint image histograms and their curves are drawn with numpy and OpenCV (about a
+millisecond each, so hundreds of edges stay cheap) and returned as PNG bytes, photos as JPEG
+bytes. Nothing is written to disk, and the same input gives the same bytes.
 """
 
 from __future__ import annotations
 
-import io
 import logging
 from typing import Sequence
 
@@ -20,20 +19,21 @@ from ..io.files import encode_image
 
 __all__ = [
     "CHANNEL_RGB",
-    "figure_png",
-    "graph_figure",
+    "GRAPH_WIDTH",
+    "graph_svg",
     "jih_panel",
     "jih_thumbnail",
     "jpeg",
+    "nice_ticks",
     "png",
     "thumbnail",
     "view_layout",
-    "warm_up",
+    "viridis",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: resolution of the report's plots (dots per inch)
+#: pixels per inch of the report's figures (font sizes and margins in points are converted with it)
 DPI = 90
 #: display colour of each channel's JIH and CMF (R, G, B), 0..255
 CHANNEL_RGB = ((200, 30, 30), (30, 150, 40), (35, 70, 210))
@@ -59,32 +59,6 @@ def thumbnail(image: np.ndarray, width: int) -> np.ndarray:
     return cv2.resize(img, (int(width), height), interpolation=cv2.INTER_AREA)
 
 
-def figure_png(fig) -> bytes:
-    """PNG bytes of a matplotlib Figure (Agg canvas; no software-version metadata, so deterministic)."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=fig.dpi, metadata={"Software": None})
-    return buf.getvalue()
-
-
-def warm_up() -> None:
-    """Import matplotlib's Figure and Agg canvas now (about 0.3 s, mostly docstring processing).
-
-    :meth:`o3d_seqcc.pipeline.RunResult.save` calls it in a thread while the mesh files are
-    encoded and written, so the report does not wait for it.
-    """
-    import matplotlib.backends.backend_agg  # noqa: F401
-    import matplotlib.figure  # noqa: F401
-
-
-def _figure(width_in: float, height_in: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width_in, height_in), dpi=DPI)
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def view_layout(centers: np.ndarray) -> np.ndarray:
     """(V, 2) positions of the views for the graph: camera centres seen along their least spread axis.
 
@@ -106,86 +80,139 @@ def view_layout(centers: np.ndarray) -> np.ndarray:
     return xy / np.abs(xy).max()
 
 
-def graph_figure(
+#: viridis (matplotlib's 256 colours) at every 16th entry and the last, linear between them: the edges' colour scale
+_VIRIDIS = np.array([[int(h[i:i + 2], 16) for i in (0, 2, 4)] for h in (
+    "440154", "48186a", "472d7b", "424086", "3b528b", "33638d", "2c728e", "26828e", "21918c", "1fa088", "28ae80",
+    "3fbc73", "5ec962", "84d44b", "addc30", "d8e219", "fde725")], dtype=np.float64)
+#: the graph's size in pixels: width, node radius (CSS pixels)
+GRAPH_WIDTH, NODE_RADIUS = 684, 8.6
+
+
+def viridis(x: np.ndarray) -> np.ndarray:
+    """(n, 3) uint8 colours of the viridis scale at ``x`` in [0, 1] (clipped)."""
+    x = np.clip(np.asarray(x, dtype=np.float64).reshape(-1), 0.0, 1.0)
+    keys = np.linspace(0.0, 1.0, len(_VIRIDIS))
+    return np.stack([np.rint(np.interp(x, keys, _VIRIDIS[:, c])) for c in range(3)], axis=1).astype(np.uint8)
+
+
+def nice_ticks(lo: float, hi: float, n: int = 6) -> tuple[np.ndarray, int]:
+    """About ``n`` round values (steps of 1, 2, 2.5 or 5 times a power of ten) in [lo, hi], and the decimals they need."""
+    if not hi > lo:
+        return np.array([lo]), max(0, 6 - int(np.floor(np.log10(abs(lo) or 1.0))))
+    raw = (hi - lo) / n
+    mag = 10.0 ** np.floor(np.log10(raw))
+    mult = next(m for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw * (1 - 1e-9))
+    step = mult * mag
+    ticks = np.arange(np.ceil(lo / step - 1e-9), np.floor(hi / step + 1e-9) + 1) * step
+    return ticks, max(0, int(-np.floor(np.log10(step) + 1e-9)) + (1 if mult == 2.5 else 0))
+
+
+def _rgb(c: np.ndarray) -> str:
+    return "#%02x%02x%02x" % tuple(int(v) for v in c)
+
+
+def graph_svg(
     xy: np.ndarray,
     edges: Sequence[dict],
     paths: dict[int, list[int]],
     reference: int,
     *,
     title: str = "",
-) -> bytes:
-    """The colour-correction graph with its Dijkstra paths (paper Figures 4-5), PNG bytes.
+) -> str:
+    """The colour-correction graph with its Dijkstra paths (paper Figures 4-5), an inline SVG element.
+
+    Written directly as SVG text (no plotting library: the page draws it; nothing to encode),
+    :data:`GRAPH_WIDTH` pixels wide and as high as the layout needs; the same input gives the
+    same text.
 
     Parameters
     ----------
     xy : (V, 2) array
-        Node positions (:func:`view_layout`).
+        Node positions (:func:`view_layout`), x to the right, y up.
     edges : list of dict
         ``{"a", "b", "n", "weight"}`` per graph edge (``CorrectionResult.graph_edges``).
     paths : dict[int, list[int]]
         ``view -> [view, ..., reference]``; views absent are unreachable (drawn grey).
     reference : int
     title : str
+        Plain text (escaped here).
 
     Returns
     -------
-    bytes
-        Nodes numbered by view index, the reference in red; edges coloured by weight (colour
-        bar), their width proportional to the number of mappings; path edges as black arrows
-        from each view toward the reference.
+    str
+        ``<svg>...</svg>``: nodes numbered by view index, the reference in red; edges coloured by
+        weight (viridis, with its colour bar), their width proportional to the number of
+        mappings; path edges as black arrows from each view toward the reference.
     """
-    from matplotlib import colormaps
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.collections import LineCollection
-    from matplotlib.colors import Normalize
+    from .html import esc
 
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     n_views = len(xy)
     span = np.ptp(xy, axis=0) if n_views else np.ones(2)
-    height = 6.3 * float(np.clip(span[1] / max(span[0], 1e-9), 0.4, 1.0)) + 0.6
-    fig = _figure(7.6, height)
-    ax = fig.add_axes((0.01, 0.01, 0.85, 1 - 0.4 / height))
-    cax = fig.add_axes((0.89, 0.1, 0.022, 0.75))
+    W = GRAPH_WIDTH
+    H = int(round(DPI * (6.3 * float(np.clip(span[1] / max(span[0], 1e-9), 0.4, 1.0)) + 0.6)))
+    ax_x, ax_w, ax_top = 0.01 * W, 0.85 * W, 0.4 * DPI  # the plot's box: 0.4 in for the title above it
+    ax_h = H - 0.01 * H - ax_top
+    mid = (xy.min(axis=0) + xy.max(axis=0)) / 2 if n_views else np.zeros(2)
+    k = min(ax_w / (max(span[0], 1e-9) * 1.12), ax_h / (max(span[1], 1e-9) * 1.12))  # equal aspect, 6 % margins
+    px = np.stack([ax_x + ax_w / 2 + k * (xy[:, 0] - mid[0]), ax_top + ax_h / 2 - k * (xy[:, 1] - mid[1])], axis=1)
     w = np.array([e["weight"] for e in edges], dtype=np.float64)
     cnt = np.array([e["n"] for e in edges], dtype=np.float64)
     lo, hi = (float(w.min()), float(w.max())) if len(w) else (0.0, 1.0)
-    norm = Normalize(lo, hi if hi > lo else lo + 1e-9)
-    cmap = colormaps["viridis"]
+    out = [f'<svg class="graph" viewBox="0 0 {W} {H}" width="{W}" height="{H}" '
+           f'role="img" aria-label="colour-correction graph" font-size="8" text-anchor="middle">'
+           f'<text x="{ax_x + ax_w / 2:.1f}" y="{0.25 * DPI:.1f}" font-size="10.6">{esc(title)}</text>']
     if len(edges):
-        segs = [[xy[e["a"]], xy[e["b"]]] for e in edges]
-        ax.add_collection(LineCollection(segs, colors=cmap(norm(w)), linewidths=0.3 + 3.2 * cnt / cnt.max(),
-                                         alpha=0.6, zorder=1))
-    cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax)
-    cb.set_label("edge weight w (lower = more mappings)", fontsize=7)
-    cb.ax.tick_params(labelsize=6)
+        col = viridis((w - lo) / (hi - lo) if hi > lo else np.zeros(len(w)))
+        width = 1.25 * (0.3 + 3.2 * cnt / cnt.max())
+        ab = np.array([(e["a"], e["b"]) for e in edges], dtype=np.int64)
+        out.append('<g stroke-opacity="0.6" stroke-linecap="round">' + "".join(
+            f'<line x1="{p[0]:.1f}" y1="{p[1]:.1f}" x2="{q[0]:.1f}" y2="{q[1]:.1f}" stroke="{_rgb(c)}" '
+            f'stroke-width="{s:.2f}"/>' for p, q, c, s in zip(px[ab[:, 0]], px[ab[:, 1]], col, width)) + "</g>")
     nmax = cnt.max() if len(cnt) else 1.0
     by_pair = {(min(e["a"], e["b"]), max(e["a"], e["b"])): e["n"] for e in edges}
     arrows = list(dict.fromkeys((t, s) for v in sorted(paths) for t, s in zip(paths[v][:-1], paths[v][1:])))
-    if arrows:
-        # one quiver for all path edges, each shortened by a node radius at both ends (data units)
-        ax_w, ax_h = 7.6 * 0.85, height - 0.4
-        per_inch = 1.12 * max(span[0] / ax_w, span[1] / ax_h, 1e-9)
-        r = 0.115 * per_inch
+    if arrows:  # each from the rim of its view's node to the rim of the next one's
         t_idx, s_idx = np.array(arrows).T
-        d = xy[s_idx] - xy[t_idx]
+        d = px[s_idx] - px[t_idx]
         length = np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-        cut = np.minimum(r / length, 0.45)
-        start, vec = xy[t_idx] + d * cut, d * (1 - 2 * cut)
-        lw = np.array([0.8 + 1.6 * by_pair.get((min(t, s), max(t, s)), 0) / nmax for t, s in arrows])
-        ax.quiver(start[:, 0], start[:, 1], vec[:, 0], vec[:, 1], angles="xy", scale_units="xy", scale=1.0,
-                  width=0.0028, headwidth=4.5, headlength=5.5, headaxislength=5.0, color="black", zorder=3,
-                  linewidths=lw * 0.3, edgecolors="black")
-    face = ["#d62728" if v == reference else ("white" if v in paths else "#bbbbbb") for v in range(n_views)]
-    ax.scatter(xy[:, 0], xy[:, 1], s=190, c=face, edgecolors="black", linewidths=0.8, zorder=4)
-    for v in range(n_views):
-        ax.text(xy[v, 0], xy[v, 1], str(v), ha="center", va="center", fontsize=6.5, zorder=5,
-                color="white" if v == reference else "black", fontweight="bold" if v == reference else "normal")
-    ax.set_title(title, fontsize=8.5)
-    ax.set_aspect("equal")
-    ax.margins(0.06)
-    ax.autoscale_view()
-    ax.axis("off")
-    return figure_png(fig)
+        cut = np.minimum((NODE_RADIUS + 1.0) / length, 0.45)
+        start, tip = px[t_idx] + d * cut, px[s_idx] - d * cut
+        u = d / length
+        head = np.minimum(8.0, 0.6 * np.linalg.norm(tip - start, axis=1))[:, None]  # arrowheads as triangles
+        base = tip - u * head
+        side = np.stack([-u[:, 1], u[:, 0]], axis=1) * head * 0.45
+        lw = np.array([1.0 + 1.2 * by_pair.get((min(t, s), max(t, s)), 0) / nmax for t, s in arrows])
+        out.append('<g class="arrows" stroke="#000">' + "".join(
+            f'<line x1="{p[0]:.1f}" y1="{p[1]:.1f}" x2="{q[0]:.1f}" y2="{q[1]:.1f}" stroke-width="{s:.2f}"/>'
+            for p, q, s in zip(start, base, lw)) + "</g><g>" + "".join(
+            f'<path d="M{t[0]:.1f},{t[1]:.1f}L{a[0]:.1f},{a[1]:.1f}L{b[0]:.1f},{b[1]:.1f}z"/>'
+            for t, a, b in zip(tip, base + side, base - side)) + "</g>")
+    fill = ["#d62728" if v == reference else ("#fff" if v in paths else "#bbb") for v in range(n_views)]
+    out.append('<g stroke="#000">' + "".join(f'<circle cx="{p[0]:.1f}" cy="{p[1]:.1f}" r="{NODE_RADIUS}" fill="{f}"/>'
+                                             for p, f in zip(px, fill)) + "</g>")
+    bold = ' fill="#fff" font-weight="bold"'
+    out.append("<g>" + "".join(f'<text x="{p[0]:.1f}" y="{p[1] + 2.8:.1f}"{bold if v == reference else ""}>{v}</text>'
+                               for v, p in enumerate(px)) + "</g>")
+    # the colour bar of the weights, its ticks and label on the right
+    bx, bw, b_top, b_bot = 0.89 * W, 0.022 * W, 0.15 * H, 0.9 * H
+    n_band = 64  # the scale as bands (no gradient: the page refers to nothing, not even a fragment)
+    band = (b_bot - b_top) / n_band
+    out.append('<g shape-rendering="crispEdges">' + "".join(
+        f'<rect x="{bx:.1f}" y="{b_bot - (i + 1) * band:.2f}" width="{bw:.1f}" height="{band + 0.3:.2f}" '
+        f'fill="{_rgb(c)}"/>' for i, c in enumerate(viridis((np.arange(n_band) + 0.5) / n_band))) + "</g>"
+               f'<rect x="{bx:.1f}" y="{b_top:.1f}" width="{bw:.1f}" height="{b_bot - b_top:.1f}" fill="none" '
+               f'stroke="#000" stroke-width="0.8"/>')
+    ticks, dec = nice_ticks(lo, hi, 8) if len(w) else (np.array([]), 0)
+    for t in ticks:
+        y = b_bot - (t - lo) / (hi - lo) * (b_bot - b_top) if hi > lo else (b_top + b_bot) / 2
+        out.append(f'<line x1="{bx + bw:.1f}" y1="{y:.1f}" x2="{bx + bw + 3:.1f}" y2="{y:.1f}" stroke="#000" '
+                   f'stroke-width="0.8"/><text x="{bx + bw + 5:.1f}" y="{y + 2.5:.1f}" font-size="7.5" '
+                   f'text-anchor="start">{t:.{dec}f}</text>')
+    lx, ly = bx + bw + 46, (b_top + b_bot) / 2
+    out.append(f'<text transform="translate({lx:.1f},{ly:.1f}) rotate(-90)" font-size="8.75">edge weight w '
+               f"(lower = more mappings)</text></svg>")
+    return "".join(out)
 
 
 def jih_panel(jih: np.ndarray, channel: int, lut: np.ndarray | None = None, outliers: np.ndarray | None = None,

@@ -2,12 +2,11 @@
 
 :class:`PageInputs` is what a page is drawn from (the ``report.json`` content and the run's data,
 in memory or recomputed); :func:`render_page` draws it. Figures come from
-:mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs.
+:mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs, the graph as inline SVG.
 """
 
 from __future__ import annotations
 
-import inspect
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -16,15 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from ..imaging.arrays import dtype_scale, img_as_uint8, sample_colors
-from ..evaluation.metrics import thin_indices
-from ..mappings.pairs import thinned
+from ..imaging.arrays import img_as_uint8
 from .._shared.parallel import carried
-from ..evaluation.render import render_selection, render_textured, resized_view, selection_palette
+from ..evaluation.render import Casters, render_selection, render_textured, resized_view, selection_palette
 from ..scene import Scene
-from ..evaluation.seams import selection_seams
+from ..evaluation.seams import selection_seams_of
 from .comparison import correction_section
-from .figures import graph_figure, jih_panel, jih_thumbnail, jpeg, png, thumbnail, view_layout
+from .figures import graph_svg, jih_panel, jpeg, png, thumbnail, view_layout
+from .parts import JIH_BITS, JIH_MAX_MAPPINGS, edge_jihs, jih_thumbnails, path_edges, view_thumbnails
 from .html import esc, img, num
 from .viewer import model_section
 
@@ -33,10 +31,6 @@ __all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH"
 
 logger = logging.getLogger(__name__)
 
-#: bit depth of the JIH drawn (2**bits bins per axis)
-JIH_BITS = 7
-#: mappings per edge drawn in a JIH (evenly spaced)
-JIH_MAX_MAPPINGS = 2000
 #: width in pixels of the selection picture drawn when the folder holds no selection.png of the same view (reused as is)
 SELECTION_WIDTH = 640
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
@@ -57,8 +51,11 @@ class PageInputs:
     mesh: tuple | None = None  # (vertices, faces) of the scene's mesh
     textured: Any = None  # TexturedMesh
     usable: np.ndarray | None = None  # (V,) faces usable per view
-    selection_png: bytes | None = None  # selection.png of the folder, rendered from the view report.json names
+    selection_png: Any = None  # selection.png of the folder (rendered from the view report.json names), or a callable
+    # returning it (the picture still being written beside the page)
     selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
+    casters: Any = None  # evaluation.render.Casters: the meshes' ray-casting scenes, each built once (made when absent)
+    parts: Any = None  # parts.CorrectionParts: the JIHs and thumbnails computed before the page (computed when absent)
 
 
 _esc, _img, _num = esc, img, num
@@ -69,8 +66,7 @@ def _selection_seams(inp: PageInputs) -> dict:
     if inp.selection_seams is not None:
         return inp.selection_seams
     v, f = inp.mesh
-    return {k: selection_seams(v, f, inp.selection, inp.scene.views, imgs)
-            for k, imgs in (("photos", inp.photos), ("corrected", inp.corrected))}
+    return selection_seams_of(v, f, inp.selection, inp.scene.views, {"photos": inp.photos, "corrected": inp.corrected})
 
 
 def _name(inp: PageInputs, v: int) -> str:
@@ -104,17 +100,13 @@ def t_npm_text(f: dict) -> str:
 
 
 # -------------------------------------------------------------------------------- graph (Fig 4-5)
-def _path_edges(paths: dict) -> list[tuple[int, int]]:
-    return list(dict.fromkeys((t, s) for v in sorted(paths) for t, s in zip(paths[v][:-1], paths[v][1:])))
-
-
 def _graph_section(inp: PageInputs, f: dict) -> str:
     c = inp.correction
     ref, names = c.reference, inp.scene.names
     xy = view_layout(np.array([v.center for v in inp.scene.views]))
     n_paths = sum(1 for v in c.paths if v != ref)
     title = f"reference: {names[ref]} (#{ref}); {len(c.graph_edges)} edges, {n_paths} paths"
-    fig = graph_figure(xy, c.graph_edges, c.paths, ref, title=title)
+    fig = graph_svg(xy, c.graph_edges, c.paths, ref, title=title)
     weight = c.settings.get("graph_weight", "paper")
     total = inp.mappings.total if inp.mappings is not None else None
     formula = "w = 1 − n / N" if weight == "paper" else "w = log(N / n)"
@@ -131,53 +123,14 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     rows = "".join(
         f"<tr><td>{_esc(_name(inp, t))}</td><td>{_esc(_name(inp, s))}</td>"
         f"<td>{by_pair[(min(t, s), max(t, s))]['n']}</td><td>{by_pair[(min(t, s), max(t, s))]['weight']:.6f}</td></tr>"
-        for t, s in _path_edges(c.paths))
-    table = (f"<details><summary>{len(_path_edges(c.paths))} path edges (target → source)</summary><table>"
+        for t, s in path_edges(c.paths))
+    table = (f"<details><summary>{len(path_edges(c.paths))} path edges (target → source)</summary><table>"
              f"<tr><th>target</th><th>source</th><th>mappings n</th><th>weight w</th></tr>{rows}</table></details>")
-    return (f'<figure data-fig="4-5">{_img(fig, "image/png", "colour-correction graph")}<figcaption>{cap}'
+    return (f'<figure data-fig="4-5">{fig}<figcaption>{cap}'
             f"</figcaption></figure>{table}")
 
 
 # --------------------------------------------------------------------------- JIH / CMF (Fig 6-7)
-def _outlier_k(c) -> float | None:
-    """The outlier threshold the correction's fit used (seqcc's ``outlier_k``), None for methods without one."""
-    from ..correction import METHODS
-
-    p = inspect.signature(METHODS[c.method]).parameters.get("outlier_k") if c.method in METHODS else None
-    return None if p is None else c.settings.get("options", {}).get("outlier_k", p.default)
-
-
-def _thinned_pair(mappings, t: int, s: int, k: int):
-    """``mappings.pair(t, s)`` at :func:`~o3d_seqcc.evaluation.metrics.thin_indices` ``(n, k)`` of its mappings:
-    only those built (:func:`~o3d_seqcc.mappings.pairs.thinned`: the same values as the whole pair, thinned)."""
-    lo, hi = (t, s) if t < s else (s, t)
-    if (lo, hi) not in mappings.pairs:
-        return mappings.pair(t, s)  # no mappings: the empty pair
-    _, pm = thinned(mappings.pairs, (lo, hi), lambda n: thin_indices(n, k))
-    return pm if t < s else pm.swapped()
-
-
-def _edge_jihs(inp: PageInputs, edges: list[tuple[int, int]]) -> dict:
-    """(t, s) -> (inlier JIH, outlier JIH or None), from the photos' colours at the pair's mappings."""
-    from ..correction.methods.seqcc import colour_inliers, quantile_luts
-    from ..correction.jih import joint_histogram
-
-    k = _outlier_k(inp.correction)
-    out = {}
-    for t, s in edges:
-        pm = _thinned_pair(inp.mappings, t, s, JIH_MAX_MAPPINGS)
-        ct = sample_colors(inp.photos[t], pm.uv_a) / dtype_scale(inp.photos[t].dtype)
-        cs = sample_colors(inp.photos[s], pm.uv_b) / dtype_scale(inp.photos[s].dtype)
-        if k is not None and len(ct):
-            lut = inp.correction.edge_luts.get((t, s))
-            keep = colour_inliers(ct, cs, quantile_luts(ct, cs, n_out=256 if lut is None else lut.shape[1]), k=float(k))
-            out[(t, s)] = (joint_histogram(ct[keep], cs[keep], bits=JIH_BITS),
-                           joint_histogram(ct[~keep], cs[~keep], bits=JIH_BITS))
-        else:
-            out[(t, s)] = (joint_histogram(ct, cs, bits=JIH_BITS), None)
-    return out
-
-
 def _jih_section(inp: PageInputs, path: list[int] | None, jihs: dict, thumbs: dict) -> str:
     c = inp.correction
     luts = c.edge_luts
@@ -352,11 +305,13 @@ def _render_views(inp: PageInputs) -> tuple[int, int]:
 def _selection_section(inp: PageInputs, view: int) -> str:
     n = len(inp.scene.views)
     same = (inp.rep.get("selection") or {}).get("picture_view") == inp.scene.names[view]
-    if inp.selection_png is not None and same:
-        picture = _img(inp.selection_png, "image/png", "selection")  # the folder's selection.png: the same picture
+    given = inp.selection_png() if callable(inp.selection_png) else inp.selection_png
+    if given is not None and same:
+        picture = _img(given, "image/png", "selection")  # the folder's selection.png: the same picture
     else:
         cam = inp.scene.views[view]
-        img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n)
+        img = render_selection(inp.mesh, inp.selection, resized_view(cam, SELECTION_WIDTH), n_views=n,
+                               caster=inp.casters.get(inp.mesh))
         picture = _img(jpeg(img, quality=90), "image/jpeg", "selection")
     pal = selection_palette(n)
     counts = np.bincount(inp.selection[inp.selection >= 0], minlength=n)
@@ -374,7 +329,8 @@ def _renders_section(inp: PageInputs, views: tuple[int, int], width: int) -> str
     rows = []
     for v in dict.fromkeys(views):
         view = inp.scene.views[v]
-        render = render_textured(inp.textured, resized_view(view, min(view.width, width)))
+        render = render_textured(inp.textured, resized_view(view, min(view.width, width)),
+                                 caster=inp.casters.get(inp.textured))
         cells = [("photo", inp.photos[v])]
         if inp.corrected is not None:
             cells.append(("corrected photo", inp.corrected[v]))
@@ -465,7 +421,7 @@ h2{font-size:17px;border-bottom:1px solid #ddd;padding-bottom:3px;margin-top:28p
 nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
 .cards{display:flex;flex-wrap:wrap;gap:10px;margin:10px 0}.card{background:#fff;border:1px solid #ddd;
 border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
-figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}
+figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}svg.graph{display:block;max-width:100%;height:auto}
 .grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
 .grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}
 .grid.panels{grid-template-columns:repeat(3,226px)}.grid figure,.row figure{margin:0;background:#fff;
@@ -494,8 +450,8 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
 
     What the correction did first (Figure 10, Table 2), then how (Figures 4-8), then the texturing
     (Figures 9, 12-13, seams), then timings and settings. The sections are built side by side on
-    ``pool``'s threads (numpy, OpenCV and Open3D release the GIL; matplotlib draws one section
-    only) and joined in this order; only this thread waits for a result another part needs.
+    ``pool``'s threads (numpy, OpenCV and Open3D release the GIL) and joined in this order; only
+    this thread waits for a result another part needs.
     """
     c = inp.correction
     out: list = []
@@ -511,10 +467,12 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         if c is not None and inp.corrected is not None:
             seams = _selection_seams(inp)
             add("correction", "What the correction changes", correction_section, inp.textured, inp.scene.views[a],
-                inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method)
-    thumbs = [pool.submit(carried(lambda ims: [thumbnail(im, width) for im in ims]), ims) if ims is not None else None
-              for ims in (inp.photos, inp.corrected if inp.photos is not None else None)]
-    before, after = (None if t is None else t.result() for t in thumbs)
+                inp.scene.views, inp.photos, inp.corrected, inp.mesh, seams["photos"], seams["corrected"], c.method,
+                casters=inp.casters)
+    given = inp.parts if inp.parts is not None and inp.parts.width == width and inp.photos is not None else None
+    before, after = given.thumbs if given is not None else pool.submit(
+        carried(view_thumbnails, "report thumbnails"), inp.photos, inp.corrected if inp.photos is not None else None,
+        width).result() if inp.photos is not None else (None, None)
     if before is not None:
         add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
             [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
@@ -529,8 +487,12 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         path = c.paths[max(longest, key=lambda v: (change[v], -v))] if longest else None
         add("graph", "Colour-correction graph and paths (Figures 4-5)", _graph_section, inp, f)
         if inp.mappings is not None and c.paths:
-            edges = _path_edges(c.paths)
-            jihs, thumbs = pool.submit(carried(_jihs_and_thumbs, "report JIH"), inp, edges).result()
+            edges = path_edges(c.paths)
+            if inp.parts is not None:
+                jihs, thumbs = inp.parts.jihs, inp.parts.jih_thumbs
+            else:
+                jihs = pool.submit(carried(edge_jihs, "report JIH"), inp.photos, c, inp.mappings, edges).result()
+                thumbs = jih_thumbnails(jihs, c.edge_luts)
             add("jih", "Joint image histograms and colour mapping functions (Figures 6-7)", _jih_section, inp, path,
                 jihs, thumbs)
             if path:
@@ -543,11 +505,6 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
     out.append(("timings", "Timings (s)", timings_block(inp.rep)))
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
     return [(sid, title, body if isinstance(body, str) else body.result()) for sid, title, body in out]
-
-
-def _jihs_and_thumbs(inp: PageInputs, edges: list) -> tuple[dict, dict]:
-    jihs = _edge_jihs(inp, edges)
-    return jihs, {e: png(jih_thumbnail(jihs[e][0], inp.correction.edge_luts.get(e), jihs[e][1])) for e in edges}
 
 
 def timings_block(rep: dict) -> str:
@@ -594,7 +551,7 @@ def render_page(inp: PageInputs, *, width: int = 160) -> str:
 
     f = facts(inp.rep)
     photos, corrected = cached_images(inp.photos, inp.corrected)  # each photo read once (unless given cached)
-    inp = replace(inp, photos=photos, corrected=corrected)
+    inp = replace(inp, photos=photos, corrected=corrected, casters=inp.casters or Casters())
     if inp.textured is not None and inp.selection is not None and inp.mesh is not None and inp.correction is not None \
             and inp.corrected is not None and inp.selection_seams is None:
         inp = replace(inp, selection_seams=_selection_seams(inp))  # the cards and two sections show them

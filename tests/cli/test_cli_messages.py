@@ -127,3 +127,67 @@ def test_a_missing_extra_is_named(small, capsys, monkeypatch):
     assert main(["--scheduler", "tcp://127.0.0.1:1", "info", str(small.root)]) == 2
     err = capsys.readouterr().err
     assert "--scheduler (a Dask cluster) needs distributed" in err and "pip install 'o3d-seqcc[dask]'" in err
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["run", "s", "--out", "o"], "run"), (["-q", "-j", "2", "run", "s", "--out", "o", "-j", "1"], "run"),
+    (["--jobs=2", "-v", "texture", "s", "--out", "o"], "texture"),
+    (["-j2", "--max-image-pixels", "10", "info", "s"], "info"), (["--scheduler", "run", "seams", "x"], "seams"),
+    (["--help"], None), (["bogus", "run"], None), (["--version"], None), ([], None), (["-x", "run"], None)])
+def test_a_command_line_is_parsed_with_its_command_alone(argv, command):
+    from o3d_seqcc.cli import build_parser, command_of
+
+    assert command_of(argv) == command
+    if command is not None:  # the one command's parser reads it as the whole parser does
+        one, full = build_parser(commands=[command]).parse_args(argv), build_parser().parse_args(argv)
+        assert {k: v for k, v in vars(one).items() if k != "_subparsers"} == \
+            {k: v for k, v in vars(full).items() if k != "_subparsers"}
+
+
+def test_starting_a_command_imports_no_other_commands_modules():
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom o3d_seqcc.cli import main\nassert main(['run', '--help']) == 0\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('o3d_seqcc.cli.', 'o3d_seqcc.demo', 'o3d_seqcc.synthetic', "
+            "'matplotlib'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "['o3d_seqcc.cli.common', 'o3d_seqcc.cli.run']"
+
+
+def test_the_interpreter_exit_skips_its_cycle_collections():
+    """main() registers gc.freeze at exit, once: a run's modules' objects are not traversed again at exit."""
+    import subprocess
+    import sys
+
+    code = ("import atexit, gc\nfrom o3d_seqcc.cli import main\nn = atexit._ncallbacks()\n"
+            "main(['run', '--help']); main(['info', '--help'])\nassert atexit._ncallbacks() == n + 1\n"
+            "assert gc.get_freeze_count() == 0\natexit._run_exitfuncs()\nprint(gc.get_freeze_count() > 0)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "True"
+
+
+def test_a_command_limits_mallocs_arenas_unless_the_user_did(monkeypatch):
+    import ctypes
+    import sys
+
+    import o3d_seqcc.cli as cli
+
+    calls = []
+
+    class Libc:
+        def mallopt(self, option, value):
+            calls.append((option, value))
+            return 1
+
+    monkeypatch.setattr(ctypes, "CDLL", lambda name: Libc())
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    cli._fewer_malloc_arenas()
+    assert calls == [(-8, cli.MALLOC_ARENAS)]  # M_ARENA_MAX
+    monkeypatch.setenv("MALLOC_ARENA_MAX", "4")
+    cli._fewer_malloc_arenas()
+    monkeypatch.delenv("MALLOC_ARENA_MAX")
+    monkeypatch.setattr(sys, "platform", "darwin")
+    cli._fewer_malloc_arenas()
+    assert len(calls) == 1

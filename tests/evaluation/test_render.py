@@ -212,3 +212,42 @@ def test_resized_view_renders_the_same_picture_smaller():
     assert resized_view(view, W) is view
     with pytest.raises(InputError, match="positive"):
         resized_view(view, 0)
+
+
+def test_selection_streamed_in_row_chunks_is_the_whole_cast_coloured(monkeypatch, tmp_path):
+    """render_selection without hits casts and colours row chunks: the picture of the one-chunk cast, bit for bit;
+    a shared RayCaster (Casters: one per mesh, any thread) casts what a new one casts."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import o3d_seqcc as sc
+    from o3d_seqcc.evaluation import render
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=2, width=160, height=120, cell_size=0.15)
+    scene = sc.load_scene(tmp_path / "room")
+    mesh, view = scene.load_mesh(), scene.views[0]
+    sel = np.random.default_rng(1).integers(-1, 2, len(mesh.faces))
+    whole = render.render_selection(mesh, sel, view, n_views=2, hits=render.raycast(mesh, view))
+    monkeypatch.setattr(render, "RAY_CHUNK", 1000)  # 6 rows per chunk, the last one short
+    assert np.array_equal(render.render_selection(mesh, sel, view, n_views=2), whole)
+    casters = render.Casters()
+    pair = (mesh.vertices, mesh.faces)
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda _: casters.get(pair), range(8)))
+    assert all(c is got[0] for c in got) and casters.get((mesh.vertices, mesh.faces)) is got[0]
+    assert casters.get(mesh) is not got[0]  # another object: its own caster
+    with ThreadPoolExecutor(2) as pool:
+        shots = list(pool.map(lambda _: render.render_selection(mesh, sel, view, n_views=2, caster=got[0]), range(4)))
+    assert all(np.array_equal(s, whole) for s in shots)
+    hits = render.raycast(mesh, view, caster=got[0])
+    assert np.array_equal(hits.face_ids, render.raycast(mesh, view).face_ids)
+
+
+def test_the_written_palette_is_the_greedy_choice():
+    from o3d_seqcc.evaluation import render
+
+    full = render._distinct_palette(64)
+    assert np.array_equal(render._PALETTE, full)
+    for n in (1, 2, 5, 33, 64):
+        assert np.array_equal(render._distinct_palette(n), full[:n])
+        assert np.array_equal(selection_palette(n), full[:n])
+    assert np.array_equal(selection_palette(70), np.resize(full, (70, 3)))

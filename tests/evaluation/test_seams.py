@@ -246,3 +246,53 @@ def test_vertex_colour_jump(tmp_path: Path):
     rep = seam_metric(vc, keep_per_edge=True, merge_tol=1e-6)
     assert rep.n_seam_edges == 2
     np.testing.assert_allclose(rep.per_edge[rep.is_seam], expected_seam_de(), rtol=1e-6)
+
+
+def test_selection_seams_of_several_image_sets_are_each_sets_seams():
+    from o3d_seqcc.evaluation.seams import selection_seams, selection_seams_of
+    from o3d_seqcc.scene import View
+
+    rng = np.random.default_rng(4)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12)), -1).reshape(-1, 2)
+    v = np.c_[g, np.zeros(len(g))]
+    q = np.arange(144).reshape(12, 12)[:-1, :-1].reshape(-1)
+    f = np.concatenate([np.stack([q, q + 1, q + 13], 1), np.stack([q, q + 13, q + 12], 1)])
+    K = np.array([[80.0, 0, 39.5], [0, 80.0, 39.5], [0, 0, 1]])
+    views = []
+    for i in range(3):
+        ext = np.eye(4)
+        ext[:3, 3] = -np.array([0.5 + 0.05 * i, 0.5, -1.0])
+        views.append(View(name=f"v{i}", image="x.png", intrinsic=K, extrinsic=ext, width=80, height=80))
+    sel = rng.integers(-1, 3, len(f))
+    sets = {"a": [rng.integers(0, 256, (80, 80, 3), dtype=np.uint8) for _ in views],
+            "b": [rng.random((80, 80, 3)) for _ in views]}
+    both = selection_seams_of(v, f, sel, views, sets)
+    assert len(both["a"].delta_e) > 10
+    for k, imgs in sets.items():
+        one = selection_seams(v, f, sel, views, imgs)
+        for name in ("delta_e", "segments", "faces"):
+            assert np.array_equal(getattr(both[k], name), getattr(one, name)), (k, name)
+
+
+def test_photo_colors_in_bands_of_rows_are_the_whole_images_remap(monkeypatch):
+    """photo_colors converts REMAP_BAND_ROWS rows at a time for OpenCV's remap: the values of the whole image's."""
+    from o3d_seqcc.evaluation import seams
+    from o3d_seqcc.scene import View
+
+    rng = np.random.default_rng(7)
+    K = np.array([[90.0, 0, 59.5], [0, 90.0, 44.5], [0, 0, 1]])
+    views = [View(name=f"v{i}", image="x.png", intrinsic=K, extrinsic=np.eye(4), width=120, height=90) for i in range(2)]
+    n = 4000
+    uv = np.c_[rng.uniform(-3, 123, n), rng.uniform(-3, 93, n)]
+    uv[:200, 1] = np.repeat(np.arange(0, 90, 9), 20) + rng.choice([-1e-3, 0.0, 0.97, 0.999, 0.9999], 200)  # band edges
+    pts = np.c_[(uv - K[:2, 2]) / 90.0, np.ones(n)]
+    ids = rng.integers(-1, 2, n)
+    sets = [[rng.integers(0, 256, (90, 120, 3), dtype=np.uint8) for _ in views],
+            [rng.integers(0, 65536, (90, 120, 3), dtype=np.uint16) for _ in views]]
+    monkeypatch.setattr(seams, "REMAP_BAND_ROWS", 10 ** 6)
+    whole = seams.photo_colors(views, pts, ids, *sets)
+    for rows in (1, 7, 9, 16):
+        monkeypatch.setattr(seams, "REMAP_BAND_ROWS", rows)
+        banded = seams.photo_colors(views, pts, ids, *sets)
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(whole, banded)), rows
+    assert np.isnan(whole[0][ids < 0]).all() and not np.isnan(whole[0][ids >= 0]).any()

@@ -274,26 +274,42 @@ def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
         assert np.array_equal(banded, whole), (H, W, band)
 
 
-def test_background_table2_is_the_table2_save_computes(tmp_path):
-    """run() starts the report's Table 2 on a thread right after the correction; save() takes it only for the
-    correction it was started for, and it is the numbers the report would compute itself."""
+def test_background_report_parts_are_what_save_computes(tmp_path):
+    """run() starts the report's Table 2 and correction figures on a thread right after the correction, the selection
+    seams after the selection; save() takes them only for the correction (and selection) they were started for, and
+    they are the numbers and pictures the report would compute itself."""
     import dataclasses
+    import json
 
+    from o3d_seqcc.evaluation.seams import selection_seams_of
     from o3d_seqcc.pipeline import _table2
     from o3d_seqcc.report import cached_images
+    from o3d_seqcc.report.parts import correction_parts
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=5, width=160, height=120, cell_size=0.15)
     res = sc.pipeline.run(tmp_path / "room", t_npm=50)
-    bg = res._table2
+    bg = res._background
     assert bg is not None and bg.matches(res)
-    direct = _table2(cached_images(res.originals, res.images), res.mappings, res.correction.paths)
+    images = cached_images(res.originals, res.images)
+    direct = _table2(images, res.mappings, res.correction.paths)
     assert bg.result() == direct and direct["before"] != direct["after"]
     assert not bg.matches(dataclasses.replace(res, mappings=sc.compute_mappings(res.scene, visibility=res.visibility)))
     assert bg.matches(dataclasses.replace(res, source="elsewhere"))  # what the command line's replace() keeps
+    parts, want = bg.parts(), correction_parts(*images, res.correction, res.mappings)
+    assert parts.jih_thumbs == want.jih_thumbs and len(parts.jihs) > 1 and parts.width == want.width
+    for e, (a, b) in want.jihs.items():
+        assert np.array_equal(parts.jihs[e][0], a) and (b is None) == (parts.jihs[e][1] is None)
+    assert all(np.array_equal(x, y) for got, exp in zip(parts.thumbs, want.thumbs) for x, y in zip(got, exp))
+    mesh = res.visibility.mesh
+    seams = selection_seams_of(mesh.vertices, mesh.faces, res.selection, res.scene.views,
+                               {"photos": images[0], "corrected": images[1]})
+    got = bg.seams(res.selection)
+    assert all(np.array_equal(got[k].delta_e, seams[k].delta_e) for k in seams) and len(seams["photos"].delta_e)
+    assert bg.seams(res.selection.copy()) is None  # another selection: measured again by save
     res.save(tmp_path / "out")
-    import json
-
-    assert json.loads((tmp_path / "out" / "report.json").read_text())["metrics"] == json.loads(json.dumps(direct))
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["metrics"] == json.loads(json.dumps(direct))
+    assert rep["selection_seams"] == {k: v.summary() for k, v in seams.items()}
 
 
 def test_data_costs_same_for_any_threads(tmp_path):
@@ -321,7 +337,7 @@ def test_report_jih_mappings_are_the_full_pairs_thinned(tmp_path):
     """The report's JIHs build only the mappings they draw: the full pair's at thin_indices, either orientation."""
     from o3d_seqcc.mappings.compute import compute_mappings
     from o3d_seqcc.evaluation.metrics import thin_indices
-    from o3d_seqcc.report.page import _thinned_pair
+    from o3d_seqcc.report.parts import thinned_pair as _thinned_pair
 
     sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
     m = compute_mappings(sc.load_scene(tmp_path / "room"))

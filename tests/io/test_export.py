@@ -195,3 +195,77 @@ def test_export_bad_input(tmp_path, textured):
     with pytest.raises(InputError, match="face indices"):
         export_obj(replace(textured, faces=textured.faces + 10), tmp_path / "x.obj")
     assert not (tmp_path / "x.glb").exists() and not (tmp_path / "x.obj").exists()
+
+
+# ---- the OBJ's text formatted by numpy: Python's bytes ---------------------------------------------------------------
+
+
+def _adversarial(rng) -> np.ndarray:
+    """Random values over 60 decades, ties and near-ties of the digits written, powers of ten and their neighbours,
+    zeros of both signs, subnormals, the largest float, NaN and infinities."""
+    p = 10.0 ** np.arange(-30, 30)
+    return np.concatenate([
+        rng.normal(size=3000), rng.normal(size=3000) * 1e-3, 10.0 ** rng.uniform(-30, 30, 3000) * rng.choice([-1, 1], 3000),
+        np.round(rng.uniform(-2, 2, 3000), 8) + 5e-9, np.round(rng.uniform(-2, 2, 3000), 6) - 5e-7, (np.arange(1000) + 0.5) / 2 ** 10,
+        p, -p, np.nextafter(p, 0), np.nextafter(p, np.inf), 9.9999999995 * p[25:35],
+        [0.0, -0.0, 1e-320, 5e-324, 1.7976931348623157e308, np.nan, np.inf, -np.inf, 123456789.5, 1e100, -1e-100]])
+
+
+@pytest.mark.parametrize("spec", ["g1", "g6", "g9", "g12", "g15", "g17", "f0", "f5", "f7", "d"])
+def test_obj_numbers_are_pythons_text(rng, spec):
+    from o3d_seqcc.io.obj_text import fixed_field, general_field, int_field, rows
+
+    x = _adversarial(rng)
+    if spec == "d":
+        x = np.concatenate([rng.integers(-10 ** 12, 10 ** 12, 5000), [0, 1, -1, 9, 10, 99, 100, 2 ** 62]])
+        field, fmt = int_field(x), "%d"
+    elif spec[0] == "g":
+        field, fmt = general_field(x, int(spec[1:])), f"%.{spec[1:]}g"
+    else:
+        field, fmt = fixed_field(x, int(spec[1:])), f"%.{spec[1:]}f"
+    assert rows([field, "\n"]).decode("ascii") == "".join(f"{fmt % v}\n" for v in x.tolist())
+
+
+def _python_obj_lines(verts, vt, normals, faces, digits) -> str:
+    """The OBJ body as o3d_seqcc wrote it before (Python's % formatting, one page)."""
+    def block(prefix, a, fmt):
+        return ((prefix + " " + " ".join([fmt] * a.shape[1]) + "\n") * len(a)) % tuple(a.ravel().tolist())
+    f1 = np.repeat(faces + 1, 3, axis=1)
+    return (block("v", verts, f"%.{digits}g") + block("vt", vt, "%.7f") + block("vn", normals, "%.5f") +
+            "usemtl material_0\n" + (("f" + " %d/%d/%d" * 3 + "\n") * len(f1)) % tuple(f1.ravel().tolist()))
+
+
+@pytest.mark.parametrize("shift", [0.0, 3.2e6])
+def test_obj_lines_are_the_python_formatted_obj(rng, monkeypatch, shift):
+    from o3d_seqcc.io import obj_text
+
+    monkeypatch.setattr(obj_text, "OBJ_CHUNK_ROWS", 1000)  # several chunks
+    m, f = 4321, 7000
+    verts = rng.normal(size=(m, 3)) * rng.choice([1e-6, 1e-2, 1.0, 30.0], size=(m, 1)) + shift
+    verts[:10] = 0.0
+    vt, normals = rng.uniform(-0.01, 1.01, size=(m, 2)), rng.normal(size=(m, 3))
+    faces = rng.integers(0, m, size=(f, 3))
+    from o3d_seqcc.io.export import _digits
+
+    d = _digits(verts)
+    got = b"".join(obj_text.obj_lines(verts, vt, normals, faces, np.zeros(f, int), 1, digits=d)).decode("ascii")
+    assert got == _python_obj_lines(verts, vt, normals, faces, d)
+
+
+def test_glb_file_is_glb_bytes(tmp_path, textured):
+    assert export_glb(textured, tmp_path / "m.glb").read_bytes() == glb_bytes(textured)
+
+
+def test_textures_encoded_beside_the_obj_text_give_the_same_files(tmp_path, textured):
+    """export_textured_mesh encodes on a thread while the OBJ's text is written: the files of one writer after the
+    other; export_obj takes the encoded pages as a callable too."""
+    from o3d_seqcc.io.export import _encoded_pages
+
+    out = export_textured_mesh(textured, tmp_path / "a", formats=("glb", "obj"))
+    assert list(out) == ["glb", "obj"]
+    enc = _encoded_pages(textured, "png", 90, 1, None)
+    export_glb(textured, tmp_path / "b" / "mesh.glb", encoded=enc)
+    export_obj(textured, tmp_path / "b" / "mesh.obj", encoded=lambda: enc)
+    for name in ("mesh.glb", "mesh.obj", "mesh.mtl", "mesh.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["mesh.glb", "mesh.mtl", "mesh.obj", "mesh.png"]

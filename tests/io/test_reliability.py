@@ -305,7 +305,7 @@ def test_singular_pose_and_malformed_colmap(tmp_path):
 def test_interrupt_during_start_up_exits_130(monkeypatch, capsys):
     import o3d_seqcc.cli as cli
 
-    def interrupted():
+    def interrupted(**_):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(cli, "build_parser", interrupted)
@@ -399,7 +399,7 @@ def test_interrupt_while_open3d_initialises_exits_130(monkeypatch, capsys):
             raise ImportError("initialization failed") from e
 
     parser = cli.build_parser()
-    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setattr(cli, "build_parser", lambda **_: parser)
     args = parser.parse_args(["info", "x"])
     monkeypatch.setattr(args, "func", interrupted, raising=False)
     monkeypatch.setattr(parser, "parse_args", lambda argv=None: args)

@@ -88,7 +88,10 @@ def test_the_report_shows_this_run(run_dir, scene):
     n_views = len(names)
     # Figures 4-5: the caption names the reference; one table row per path edge
     edges = {(p[i], p[i + 1]) for p in paths.values() for i in range(len(p) - 1)}
-    assert f"the reference <b>{ref}</b>" in sec["graph"] and len(_images(sec["graph"])) == 1
+    assert f"the reference <b>{ref}</b>" in sec["graph"] and len(_images(sec["graph"])) == 0
+    svg = re.findall(r"<svg .*?</svg>", sec["graph"], flags=re.S)  # drawn as SVG: one node per view, one arrow per edge
+    assert len(svg) == 1 and svg[0].count("<circle ") == n_views
+    assert svg[0].split('<g class="arrows" stroke="#000">')[1].split("</g>")[0].count("<line ") == len(edges)
     assert sec["graph"].count("<tr><td>") == len(edges)
     # Figures 6-7: three channels of the path's edges (at most MAX_DETAIL_EDGES), one thumbnail per path edge
     detail = min(max(len(p) for p in paths.values()) - 1, MAX_DETAIL_EDGES)
@@ -161,7 +164,7 @@ def test_report_command_writes_the_same_report_again(run_dir, tmp_path, capsys):
         assert len(_images(a[sid])) == len(_images(b[sid])), sid
     for sid in ("table2", "seams", "settings"):
         assert a[sid] == b[sid], sid
-    assert _images(a["graph"]) == _images(b["graph"])  # the correction recomputed is the run's
+    assert a["graph"] == b["graph"]  # the correction recomputed is the run's
     assert _images(a["jih"]) == _images(b["jih"])
     # mesh.glb is Y-up (report.json's export.orientation): reloaded, it is rotated back into the cameras' frame
     assert json.loads((copy / "report.json").read_text())["export"]["orientation"]["up_axis"] == "y"
@@ -298,3 +301,23 @@ def test_t_npm_is_shown_as_its_setting_and_count_in_every_mapping_mode():
     for bad in ("many", 2.5, True):
         with pytest.raises(InputError, match="'t_npm' must be an integer or \"auto\""):
             validate_report({**rep, "t_npm": bad})
+
+
+def test_the_graph_is_svg_text_with_a_node_per_view_and_an_arrow_per_path_edge():
+    from o3d_seqcc.report.figures import graph_svg, nice_ticks, viridis
+
+    ticks, dec = nice_ticks(0.9934, 0.9999, 8)
+    np.testing.assert_allclose(ticks, [0.994, 0.995, 0.996, 0.997, 0.998, 0.999])
+    assert dec == 3
+    ticks, dec = nice_ticks(0.0, 1.0)
+    np.testing.assert_allclose(ticks, [0, 0.2, 0.4, 0.6, 0.8, 1.0]) and dec == 1
+    assert viridis(np.array([0.0, 1.0])).tolist() == [[68, 1, 84], [253, 231, 37]]  # matplotlib's ends
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
+    edges = [{"a": 0, "b": 1, "n": 10, "weight": 0.5}, {"a": 1, "b": 2, "n": 5, "weight": 0.8}]
+    svg = graph_svg(xy, edges, {0: [0], 1: [1, 0], 2: [2, 1, 0]}, 0, title="ref <a> & b")
+    assert svg.startswith('<svg class="graph"') and svg.endswith("</svg>") and "ref &lt;a&gt; &amp; b" in svg
+    assert svg.count("<circle ") == 4 and svg.count('fill="#d62728"') == 1 and svg.count('fill="#bbb"') == 1
+    arrows = svg.split('<g class="arrows" stroke="#000">')[1].split("</g>")[0]
+    assert arrows.count("<line ") == 2  # 1 -> 0 and 2 -> 1 (2's path shares the edge 1 -> 0)
+    assert "url(" not in svg and "http" not in svg
+    assert graph_svg(xy, edges, {0: [0], 1: [1, 0], 2: [2, 1, 0]}, 0, title="ref <a> & b") == svg

@@ -27,7 +27,7 @@ def _stage_functions():
     import o3d_seqcc.visibility.compute as visibility
 
     return [(visibility, "compute_visibility"), (mappings, "compute_mappings"), (correction, "correct"),
-            (texturing, "select_views"), (texturing, "bake_texture"), (page, "selection_seams"),
+            (texturing, "select_views"), (texturing, "bake_texture"), (page, "selection_seams_of"),
             *((pipeline, n) for n in ("compute_visibility", "compute_mappings", "correct", "select_views",
                                       "bake_texture", "seam_metric"))]
 
