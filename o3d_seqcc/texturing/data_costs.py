@@ -299,6 +299,8 @@ def _view_means(image: np.ndarray, tri: np.ndarray, *, gmi: bool, colour: bool
 
 
 class _Statistics(NamedTuple):
+    """What :func:`_statistics` computed for every usable incidence (None where not asked for)."""
+
     gmi: np.ndarray | None  # (nnz,) float64
     colour: np.ndarray | None  # (nnz, 3) float32
     lab: np.ndarray | None  # (nnz, 3) float64
@@ -306,7 +308,11 @@ class _Statistics(NamedTuple):
 
 def _statistics(visibility: Any, images: Sequence[np.ndarray], indptr: np.ndarray, faces: np.ndarray,
                 area: np.ndarray, *, gmi: bool, colour: bool, lab: bool) -> _Statistics:
-    """:func:`face_view_statistics`, plus the CIE Lab of the mean colours (:func:`~o3d_seqcc.texturing.outliers.colour_lab`, per view in the tasks)."""
+    """GMI, mean colour and the colour's CIE Lab of every usable incidence (:func:`face_view_statistics`).
+
+    ``colour`` keeps the float32 colours (the Gaussian outlier tests), ``lab`` their CIE Lab
+    (:func:`~o3d_seqcc.texturing.outliers.colour_lab`: the median test), converted in each view's task.
+    """
     from .._shared.parallel import LocalExecutor
 
     nnz = len(faces)

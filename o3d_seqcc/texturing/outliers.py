@@ -80,24 +80,35 @@ def _median_outliers(face: np.ndarray, lab: np.ndarray, n_faces: int) -> np.ndar
     x the face's median distance) from the per-channel median of the face's views (faces of >= 3 views).
 
     ``face`` (m,) int ids in ``[0, n_faces)``, ``lab`` (m, 3) float64; returns (m,) bool. The faces
-    seen by the same number n of views are tested together as an (f, n) block: sorted along its rows,
-    the medians are their middle values (one loop over the distinct counts, never over faces).
+    seen by the same number n of views are tested together as an (f, n) block per channel: sorted
+    along its rows, the medians are their middle values (one task per distinct count, never a loop
+    over faces).
     """
+    from .._shared.parallel import LocalExecutor
+
     count = np.bincount(face, minlength=n_faces)
     order = np.argsort(face, kind="stable")  # the incidences face by face
     ptr = np.zeros(n_faces + 1, dtype=np.int64)
     np.cumsum(count, out=ptr[1:])
     drop = np.zeros(len(face), dtype=bool)
-    for n in np.unique(count[count >= 3]).tolist():
+
+    def block(n: int) -> None:
         idx = order[ptr[np.flatnonzero(count == n)][:, None] + np.arange(n)]  # (f, n) incidences
-        vals = lab[idx]
-        srt = np.sort(vals, axis=1)
-        med = 0.5 * (srt[:, (n - 1) // 2] + srt[:, n // 2])  # per channel, the middle one or two
-        del srt
-        d = np.linalg.norm(vals - med[:, None], axis=2)
+        lo, hi = (n - 1) // 2, n // 2
+        sq = None
+        for c in range(3):  # per channel: its median (the middle one or two), the squared distances summed in order
+            x = lab[idx, c]
+            srt = np.sort(x, axis=1)
+            x -= 0.5 * (srt[:, lo] + srt[:, hi])[:, None]
+            x *= x
+            sq = x if sq is None else sq + x
+        d = np.sqrt(sq)  # np.linalg.norm of the (f, n, 3) differences, term for term
         ds = np.sort(d, axis=1)
-        dmed = 0.5 * (ds[:, (n - 1) // 2] + ds[:, n // 2])
+        dmed = 0.5 * (ds[:, lo] + ds[:, hi])
         drop[idx] = d > np.maximum(MEDIAN_MIN_DELTA_E, MEDIAN_MAD_FACTOR * dmed)[:, None]
+
+    # the blocks on local threads (numpy's gathers and sorts release the GIL), each writing its own incidences
+    LocalExecutor().map(block, np.unique(count[count >= 3]).tolist(), desc="outliers", unit="block")
     return drop
 
 
