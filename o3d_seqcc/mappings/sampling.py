@@ -146,14 +146,14 @@ def project_points(project: Callable, faces: np.ndarray, views: np.ndarray, boun
     cut = np.flatnonzero(np.diff(view_u[order])) + 1
     block = np.empty((9, len(first)))  # per face (in run order) and corner j: z_j u_j, z_j v_j, z_j
     for s0, s1 in zip(np.concatenate([[0], cut]), np.concatenate([cut, [len(order)]])):
-        rows = order[s0:s1]
-        uv, z = project(int(view_u[rows[0]]), faces[face[first[rows]]].reshape(-1))
+        rows = order[s0:s1] if len(cut) else slice(None)  # one view: every face, in order
+        uv, z = project(int(view_u[order[s0]]), faces[face[first[rows]]].reshape(-1))
         uv, z = uv.reshape(-1, 3, 2), z.reshape(-1, 3).astype(np.float64)
         for j in range(3):
             block[3 * j, rows] = uv[:, j, 0] * z[:, j]
             block[3 * j + 1, rows] = uv[:, j, 1] * z[:, j]
             block[3 * j + 2, rows] = z[:, j]
-    g = np.take(block, inv, axis=1)  # (9, M)
+    g = block if len(first) == len(face) else np.take(block, inv, axis=1)  # (9, M): per point
     sums = np.empty((3, len(face)))  # sum(w z u), sum(w z v), sum(w z)
     for c in range(3):
         np.multiply(weights[0], g[c], out=sums[c])

@@ -87,9 +87,9 @@ def test_colour_samples_from_uint8_are_the_float_samples():
     from o3d_seqcc.imaging.arrays import img_as_float
 
     rng = np.random.default_rng(1)
-    for dtype, top in ((np.uint8, 256), (np.uint16, 65536)):
-        img = rng.integers(0, top, (37, 53, 3)).astype(dtype)
-        uv = np.concatenate([rng.uniform(-2, 55, (500, 2)), [[0, 0], [52, 36], [52.5, 36.7], [51.999, 35.2]]])
+    for dtype, top, n in ((np.uint8, 256, 500), (np.uint16, 65536, 500), (np.uint8, 256, 3000), (np.uint16, 65536, 3000)):
+        img = rng.integers(0, top, (37, 53, 3)).astype(dtype)  # 500 samples: pixel by pixel; 3000: channel planes
+        uv = np.concatenate([rng.uniform(-2, 55, (n, 2)), [[0, 0], [52, 36], [52.5, 36.7], [51.999, 35.2]]])
         for interp in ("bilinear", "nearest"):
             want = _float32_samples(img_as_float(img), uv, interp).T
             for got in (_sample_image(img, uv, interp), _sample_image(img_as_float(img), uv, interp)):

@@ -89,61 +89,68 @@ def _rank_inliers(ca: np.ndarray, cb: np.ndarray, order_a: np.ndarray, sorted_b:
     return np.sqrt((z[0] + z[1]) + z[2]) <= k * np.sqrt(3.0)
 
 
-def _sample_planes(planes: list[np.ndarray], table: np.ndarray | None, shape: tuple[int, int], uv: np.ndarray,
-                   interpolation: str) -> np.ndarray:
-    """(n, 2) pixel positions -> (3, n) float32 colours, channels as rows, from an image's three channel planes.
+class _PlaneValues:
+    """``[c]``: channel ``c``'s values at some pixels, gathered from its plane through the level table when asked."""
 
-    ``planes``: the (H * W,) planes, float32 values (``table`` None) or integer levels turned into float32
-    through ``table``. Bilinear weights and products in float32, as :func:`o3d_seqcc.imaging.arrays.sample_colors`
-    on a float32 image (its sorts are twice as fast as float64's); a channel's values are contiguous for the
-    edge summaries' sorts.
+    def __init__(self, planes: list[np.ndarray], table: np.ndarray, idx: np.ndarray) -> None:
+        self.planes, self.table, self.idx = planes, table, idx
+
+    def __getitem__(self, c: int) -> np.ndarray:
+        return np.take(self.table, np.take(self.planes[c], self.idx))
+
+
+def _bilinear_rows(values, shape: tuple[int, int], uv: np.ndarray, interpolation: str) -> np.ndarray:
+    """(n, 2) pixel positions -> (3, n) float32 colours, channels as rows (contiguous for the edge summaries' sorts).
+
+    ``values(idx)[c]``: the float32 values of channel ``c`` at the flat pixel indices ``idx``. Bilinear weights
+    and products in float32, as :func:`o3d_seqcc.imaging.arrays.sample_colors` on a float32 image (its sorts
+    are twice as fast as float64's).
     """
     H, W = shape
-
-    def values(c: int, idx: np.ndarray) -> np.ndarray:
-        got = np.take(planes[c], idx)
-        return got if table is None else np.take(table, got)
-
     x = np.clip(uv[:, 0], 0.0, W - 1.0)
     y = np.clip(uv[:, 1], 0.0, H - 1.0)
-    out = np.empty((3, len(uv)), np.float32)
     if interpolation == "nearest":
         xi = np.minimum(np.floor(x + 0.5).astype(np.int64), W - 1)
         yi = np.minimum(np.floor(y + 0.5).astype(np.int64), H - 1)
-        for c in range(3):
-            out[c] = values(c, yi * W + xi)
-        return out
+        got = values(yi * W + xi)
+        return np.stack([got[c] for c in range(3)])
     x0 = np.floor(x).astype(np.int64)
     y0 = np.floor(y).astype(np.int64)
     i00 = y0 * W + x0
     i01 = i00 + (x0 < W - 1)
     down = np.where(y0 < H - 1, W, 0)
-    i10, i11 = i00 + down, i01 + down
+    c00, c01, c10, c11 = (values(i) for i in (i00, i01, i00 + down, i01 + down))
     fx = (x - x0).astype(np.float32)
     fy = (y - y0).astype(np.float32)
     gx, gy = 1.0 - fx, 1.0 - fy
+    out = np.empty((3, len(uv)), np.float32)
     for c in range(3):
-        top = values(c, i00) * gx + values(c, i01) * fx
-        bot = values(c, i10) * gx + values(c, i11) * fx
+        top = c00[c] * gx + c01[c] * fx
+        bot = c10[c] * gx + c11[c] * fx
         np.add(top * gy, bot * fy, out=out[c])
     return out
 
 
 def _sample_image(img: np.ndarray, uv: np.ndarray, interpolation: str) -> np.ndarray:
-    """:func:`_sample_planes` of an (H, W, 3) image: float images as float32; uint8 / uint16 photos through a
+    """:func:`_bilinear_rows` of an (H, W, 3) image: float images as float32; uint8 / uint16 photos through a
     table of ``float32(level / scale)`` (float64 division, as :func:`~o3d_seqcc.imaging.arrays.img_as_float` then
     a float32 copy do), so every value, and every bilinear weight and product after it, is bit for bit that of
-    the float32 copy of ``img_as_float(img)``, which is never made (24 + 12 bytes per pixel)."""
+    the float32 copy of ``img_as_float(img)``, which is never made (24 + 12 bytes per pixel). A photo sampled
+    at as many points as half its pixels is read through its channel planes (contiguous gathers), a larger
+    one (6 MP at a few edges' mappings) pixel by pixel, without copying it."""
     from ...imaging.arrays import dtype_scale
 
     img = np.asarray(img)
-    if img.dtype in (np.uint8, np.uint16):
-        table = (np.arange(np.iinfo(img.dtype).max + 1, dtype=np.float64) / dtype_scale(img.dtype)).astype(np.float32)
+    H, W = img.shape[:2]
+    if img.dtype not in (np.uint8, np.uint16):
+        flat = np.ascontiguousarray(img, dtype=np.float32).reshape(-1, 3)
+        return _bilinear_rows(lambda idx: np.take(flat, idx, axis=0).T, (H, W), uv, interpolation)
+    table = (np.arange(np.iinfo(img.dtype).max + 1, dtype=np.float64) / dtype_scale(img.dtype)).astype(np.float32)
+    if 2 * len(uv) >= H * W:
         planes = [np.ascontiguousarray(img[..., c]).reshape(-1) for c in range(3)]
-    else:
-        table = None
-        planes = [np.ascontiguousarray(img[..., c], dtype=np.float32).reshape(-1) for c in range(3)]
-    return _sample_planes(planes, table, img.shape[:2], uv, interpolation)
+        return _bilinear_rows(lambda idx: _PlaneValues(planes, table, idx), (H, W), uv, interpolation)
+    flat = np.ascontiguousarray(img).reshape(-1, 3)
+    return _bilinear_rows(lambda idx: np.take(table, np.take(flat, idx, axis=0).T), (H, W), uv, interpolation)
 
 
 def _sample_view_task(item: tuple[int, list], images, interpolation: str, source=None) -> np.ndarray:
