@@ -389,12 +389,34 @@ def _concurrent(c: Ctx) -> tuple[bool, str]:
     return ok, f"exits {a.returncode}/{b.returncode}; " + (message(eb) if b.returncode else message(ea))
 
 
+def _holds_lock(a: subprocess.Popen, out: Path, timeout: float = 120) -> bool:
+    """Wait until ``a`` holds ``out``'s lock (its PID in ``.<out>.o3d_seqcc.lock``), then stop it there (SIGSTOP)."""
+    lock = out.parent / f".{out.name}.o3d_seqcc.lock"
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and a.poll() is None:
+        try:
+            if lock.read_text().strip() == str(a.pid):
+                os.kill(a.pid, signal.SIGSTOP)
+                return True
+        except OSError:
+            pass
+        time.sleep(0.002)
+    return False
+
+
 def _concurrent_overwrite(c: Ctx) -> tuple[bool, str]:
     cli("correct", c.S, "--out", c.out, *FAST)
     a = popen("correct", c.S, "--out", c.out, "--overwrite", *FAST)
-    time.sleep(0.3)
+    # the second run while the first writes: the first is held inside its save (a save takes a fraction of a second,
+    # so starting the second a little later left the two overlapping only by chance)
+    held = _holds_lock(a, c.out)
     b = popen("correct", c.S, "--out", c.out, "--overwrite", "--method", "none")
-    ea, eb = a.communicate()[1], b.communicate()[1]
+    if held:
+        eb = b.communicate()[1]
+        os.kill(a.pid, signal.SIGCONT)
+        ea = a.communicate()[1]
+    else:
+        ea, eb = a.communicate()[1], b.communicate()[1]
     ok = ("Traceback" not in ea + eb and whole(c.out) and clean_beside(c, {"S", c.out.name})
           and (0 in (a.returncode, b.returncode)) and all(x in (0, 1, 2) for x in (a.returncode, b.returncode))
           and (a.returncode != 0 or b.returncode != 0 or "wait" in (ea + eb).lower()))
