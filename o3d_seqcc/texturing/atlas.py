@@ -402,7 +402,8 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_pack = time.perf_counter()
     step("rasterize")
     # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
-    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)])
+    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
+                            threads=threads)
     eidx, eface = edge_texels(ctxy, cs.faces, None, H, S, free=owner == -1)  # slivers own the texels under their edges
     owner[eidx] = -2 - eface.astype(np.int32)
     del eidx, eface
@@ -441,7 +442,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     if s.fill_background and not written.all():
         w2 = written.reshape(H, S)
         for p in range(P):  # page by page, in place
-            push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S], copy=False)
+            push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S], copy=False, threads=threads)
     t_end = time.perf_counter()
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])

@@ -63,7 +63,7 @@ def _edge_functions(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return A, B, C, d
 
 
-def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000):
+def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000, rows: tuple[int, int] | None = None):
     """Per triangle and canvas row, the span of texel (pixel) centres inside the triangle.
 
     The span of every row is solved from the three edge functions (no per-texel inside test),
@@ -77,6 +77,8 @@ def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000)
         Canvas size (spans are clipped to it).
     chunk : int
         Texels (estimated from bounding boxes) handled per step.
+    rows : (int, int), optional
+        Only the canvas rows ``rows[0] <= y < rows[1]`` (each row's span is the same as without it).
 
     Yields
     ------
@@ -90,8 +92,9 @@ def row_spans(p: np.ndarray, height: int, width: int, *, chunk: int = 2_000_000)
         The barycentric coordinates on the row: ``l_i = A_i x + r_i``.
     """
     A, B, C, d = _edge_functions(p)
-    y0 = np.maximum(np.ceil(p[:, :, 1].min(axis=1) - 1e-9), 0).astype(np.int64)
-    y1 = np.minimum(np.floor(p[:, :, 1].max(axis=1) + 1e-9), height - 1).astype(np.int64)
+    lo_row, hi_row = (0, height) if rows is None else (max(0, int(rows[0])), min(height, int(rows[1])))
+    y0 = np.maximum(np.ceil(p[:, :, 1].min(axis=1) - 1e-9), lo_row).astype(np.int64)
+    y1 = np.minimum(np.floor(p[:, :, 1].max(axis=1) + 1e-9), hi_row - 1).astype(np.int64)
     xlo = np.maximum(p[:, :, 0].min(axis=1) - 1e-9, 0.0)
     xhi = np.minimum(p[:, :, 0].max(axis=1) + 1e-9, width - 1.0)
     ny = np.where(np.abs(d) > 1e-12, np.maximum(y1 - y0 + 1, 0), 0)
@@ -140,8 +143,12 @@ def release_free_memory() -> None:
 _LIBC = None
 
 
+#: canvas rows per band of :func:`rasterize_owner` on several threads
+RASTER_BAND_ROWS = 256
+
+
 def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int, *,
-                    order: np.ndarray | None = None, chunk: int = 2_000_000) -> np.ndarray:
+                    order: np.ndarray | None = None, chunk: int = 2_000_000, threads: int = 1) -> np.ndarray:
     """The face whose UV triangle holds each texel centre: a canvas of face ids (the face drawn last wins).
 
     Scanline (:func:`row_spans`), vectorised over all rows of a chunk of triangles; each span is
@@ -158,6 +165,9 @@ def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
         Drawing order: where triangles overlap, the face drawn last keeps the texel.
     chunk : int
         Texels (estimated from bounding boxes) handled per vectorised step.
+    threads : int
+        Bands of :data:`RASTER_BAND_ROWS` rows drawn side by side (each band's texels by the faces
+        that reach it, in the drawing order: the same canvas).
 
     Returns
     -------
@@ -172,15 +182,33 @@ def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
         return owner
     p = np.asarray(txy, dtype=np.float64)[np.asarray(faces)[fo]]
     fo32 = fo.astype(np.int32)
-    for k, y, xs, n, _, _ in row_spans(p, height, width, chunk=chunk):
-        total = int(n.sum())
-        if total == 0:
-            continue
-        first = y.astype(np.int64) * width + xs - (np.cumsum(n) - n)  # span start minus its offset in the run
-        pos = np.repeat(first, n)
-        pos += np.arange(total, dtype=np.int64)
-        owner[pos] = np.repeat(fo32[k], n)  # in drawing order: the last face written keeps a texel
-        del pos
+
+    def draw(q: np.ndarray, ids: np.ndarray, rows: tuple[int, int] | None) -> None:
+        for k, y, xs, n, _, _ in row_spans(q, height, width, chunk=chunk, rows=rows):
+            total = int(n.sum())
+            if total == 0:
+                continue
+            first = y.astype(np.int64) * width + xs - (np.cumsum(n) - n)  # span start minus its offset in the run
+            pos = np.repeat(first, n)
+            pos += np.arange(total, dtype=np.int64)
+            owner[pos] = np.repeat(ids[k], n)  # in drawing order: the last face written keeps a texel
+            del pos
+
+    if threads <= 1 or height <= RASTER_BAND_ROWS:
+        draw(p, fo32, None)
+        return owner
+    from concurrent.futures import ThreadPoolExecutor
+
+    ylo, yhi = p[:, :, 1].min(axis=1), p[:, :, 1].max(axis=1)
+
+    def band(r0: int) -> None:
+        r1 = r0 + RASTER_BAND_ROWS
+        sel = np.flatnonzero((yhi + 1e-9 >= r0) & (ylo - 1e-9 <= r1 - 1))  # faces with a row in the band
+        if len(sel):
+            draw(p[sel], fo32[sel], (r0, r1))
+
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-raster") as pool:
+        list(pool.map(band, range(0, height, RASTER_BAND_ROWS)))
     return owner
 
 
@@ -317,13 +345,32 @@ def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray | None, 
     thin = np.flatnonzero(a2 <= max_altitude * np.maximum(L.max(axis=1), 1e-12))
     if len(thin) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    n = np.maximum(np.ceil(L[thin] / step).astype(np.int64), 1).reshape(-1) + 1  # samples per edge, ends included
+    if free is None:
+        free = np.ones(height * width, dtype=bool)
+        free[covered] = False
+    pe, ee = p[thin].reshape(-1, 2), e[thin].reshape(-1, 2)  # (3 per thin face) edge starts and vectors
+    # an edge whose samples' texels (within the rounded box of its ends, a texel more for rounding) are all covered
+    # gives nothing: left out
+    lo, hi = np.rint(np.minimum(pe, pe + ee)) - 1, np.rint(np.maximum(pe, pe + ee)) + 1
+    x0, x1 = (np.clip(v[:, 0], 0, width - 1).astype(np.int64) for v in (lo, hi))
+    y0, y1 = (np.clip(v[:, 1], 0, height - 1).astype(np.int64) for v in (lo, hi))
+    import cv2
+
+    ry, rx = int(y1.max()) + 1, int(x1.max()) + 1  # the summed-area table over the edges' extent only
+    acc = cv2.integral(np.ascontiguousarray(free.view(np.uint8).reshape(height, width)[:ry, :rx]),
+                       sdepth=cv2.CV_32S if ry * rx < 2**31 else cv2.CV_64F)
+    inside = acc[y1 + 1, x1 + 1] - acc[y0, x1 + 1] - acc[y1 + 1, x0] + acc[y0, x0]
+    del acc
+    keep = np.flatnonzero(inside > 0)
+    if len(keep) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    pe, ee = pe[keep], ee[keep]
+    n = np.maximum(np.ceil(L[thin].reshape(-1)[keep] / step).astype(np.int64), 1) + 1  # samples per edge, ends included
     # sample k of an edge at start + e * (k / (n - 1)), its values repeated from the edge's (no (samples, 2) gathers)
     k = np.arange(int(n.sum()), dtype=np.float64)
     k -= np.repeat((np.cumsum(n) - n).astype(np.float64), n)
     k /= np.repeat(np.maximum(n - 1, 1).astype(np.float64), n)
-    f = np.repeat(np.repeat(thin, 3), n)
-    pe, ee = p[thin].reshape(-1, 2), e[thin].reshape(-1, 2)  # (3 per thin face) edge starts and vectors
+    f = np.repeat(np.repeat(thin, 3)[keep], n)
     idx = np.zeros(len(k), dtype=np.int64)
     for a, size, stride in ((0, width, 1), (1, height, width)):  # idx = y * width + x
         v = np.repeat(ee[:, a], n)
@@ -333,9 +380,6 @@ def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray | None, 
         np.clip(v, 0, size - 1, out=v)
         idx += v.astype(np.int64) * stride
         del v
-    if free is None:
-        free = np.ones(height * width, dtype=bool)
-        free[covered] = False
     m = free[idx]
     idx, f = idx[m], f[m]
     u, first = np.unique(idx, return_index=True)
@@ -535,7 +579,7 @@ def _as_uint8(values: np.ndarray) -> np.ndarray:
     return cv2.convertScaleAbs(np.ascontiguousarray(values)).reshape(values.shape)
 
 
-def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True) -> np.ndarray:
+def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True, threads: int = 1) -> np.ndarray:
     """Fill texels outside ``mask`` with smooth colours from the masked ones (pull-push).
 
     Pull: area-averaged pyramid of colour x coverage and coverage. Push: from the coarsest
@@ -555,6 +599,8 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True) -> n
 
     copy : bool, default True
         Fill a copy; False fills ``img`` itself (for a caller that drops the unfilled image).
+    threads : int, default 1
+        The full-resolution bands pulled and pushed side by side (the same values).
 
     Returns
     -------
@@ -569,14 +615,15 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True) -> n
     if banded:  # level 1 from bands of the full-resolution colour x coverage
         m = np.empty((H // 2, W // 2), dtype=np.float32)
         c = np.empty((H // 2, W // 2, 3), dtype=np.float32)
-        for r in range(0, H, B):  # written band by band into the level (no list of bands to concatenate)
+        def pull(r: int, m1: np.ndarray = m, c1: np.ndarray = c) -> None:  # band by band into the level
             hb = min(B, H - r) // 2
             mb = mask[r:r + B].astype(np.float32)
-            m[r // 2:r // 2 + hb] = cv2.resize(mb, (W // 2, hb), interpolation=cv2.INTER_AREA)
+            m1[r // 2:r // 2 + hb] = cv2.resize(mb, (W // 2, hb), interpolation=cv2.INTER_AREA)
             cb = img[r:r + B].astype(np.float32)
             cb *= mb[..., None]
-            c[r // 2:r // 2 + hb] = cv2.resize(cb, (W // 2, hb), interpolation=cv2.INTER_AREA)
-            del mb, cb
+            c1[r // 2:r // 2 + hb] = cv2.resize(cb, (W // 2, hb), interpolation=cv2.INTER_AREA)
+
+        _each(pull, range(0, H, B), threads)
         levels = [(c, m)]
     else:
         m = mask.astype(np.float32)
@@ -607,9 +654,24 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True) -> n
         np.copyto(out, _as_uint8(up), where=~mask[..., None])
         return out
     h2 = filled.shape[0]
-    for r in range(0, H, B):  # output rows r .. r1 read level-1 rows r/2 - 1 .. r1/2 (clamped at the page)
+
+    def push(r: int) -> None:  # output rows r .. r1 read level-1 rows r/2 - 1 .. r1/2 (clamped at the page)
         r1 = min(H, r + B)
         s0, s1 = max(r // 2 - 1, 0), min(r1 // 2 + 1, h2)
         up = cv2.resize(filled[s0:s1], (W, 2 * (s1 - s0)), interpolation=cv2.INTER_LINEAR)[r - 2 * s0:r1 - 2 * s0]
         np.copyto(out[r:r1], _as_uint8(up), where=~mask[r:r1, :, None])
+
+    _each(push, range(0, H, B), threads)
     return out
+
+
+def _each(fn, items, threads: int) -> None:
+    """``fn(item)`` for every item, on ``threads`` threads (the items write disjoint rows)."""
+    if threads <= 1:
+        for it in items:
+            fn(it)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-fill") as pool:
+        list(pool.map(fn, items))
