@@ -453,8 +453,8 @@ def refine_visibility(job: VisibilityJob, records: list, ex, *, vertex_normals: 
             book.renumber(old_to_new, len(f))
             book.add(_new_face_records(job, ex, X, f, fn, deg, new), new)
             stats["merged_back"] = int(n_old - len(f))
-        if len(f) != F0:  # the caller takes the refined records: the book releases the input ones as it merges
-            records.clear()
+        if len(f) != F0 and isinstance(records, list):  # the caller takes the refined records: the book releases
+            records.clear()  # the input ones as it merges (a tuple, e.g. after the far junk is dropped, stays)
         del latest
         records = book.records()
     split = np.bincount(parent, minlength=F0) > 1
