@@ -48,9 +48,10 @@ from ..geometry.meshops import face_adjacency, vertex_normals, weld_vertices
 from .._shared.progress import steps
 from .._shared.parallel import LocalExecutor, carried, current as current_executor
 from ..imaging.sequences import LRUCache, default_cache_bytes
-from .bake import (bary_coefficients, edge_texels, gutter_owner, push_pull_fill, rasterize_owner, release_free_memory,
-                   sample_image, texel_bary)
+from .bake import (bary_coefficients, edge_texels, gutter_owner, rasterize_owner, release_free_memory, sample_image,
+                   texel_bary)
 from .charts import build_charts
+from .fill import push_pull_fill
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
 from .packing import pack_charts_beside

@@ -258,7 +258,7 @@ def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
     float copy of the page): the same bytes as the whole-page pyramid, for bands that do or do not divide it."""
     import cv2
 
-    from o3d_seqcc.texturing import bake
+    from o3d_seqcc.texturing import fill
 
     rng = np.random.default_rng(5)
     for H, W, band in ((512, 384, 64), (640, 256, 96), (514, 258, 128)):
@@ -266,10 +266,10 @@ def test_push_pull_fill_in_bands_is_the_whole_page_fill(monkeypatch):
         blobs = cv2.resize(rng.random((H // 16 + 1, W // 16 + 1)).astype(np.float32), (W, H),
                            interpolation=cv2.INTER_NEAREST)
         mask = (blobs > 0.55) & (rng.random((H, W)) > 0.05)
-        monkeypatch.setattr(bake, "FILL_BAND_ROWS", 1 << 20)  # one band: the whole-page path
-        whole = bake.push_pull_fill(img, mask)
-        monkeypatch.setattr(bake, "FILL_BAND_ROWS", band)
-        banded = bake.push_pull_fill(img, mask)
+        monkeypatch.setattr(fill, "FILL_BAND_ROWS", 1 << 20)  # one band: the whole-page path
+        whole = fill.push_pull_fill(img, mask)
+        monkeypatch.setattr(fill, "FILL_BAND_ROWS", band)
+        banded = fill.push_pull_fill(img, mask)
         assert np.array_equal(whole[mask], img[mask]) and not np.array_equal(whole, img)
         assert np.array_equal(banded, whole), (H, W, band)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from o3d_seqcc.texturing import atlas, bake, packing
+from o3d_seqcc.texturing import atlas, bake, fill, packing
 from o3d_seqcc.texturing.bake import (barycentric, edge_texels, gutter_owner, gutter_texels, rasterize_faces,
                                       rasterize_owner, sample_image)
 
@@ -215,7 +215,7 @@ def test_the_childs_warnings_and_log_records_reach_this_process_as_its_own(rng, 
 
 def test_the_face_canvas_and_the_fill_in_bands_on_threads_are_the_single_pass_ones(rng, monkeypatch):
     monkeypatch.setattr(bake, "RASTER_BAND_ROWS", 16)
-    monkeypatch.setattr(bake, "FILL_BAND_ROWS", 32)
+    monkeypatch.setattr(fill, "FILL_BAND_ROWS", 32)
     txy, faces = random_triangles(rng, 400, 150, 5.0)
     order = rng.permutation(len(faces))
     one = rasterize_owner(txy, faces, 160, 150, order=order)
@@ -223,6 +223,6 @@ def test_the_face_canvas_and_the_fill_in_bands_on_threads_are_the_single_pass_on
     assert np.array_equal(one, two) and (one >= 0).sum() > 3000
     img = rng.integers(0, 256, size=(160, 150, 3), dtype=np.uint8)
     mask = one.reshape(160, 150) >= 0
-    a = bake.push_pull_fill(img, mask)
-    b = bake.push_pull_fill(img.copy(), mask, copy=False, threads=2)
+    a = fill.push_pull_fill(img, mask)
+    b = fill.push_pull_fill(img.copy(), mask, copy=False, threads=2)
     assert np.array_equal(a, b) and not np.array_equal(a, img)
