@@ -317,6 +317,10 @@ def rasterize_faces(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
     return cov.astype(itype, copy=False), face.astype(itype, copy=False), bary
 
 
+#: edge samples made at a time by :func:`edge_texels`
+EDGE_SAMPLES = 1 << 22
+
+
 def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray | None, height: int, width: int, *,
                 max_altitude: float = 2.0, step: float = 0.5,
                 free: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -364,24 +368,36 @@ def edge_texels(txy: np.ndarray, faces: np.ndarray, covered: np.ndarray | None, 
     keep = np.flatnonzero(inside > 0)
     if len(keep) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    pe, ee = pe[keep], ee[keep]
+    pe, ee, fe = pe[keep], ee[keep], np.repeat(thin, 3)[keep]
     n = np.maximum(np.ceil(L[thin].reshape(-1)[keep] / step).astype(np.int64), 1) + 1  # samples per edge, ends included
-    # sample k of an edge at start + e * (k / (n - 1)), its values repeated from the edge's (no (samples, 2) gathers)
-    k = np.arange(int(n.sum()), dtype=np.float64)
-    k -= np.repeat((np.cumsum(n) - n).astype(np.float64), n)
-    k /= np.repeat(np.maximum(n - 1, 1).astype(np.float64), n)
-    f = np.repeat(np.repeat(thin, 3)[keep], n)
-    idx = np.zeros(len(k), dtype=np.int64)
-    for a, size, stride in ((0, width, 1), (1, height, width)):  # idx = y * width + x
-        v = np.repeat(ee[:, a], n)
-        v *= k
-        v += np.repeat(pe[:, a], n)
-        np.rint(v, out=v)
-        np.clip(v, 0, size - 1, out=v)
-        idx += v.astype(np.int64) * stride
-        del v
-    m = free[idx]
-    idx, f = idx[m], f[m]
+    # the edges in runs of about EDGE_SAMPLES samples; the free texels they hit, in edge order
+    ends = np.cumsum(n)
+    cuts = np.unique(np.searchsorted(ends, np.arange(EDGE_SAMPLES, int(ends[-1]), EDGE_SAMPLES), side="right"))
+    hit_idx, hit_face = [], []
+    for s0, s1 in zip(np.r_[0, cuts], np.r_[cuts, len(n)]):
+        if s1 <= s0:
+            continue
+        nn = n[s0:s1]
+        # sample k of an edge at start + e * (k / (n - 1)), its values repeated from the edge's (no (samples, 2) gathers)
+        k = np.arange(int(nn.sum()), dtype=np.float64)
+        k -= np.repeat((np.cumsum(nn) - nn).astype(np.float64), nn)
+        k /= np.repeat(np.maximum(nn - 1, 1).astype(np.float64), nn)
+        idx = np.zeros(len(k), dtype=np.int64)
+        for a, size, stride in ((0, width, 1), (1, height, width)):  # idx = y * width + x
+            v = np.repeat(ee[s0:s1, a], nn)
+            v *= k
+            v += np.repeat(pe[s0:s1, a], nn)
+            np.rint(v, out=v)
+            np.clip(v, 0, size - 1, out=v)
+            idx += v.astype(np.int64) * stride
+            del v
+        del k
+        m = free[idx]
+        hit_idx.append(idx[m])
+        hit_face.append(np.repeat(fe[s0:s1], nn)[m])
+        del idx, m
+    idx, f = np.concatenate(hit_idx), np.concatenate(hit_face)
+    del hit_idx, hit_face
     u, first = np.unique(idx, return_index=True)
     return u, f[first].astype(np.int64)
 

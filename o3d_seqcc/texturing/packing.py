@@ -462,7 +462,7 @@ def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, 
     import pickle
     import threading
 
-    payload = pickle.dumps((np.asarray(uv), np.asarray(faces), np.asarray(chart), options), protocol=5)
+    payload = [pickle.dumps((np.asarray(uv), np.asarray(faces), np.asarray(chart), options), protocol=5)]
     code = f"from {__name__} import _child; _child()"
     try:
         proc = subprocess.Popen([sys.executable, "-c", code, str(os.getpid())], stdin=subprocess.PIPE,
@@ -474,7 +474,7 @@ def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, 
 
     def talk() -> None:
         try:
-            out["stdout"], out["stderr"] = proc.communicate(payload)
+            out["stdout"], out["stderr"] = proc.communicate(payload.pop())  # the bytes dropped once sent
         except BaseException as exc:  # noqa: BLE001 - reported by result()
             out["exc"] = exc
 
@@ -491,7 +491,7 @@ def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, 
             err = out.get("stderr", b"").decode("utf-8", "replace").strip().splitlines()
             logger.debug("packing child failed (exit %s: %s): packing inline", proc.returncode, err[-1:] or out.get("exc"))
             return inline()
-        status, value, notes, records = pickle.loads(out["stdout"])
+        status, value, notes, records = pickle.loads(out.pop("stdout"))
         for rec in records:
             if logger.isEnabledFor(rec.levelno):  # the level check logging makes before a record exists
                 logger.handle(rec)
