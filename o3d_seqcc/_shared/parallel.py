@@ -32,12 +32,12 @@ import logging
 import threading
 import uuid
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from ..errors import InputError, require
 from .progress import track
 
-__all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "carried", "connect", "current", "use"]
+__all__ = ["DaskExecutor", "LocalExecutor", "SCHEDULER_ENV", "carried", "connect", "current", "thread_map", "use"]
 
 logger = logging.getLogger(__name__)
 
@@ -226,6 +226,22 @@ def carried(fn: Callable, timed: str | None = None) -> Callable:
                 logger.debug("%s: %.3f s", timed, time.perf_counter() - t)
 
     return run
+
+
+def thread_map(fn: Callable, items: Iterable, threads: int, *, name: str = "o3d_seqcc-threads") -> list:
+    """``[fn(item) for item in items]`` on up to ``threads`` threads of this process, in the order of ``items``.
+
+    For array work in bands or chunks that releases the interpreter (numpy, OpenCV); each task runs
+    with this thread's context (:func:`carried`). With one thread or one item, here and in order.
+    """
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        return [fn(it) for it in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=int(threads), thread_name_prefix=name) as pool:
+        futures = [pool.submit(carried(fn), it) for it in items]  # one carried context per task
+        return [f.result() for f in futures]
 
 
 def current(n_jobs: int | None = None) -> LocalExecutor | DaskExecutor:

@@ -46,7 +46,7 @@ from ..errors import InputError
 from ..imaging.arrays import img_as_uint8
 from ..geometry.meshops import face_adjacency, vertex_normals, weld_vertices
 from .._shared.progress import steps
-from .._shared.parallel import LocalExecutor, carried, current as current_executor
+from .._shared.parallel import LocalExecutor, current as current_executor, thread_map
 from ..imaging.sequences import LRUCache, default_cache_bytes
 from .bake import (bary_coefficients, edge_texels, gutter_owner, rasterize_owner, release_free_memory, sample_image,
                    texel_bary)
@@ -206,21 +206,9 @@ def _corner_pass(views_images, faces: np.ndarray, labels: np.ndarray, fuv: np.nd
         m, pt = corner_colors(img, p.reshape(-1, 2)[first])
         return m[back.reshape(-1)], pt[back.reshape(-1)]
 
-    for (v, fs), (m, pt) in zip(tasks, _map(one, tasks, threads, "o3d_seqcc-corners")):
+    for (v, fs), (m, pt) in zip(tasks, thread_map(one, tasks, threads, name="o3d_seqcc-corners")):
         corner_mean[fs], corner_point[fs] = m.reshape(-1, 3, 3), pt.reshape(-1, 3, 3)
     return corner_mean, corner_point
-
-
-def _map(fn, items, threads: int, name: str):
-    """``fn`` over ``items`` in order, on ``threads`` threads (the executor's context carried to them)."""
-    items = list(items)
-    if threads <= 1 or len(items) <= 1:
-        return [fn(it) for it in items]
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix=name) as pool:
-        futures = [pool.submit(carried(fn), it) for it in items]  # one carried context per task
-        return [f.result() for f in futures]
 
 
 def _image(views_images, v: int, cache: LRUCache) -> np.ndarray:
@@ -352,7 +340,7 @@ def _texel_pass(tex: np.ndarray, owner: np.ndarray, ctxy: np.ndarray, faces: np.
         np.clip(col, 0, 255, out=col)
         flat_tex[loc + a] = col.astype(np.uint8)
 
-    _map(band, range(0, H, rows), threads, "o3d_seqcc-bake")
+    thread_map(band, range(0, H, rows), threads, name="o3d_seqcc-bake")
 
 
 def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:

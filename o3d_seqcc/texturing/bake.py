@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared.parallel import thread_map
+
 __all__ = ["bary_coefficients", "barycentric", "edge_texels", "gutter_owner", "gutter_texels",
            "rasterize_faces", "rasterize_owner", "release_free_memory", "row_spans", "sample_image", "texel_bary"]
 
@@ -197,8 +199,6 @@ def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
     if threads <= 1 or height <= RASTER_BAND_ROWS:
         draw(p, fo32, None)
         return owner
-    from concurrent.futures import ThreadPoolExecutor
-
     ylo, yhi = p[:, :, 1].min(axis=1), p[:, :, 1].max(axis=1)
 
     def band(r0: int) -> None:
@@ -207,8 +207,7 @@ def rasterize_owner(txy: np.ndarray, faces: np.ndarray, height: int, width: int,
         if len(sel):
             draw(p[sel], fo32[sel], (r0, r1))
 
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-raster") as pool:
-        list(pool.map(band, range(0, height, RASTER_BAND_ROWS)))
+    thread_map(band, range(0, height, RASTER_BAND_ROWS), threads, name="o3d_seqcc-raster")
     return owner
 
 
@@ -494,14 +493,7 @@ def gutter_owner(owner: np.ndarray, height: int, width: int, reach: float, *,
         f = np.where(f < -1, -2 - f, f)
         return loc + r0 * width, f
 
-    starts = range(0, height, GUTTER_BAND_ROWS)
-    if threads > 1 and height > GUTTER_BAND_ROWS:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-gutters") as pool:
-            parts = list(pool.map(band, starts))
-    else:
-        parts = [band(r0) for r0 in starts]
+    parts = thread_map(band, range(0, height, GUTTER_BAND_ROWS), threads, name="o3d_seqcc-gutters")
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._shared.parallel import thread_map
+
 __all__ = ["push_pull_fill"]
 
 
@@ -69,7 +71,7 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True, thre
             cb *= mb[..., None]
             c1[r // 2:r // 2 + hb] = cv2.resize(cb, (W // 2, hb), interpolation=cv2.INTER_AREA)
 
-        _each(pull, range(0, H, B), threads)
+        thread_map(pull, range(0, H, B), threads, name="o3d_seqcc-fill")
         levels = [(c, m)]
     else:
         m = mask.astype(np.float32)
@@ -107,17 +109,6 @@ def push_pull_fill(img: np.ndarray, mask: np.ndarray, *, copy: bool = True, thre
         up = cv2.resize(filled[s0:s1], (W, 2 * (s1 - s0)), interpolation=cv2.INTER_LINEAR)[r - 2 * s0:r1 - 2 * s0]
         np.copyto(out[r:r1], _as_uint8(up), where=~mask[r:r1, :, None])
 
-    _each(push, range(0, H, B), threads)
+    thread_map(push, range(0, H, B), threads, name="o3d_seqcc-fill")
     return out
 
-
-def _each(fn, items, threads: int) -> None:
-    """``fn(item)`` for every item, on ``threads`` threads (the items write disjoint rows)."""
-    if threads <= 1:
-        for it in items:
-            fn(it)
-        return
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="o3d_seqcc-fill") as pool:
-        list(pool.map(fn, items))

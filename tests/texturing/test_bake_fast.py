@@ -62,6 +62,20 @@ def test_edge_texels_from_a_free_canvas_equal_those_from_the_covered_list(rng):
     assert len(a[0]) > 0 and all(np.array_equal(u, v) for u, v in zip(a, b))
 
 
+
+def test_edge_texels_in_runs_of_samples_equal_one_run(rng, monkeypatch):
+    """Thin faces' edges sampled in many short runs give the texels and faces of a single run (first face wins)."""
+    p = rng.random((400, 2)) * 120
+    d = rng.normal(size=(400, 2)) * 8  # slivers: a long edge and a third corner near it
+    txy = np.concatenate([p, p + d, p + 0.5 * d + rng.normal(size=(400, 2)) * 0.2]).round(4)
+    faces = np.arange(1200).reshape(3, 400).T.copy()
+    owner = rasterize_owner(txy, faces, 128, 128)
+    one = edge_texels(txy, faces, None, 128, 128, free=owner == -1)
+    monkeypatch.setattr(bake, "EDGE_SAMPLES", 37)  # runs that cut edges' samples anywhere
+    many = edge_texels(txy, faces, None, 128, 128, free=owner == -1)
+    assert len(one[0]) > 500 and len(np.unique(one[1])) > 100
+    assert np.array_equal(one[0], many[0]) and np.array_equal(one[1], many[1])
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_gutters_in_bands_equal_the_whole_canvas_distance_transform(rng, monkeypatch, threads):
     monkeypatch.setattr(bake, "GUTTER_BAND_ROWS", 24)  # many bands on a small canvas
