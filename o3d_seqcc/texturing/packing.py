@@ -134,19 +134,24 @@ class _Packer:
     def largest_chart(self, t: float) -> float:
         """An upper bound of the side of any chart's packed image at density ``t`` (texels: its extent, xatlas's
         half-texel offset and padding on both sides, rounding)."""
-        if not hasattr(self, "_side"):
+        return float(self._spans().max(initial=0.0)) * t + self._margin()
+
+    def _margin(self) -> float:
+        return 2 * (self.padding + 1) + 3
+
+    def _spans(self) -> np.ndarray:
+        """(C, 2) extent of every chart in uv units (0 for a chart with no vertex)."""
+        if not hasattr(self, "_span"):
             vc = self.vertex_chart
             ok = vc >= 0
             lo = np.full((self.n_charts, 2), np.inf)
             hi = np.full((self.n_charts, 2), -np.inf)
             np.minimum.at(lo, vc[ok], self.uv64[ok])
             np.maximum.at(hi, vc[ok], self.uv64[ok])
-            span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
-            self._side = float(span.max()) if span.size else 0.0
-            self._area = float(np.prod(span, axis=1).sum()) if span.size else 0.0
-        return self._side * t + 2 * (self.padding + 1) + 3
+            self._span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+        return self._span
 
-    def unlimited(self, t: float):
+    def unlimited(self, t: float, *, start: int | None = None):
         """The charts at density ``t`` without a size limit: ``(atlas, width, height, R)`` or None.
 
         xatlas given a page limit places every chart where it would without one, as long as no chart's search
@@ -155,25 +160,31 @@ class _Packer:
         unlimited packing's extents plus the largest chart, the placement is the unlimited one, and its texel
         coordinates are exact (``uv * R``). ``width`` and ``height`` are the unlimited packing's extents (xatlas's
         ``atlasSizes`` less the padding: the ceiling of its largest texel coordinates). None when R would have to
-        exceed 2**15 or the placement came close to the page's limit (the caller packs without a limit instead).
+        exceed 2**15 (the caller packs without a limit instead).
+
+        The first ``R`` tried is the smallest that holds the charts' padded bounding boxes side by side (1.1 x the
+        square root of their total area) plus the largest chart; a placement that came close to its limit is
+        packed again on a page twice as large (``start``: the first ``R`` tried instead, a power of two). xatlas's
+        time grows with ``R`` (Fountain 300k: 1.2 s at 4096, 1.8 s at 32768) while the placement does not change.
         """
         side = self.largest_chart(t)
-        est = math.sqrt(self._area * t * t + self.n_charts * side * 4 * (self.padding + 2)) + side
-        R = 1 << max(4, math.ceil(math.log2(max(2.0 * est, 1.0))))
-        if R > 2**15:
-            return None
-        a = self.pack(t, R)
-        if a.atlas_count != 1:
-            return None
-        _, _, uv = a[0]
-        page, _ = a.get_mesh_vertex_assignment(0)
-        tc = uv[page < _NONE].astype(np.float64) * R
-        if not len(tc):
-            return None
-        W, H = (int(math.ceil(float(v))) for v in tc.max(axis=0))
-        if max(W, H) + 1 + side > R:
-            return None
-        return a, W, H, R
+        span = self._spans() * t + self._margin()
+        need = 1.1 * math.sqrt(float(np.sum(span[:, 0] * span[:, 1]))) + side + 1
+        R = 1 << max(4, math.ceil(math.log2(max(need, 1.0)))) if start is None else int(start)
+        while R <= 2**15:
+            a = self.pack(t, R)
+            if a.atlas_count == 1:
+                _, _, uv = a[0]
+                page, _ = a.get_mesh_vertex_assignment(0)
+                tc = uv[page < _NONE].astype(np.float64) * R
+                if not len(tc):
+                    return None
+                W, H = (int(math.ceil(float(v))) for v in tc.max(axis=0))
+                if max(W, H) + 1 + side <= R:
+                    return a, W, H, R
+            logger.debug("packing: a %dx%d page is too small to read the unlimited placement off; twice that", R, R)
+            R *= 2
+        return None
 
     def attempt(self, t: float, size: int):
         a = self.pack(t, size)

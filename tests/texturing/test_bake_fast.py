@@ -144,6 +144,22 @@ def test_a_packing_read_on_a_smaller_page_is_xatlas_own_on_that_page(rng):
     assert own.get_utilization(0) == read.get_utilization(0)
 
 
+def test_the_unlimited_placement_is_read_off_the_smallest_page_that_holds_it(rng):
+    uv, faces, chart = _charts(rng, 200)
+    pk = packing._Packer(uv, faces, chart, 4)
+    big, W, H, R = pk.unlimited(1.0)
+    assert R < 2**15 and max(W, H) + 1 + pk.largest_chart(1.0) <= R
+    smallest = 1 << int(np.ceil(np.log2(max(W, H) + 1 + pk.largest_chart(1.0))))
+    assert R <= 2 * smallest  # the first page tried is near the smallest that holds it, not the largest
+    largest = pk.pack(1.0, 2**15)  # what the first version read it off: the largest page
+    uv_here, uv_there = big[0][2].astype(np.float64) * R, largest[0][2].astype(np.float64) * 2**15
+    assert np.array_equal(uv_here, uv_there) and np.array_equal(big[0][1], largest[0][1])
+    # a first page too small for it: packed again on pages twice as large until one holds it, the same placement
+    again, W2, H2, R2 = pk.unlimited(1.0, start=16)
+    assert (W2, H2, R2) == (W, H, R)
+    assert np.array_equal(again[0][2].astype(np.float64) * R2, uv_here)
+
+
 def test_packing_in_a_child_process_is_the_same_packing(rng, monkeypatch):
     uv, faces, chart = _charts(rng, 120)
     monkeypatch.setattr(packing, "BESIDE_MIN_FACES", 0)
