@@ -168,6 +168,34 @@ def test_packing_in_a_child_process_is_the_same_packing(rng, monkeypatch):
     assert np.array_equal(beside.txy, here.txy) and beside.log == here.log and beside.size == here.size
 
 
+def _big_and_small_charts(rng):
+    """A chart as large as a page's slack (600 x 500 px) among 150 small ones: packed twice (unlimited, then on the
+    page)."""
+    uv, faces, chart = _charts(rng, 150)
+    big = np.array([[0.0, 0.0], [600.0, 0.0], [600.0, 500.0], [0.0, 500.0]]) + 1000.0
+    n = len(uv)
+    return (np.concatenate([uv, big]), np.concatenate([faces, [[n, n + 1, n + 2], [n, n + 2, n + 3]]]),
+            np.concatenate([chart, [150, 150]]))
+
+
+@pytest.mark.parametrize("guess", [packing._EXTENT_RATIO_GUESS, 0.3])  # the page the charts call for; a smaller one
+def test_a_page_packed_beside_the_unlimited_one_is_the_same_packing(rng, monkeypatch, guess):
+    uv, faces, chart = _big_and_small_charts(rng)
+    here = packing.pack_charts(uv, faces, chart)
+    assert len(here.log) == 2 and "without a size limit" in here.log[0]  # two xatlas calls: unlimited, on the page
+    right = guess == packing._EXTENT_RATIO_GUESS
+    monkeypatch.setattr(packing, "_EXTENT_RATIO_GUESS", guess)
+    started = []
+    speculate = packing._speculative_page
+    monkeypatch.setattr(packing, "_speculative_page", lambda *a: started.append(speculate(*a)) or started[-1])
+    beside = packing._pack_charts(uv, faces, chart, atlas_size="auto", texels_per_pixel="auto", overflow="scale",
+                                  padding=4, power_of_two=True, speculate=True)
+    assert started and started[0] is not None  # a child packed a page from the start
+    assert (started[0].size == here.size) == right  # a wrong guess: its page is not the one used
+    assert np.array_equal(beside.txy, here.txy) and np.array_equal(beside.page, here.page)
+    assert (beside.size, beside.log, beside.utilization) == (here.size, here.log, here.utilization)
+
+
 def test_pixel_aligned_faces_are_whole_offsets_of_their_photo_corners(rng):
     n = 50
     P = np.round(rng.uniform(0, 300, size=(5 * n, 3, 2)) * 256) / 256
