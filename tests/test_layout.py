@@ -29,7 +29,7 @@ TREE: dict[str, set[str]] = {
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "pairwise",
                            "global_methods"},
-    "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "bake", "fill",
+    "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
                   "atlas", "fallback", "leveling", "textured_mesh"},
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",

@@ -7,6 +7,7 @@
 - :mod:`~o3d_seqcc.texturing.charts`: charts (image footprints of same-view regions, unseen
   faces welded in) and their UVs;
 - :mod:`~o3d_seqcc.texturing.packing`: xatlas packing under an atlas-size budget;
+- :mod:`~o3d_seqcc.texturing.packing_child`: that packing in child processes, beside the bake;
 - :mod:`~o3d_seqcc.texturing.bake`: rasterisation, sampling, gutters, pull-push fill;
 - :mod:`~o3d_seqcc.texturing.atlas`: the stages together (:func:`bake_texture`);
 - :mod:`~o3d_seqcc.texturing.fallback`: colours of the faces seen by no view;

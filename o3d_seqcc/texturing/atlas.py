@@ -54,7 +54,7 @@ from .charts import build_charts
 from .fill import push_pull_fill
 from .fallback import fallback_corner_colors
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
-from .packing import pack_charts_beside
+from .packing_child import pack_charts_beside
 from .settings import TextureSettings, VisibilityLike
 from .textured_mesh import TexturedMesh
 

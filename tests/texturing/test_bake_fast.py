@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from o3d_seqcc.texturing import atlas, bake, fill, packing
+from o3d_seqcc.texturing import atlas, bake, fill, packing, packing_child
 from o3d_seqcc.texturing.bake import (barycentric, edge_texels, gutter_owner, gutter_texels, rasterize_faces,
                                       rasterize_owner, sample_image)
 
@@ -162,8 +162,8 @@ def test_the_unlimited_placement_is_read_off_the_smallest_page_that_holds_it(rng
 
 def test_packing_in_a_child_process_is_the_same_packing(rng, monkeypatch):
     uv, faces, chart = _charts(rng, 120)
-    monkeypatch.setattr(packing, "BESIDE_MIN_FACES", 0)
-    beside = packing.pack_charts_beside(uv, faces, chart, beside=True).result()
+    monkeypatch.setattr(packing_child, "BESIDE_MIN_FACES", 0)
+    beside = packing_child.pack_charts_beside(uv, faces, chart, beside=True).result()
     here = packing.pack_charts(uv, faces, chart)
     assert np.array_equal(beside.txy, here.txy) and beside.log == here.log and beside.size == here.size
 
@@ -178,18 +178,18 @@ def _big_and_small_charts(rng):
             np.concatenate([chart, [150, 150]]))
 
 
-@pytest.mark.parametrize("guess", [packing._EXTENT_RATIO_GUESS, 0.3])  # the page the charts call for; a smaller one
+@pytest.mark.parametrize("guess", [packing_child._EXTENT_RATIO_GUESS, 0.3])  # the page the charts call for; a smaller one
 def test_a_page_packed_beside_the_unlimited_one_is_the_same_packing(rng, monkeypatch, guess):
     uv, faces, chart = _big_and_small_charts(rng)
     here = packing.pack_charts(uv, faces, chart)
     assert len(here.log) == 2 and "without a size limit" in here.log[0]  # two xatlas calls: unlimited, on the page
-    right = guess == packing._EXTENT_RATIO_GUESS
-    monkeypatch.setattr(packing, "_EXTENT_RATIO_GUESS", guess)
+    right = guess == packing_child._EXTENT_RATIO_GUESS
+    monkeypatch.setattr(packing_child, "_EXTENT_RATIO_GUESS", guess)
     started = []
-    speculate = packing._speculative_page
-    monkeypatch.setattr(packing, "_speculative_page", lambda *a: started.append(speculate(*a)) or started[-1])
-    beside = packing._pack_charts(uv, faces, chart, atlas_size="auto", texels_per_pixel="auto", overflow="scale",
-                                  padding=4, power_of_two=True, speculate=True)
+    speculate = packing_child.speculative_page
+    monkeypatch.setattr(packing_child, "speculative_page", lambda *a: started.append(speculate(*a)) or started[-1])
+    beside = packing_child.pack_speculating(uv, faces, chart, atlas_size="auto", texels_per_pixel="auto",
+                                            overflow="scale", padding=4, power_of_two=True)
     assert started and started[0] is not None  # a child packed a page from the start
     assert (started[0].size == here.size) == right  # a wrong guess: its page is not the one used
     assert np.array_equal(beside.txy, here.txy) and np.array_equal(beside.page, here.page)
@@ -259,16 +259,16 @@ def test_the_childs_warnings_and_log_records_reach_this_process_as_its_own(rng, 
     from o3d_seqcc.errors import O3dSeqccWarning
 
     uv, faces, chart = _charts(rng, 120)
-    monkeypatch.setattr(packing, "BESIDE_MIN_FACES", 0)
+    monkeypatch.setattr(packing_child, "BESIDE_MIN_FACES", 0)
     with caplog.at_level(logging.WARNING, logger=packing.logger.name), warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
-        res = packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=256).result()  # too small: scaled
+        res = packing_child.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=256).result()  # too small: scaled
     assert res.scale < 1
     assert any(issubclass(x.category, O3dSeqccWarning) and "density scaled" in str(x.message) for x in w)
     levels = {r.levelname for r in caplog.records if r.name == packing.logger.name}
     assert "WARNING" in levels and "INFO" not in levels  # the INFO line is below this process's level
     with pytest.raises(packing.InputError, match="could not pack"):
-        packing.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=8, padding=8).result()
+        packing_child.pack_charts_beside(uv, faces, chart, beside=True, atlas_size=8, padding=8).result()
 
 
 def test_the_face_canvas_and_the_fill_in_bands_on_threads_are_the_single_pass_ones(rng, monkeypatch):
