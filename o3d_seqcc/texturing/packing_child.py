@@ -98,8 +98,10 @@ def _beside(function: str, args: tuple, kwargs: dict, inline, *, sent: bool = Fa
 
     payload = [pickle.dumps((function, tuple(np.asarray(a) if isinstance(a, np.ndarray) else a for a in args),
                              kwargs), protocol=5)]
-    # the child reads its call first (before the imports): the pipe is emptied as soon as the interpreter runs
-    code = f"import sys; call = sys.stdin.buffer.read(); from {__name__} import _child; _child(call)"
+    # the child imports what this process imports (its sys.path, not the working folder's modules that ``-c`` would
+    # put first), and reads its call before its imports: the pipe is emptied as soon as the interpreter runs
+    code = (f"import sys; sys.path[:] = {list(sys.path)!r}; call = sys.stdin.buffer.read(); "
+            f"from {__name__} import _child; _child(call)")
     try:
         proc = subprocess.Popen([sys.executable, "-c", code, str(os.getpid())], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -168,6 +168,24 @@ def test_packing_in_a_child_process_is_the_same_packing(rng, monkeypatch):
     assert np.array_equal(beside.txy, here.txy) and beside.log == here.log and beside.size == here.size
 
 
+def test_the_packing_child_imports_what_this_process_imports(rng, monkeypatch, tmp_path, caplog):
+    import logging
+    import sys
+
+    import xatlas  # noqa: F401 - this process's, imported before the working folder changes
+
+    (tmp_path / "xatlas.py").write_text('raise SystemExit("the working folder\'s xatlas")\n')
+    monkeypatch.chdir(tmp_path)  # a child started with -c would put this folder first on its path
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    monkeypatch.setattr(packing_child, "BESIDE_MIN_FACES", 0)
+    uv, faces, chart = _charts(rng, 60)
+    with caplog.at_level(logging.DEBUG, logger="o3d_seqcc.texturing.packing"):
+        beside = packing_child.pack_charts_beside(uv, faces, chart, beside=True).result()
+    assert not [r for r in caplog.records if "child failed" in r.getMessage()]  # packed in the child, not inline
+    here = packing.pack_charts(uv, faces, chart)
+    assert np.array_equal(beside.txy, here.txy) and beside.log == here.log
+
+
 def _big_and_small_charts(rng):
     """A chart as large as a page's slack (600 x 500 px) among 150 small ones: packed twice (unlimited, then on the
     page)."""
