@@ -138,6 +138,11 @@ class _Packer:
     def _margin(self) -> float:
         return 2 * (self.padding + 1) + 3
 
+    def boxes_side(self, t: float) -> float:
+        """The side of a square as large as the charts' padded bounding boxes at density ``t`` (texels)."""
+        span = self._spans() * t + self._margin()
+        return math.sqrt(float(np.sum(span[:, 0] * span[:, 1])))
+
     def _spans(self) -> np.ndarray:
         """(C, 2) extent of every chart in uv units (0 for a chart with no vertex)."""
         if not hasattr(self, "_span"):
@@ -167,8 +172,7 @@ class _Packer:
         time grows with ``R`` (Fountain 300k: 1.2 s at 4096, 1.8 s at 32768) while the placement does not change.
         """
         side = self.largest_chart(t)
-        span = self._spans() * t + self._margin()
-        need = 1.1 * math.sqrt(float(np.sum(span[:, 0] * span[:, 1]))) + side + 1
+        need = 1.1 * self.boxes_side(t) + side + 1
         R = 1 << max(4, math.ceil(math.log2(max(need, 1.0)))) if start is None else int(start)
         while R <= 2**15:
             a = self.pack(t, R)
@@ -370,14 +374,13 @@ def _pack_charts(uv, faces, chart, *, atlas_size, texels_per_pixel, overflow, pa
     pk = _Packer(uv, faces, chart, padding)
     spec = speculate(pk, req, N, power_of_two) if speculate is not None else None
     try:
-        return _pack_sized(pk, req, N, sized, overflow, power_of_two, padding, spec)
+        return _pack_sized(pk, req, N, overflow, power_of_two, padding, spec)
     finally:
         if spec is not None:
             spec.cancel()
 
 
-def _pack_sized(pk: _Packer, req: float, N: int, sized: bool, overflow: str, power_of_two: bool, padding: int,
-                spec) -> Packing:
+def _pack_sized(pk: _Packer, req: float, N: int, overflow: str, power_of_two: bool, padding: int, spec) -> Packing:
     # the charts at the asked density without a size limit (its placement serves any page it fits, see unlimited)
     free = pk.unlimited(req)
     if free is None:

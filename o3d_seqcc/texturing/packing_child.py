@@ -10,7 +10,6 @@ give the packing :func:`~o3d_seqcc.texturing.packing.pack_charts` gives, byte fo
 from __future__ import annotations
 
 import logging
-import math
 import os
 
 import numpy as np
@@ -242,8 +241,7 @@ def speculative_page(pk: _Packer, t: float, N: int, power_of_two: bool) -> _Spec
     actual extents call for, packed again when it is not S."""
     if not power_of_two or pk.n_charts == 0:
         return None
-    span = pk._spans() * t + pk._margin()
-    boxes = math.sqrt(float(np.sum(span[:, 0] * span[:, 1])))
+    boxes = pk.boxes_side(t)
     S = next((s for s in _sizes(N, True, 0.0) if s * 0.98 >= _EXTENT_RATIO_GUESS * boxes), None)
     if S is None or _EXTENT_RATIO_LOW * boxes + 1 + pk.largest_chart(t) <= S:
         return None  # several pages, or the unlimited placement may be read off that page: no second call
