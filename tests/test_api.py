@@ -22,6 +22,9 @@ def test_unknown_attribute():
 def test_lazy_names_are_the_module_objects():
     assert o3d_seqcc.correct is importlib.import_module("o3d_seqcc.correction").correct
     assert o3d_seqcc.compute_mappings is importlib.import_module("o3d_seqcc.mappings").compute_mappings
+    tex = importlib.import_module("o3d_seqcc.texturing")
+    assert tex.bake_texture is importlib.import_module("o3d_seqcc.texturing.atlas").bake_texture
+    assert set(tex.__all__) <= set(dir(tex)) and all(getattr(tex, n) is not None for n in tex.__all__)
 
 
 def test_correction_registry_lists_the_papers_table_1():

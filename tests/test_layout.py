@@ -242,7 +242,7 @@ def test_package_inits_import_no_stage_eagerly():
     runs its siblings (and the layers above stay out of the layers below)."""
     graph = direct_imports()
     eager = {pkg: sorted(graph[f"o3d_seqcc.{pkg}"] - {"o3d_seqcc._shared.lazy"})
-             for pkg in ("_shared", "imaging", "geometry", "visibility", "mappings", "evaluation", "io")}
+             for pkg in ("_shared", "imaging", "geometry", "visibility", "mappings", "texturing", "evaluation", "io")}
     # (correction/methods/__init__.py is the literal method table: it imports its methods by design)
     assert not any(eager.values()), eager
 

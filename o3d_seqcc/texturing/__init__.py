@@ -19,11 +19,17 @@
 
 from __future__ import annotations
 
-from .atlas import bake_texture
-from .leveling import seam_leveling_offsets
-from .selection import SELECTION_METHODS, count_transitions, register_selection, select_views, selection_stats
-from .settings import LEVELING_SMOOTHNESS, MRF_SMOOTHNESS, TextureSettings
-from .textured_mesh import TexturedMesh, load_textured_mesh, sample_texture
+from .._shared.lazy import lazy_exports
+
+# names imported from their modules on first use: a child process that packs (packing_child) imports packing alone
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "bake_texture": "atlas",
+    "seam_leveling_offsets": "leveling",
+    **dict.fromkeys(("SELECTION_METHODS", "count_transitions", "register_selection", "select_views",
+                     "selection_stats"), "selection"),
+    **dict.fromkeys(("LEVELING_SMOOTHNESS", "MRF_SMOOTHNESS", "TextureSettings"), "settings"),
+    **dict.fromkeys(("TexturedMesh", "load_textured_mesh", "sample_texture"), "textured_mesh"),
+})
 
 __all__ = [
     "LEVELING_SMOOTHNESS",
