@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from concurrent.futures import Future
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -44,7 +45,7 @@ from .mappings.compute import Mappings, compute_mappings
 from .geometry.meshops import face_adjacency
 from .evaluation.metrics import before_after
 from .geometry.orientation import up_axis_transform
-from ._shared.parallel import LocalExecutor, current as current_executor, use as use_executor
+from ._shared.parallel import LocalExecutor, carried, current as current_executor, use as use_executor
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder import write_run_folder
@@ -131,7 +132,7 @@ class RunResult:
     settings: TextureSettings
     correction: CorrectionResult | None = None
     mappings: Mappings | None = None
-    seams: SeamReport | None = None
+    _seams: Any = field(default=None, repr=False)  # a SeamReport, or a future of it (run's thread: see seams)
     seams_original: SeamReport | None = None
     timings: dict = field(default_factory=dict)
     command: str = "run"
@@ -142,6 +143,12 @@ class RunResult:
     #: Table 2 and the report's figures started on a background thread by :func:`run` (:class:`_BackgroundReport`),
     #: used by :meth:`save`
     _background: Any = field(default=None, repr=False, compare=False)
+
+    @property
+    def seams(self) -> SeamReport | None:
+        """Seam metric of ``textured`` (None with ``seams=False``); measured beside what follows :func:`run`
+        (:meth:`save`): the first read waits for it."""
+        return self._seams.result() if isinstance(self._seams, Future) else self._seams
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
                export: dict[str, Any] | None = None, metrics: dict | None = None,
@@ -275,8 +282,6 @@ class _BackgroundReport:
     def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
-        from ._shared.parallel import carried
-
         self._key = (originals, res, maps)
         # the photos through the run's cache, the corrections applied on access: caching them here, next to the
         # texturing's arrays, would raise the run's peak memory (save() caches them for the page, as before)
@@ -333,11 +338,31 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
         selected(mesh, labels, scene.views)
     with _stage("bake", timings):
         tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
-    seams = None
-    if want_seams:
+    return (labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm,
+            _seams_beside(tm, timings) if want_seams else None)
+
+
+def _seams_beside(tm: TexturedMesh, timings: dict) -> Any:
+    """The seam metric of ``tm`` (``timings["seams"]``): with local threads, a future of it computed on a thread of
+    its own, beside what the caller does next (``save``'s files: the metric's numpy leaves a core idle)."""
+    ex = current_executor()
+    if not isinstance(ex, LocalExecutor) or ex.threads() < 2:
         with _stage("seams", timings):
-            seams = seam_metric(tm)
-    return labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm, seams
+            return seam_metric(tm)
+    from concurrent.futures import ThreadPoolExecutor
+
+    def measure() -> SeamReport:
+        t = time.perf_counter()
+        try:
+            return seam_metric(tm)
+        finally:
+            timings["seams"] = time.perf_counter() - t
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-seams")
+    try:
+        return pool.submit(carried(measure))
+    finally:
+        pool.shutdown(wait=False)  # the thread ends after its task (the interpreter's exit waits for it)
 
 
 def texture(
@@ -391,7 +416,7 @@ def texture(
         labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=rs.seams)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
-                     settings=s, seams=sm, timings=timings, command="texture", source=source,
+                     settings=s, _seams=sm, timings=timings, command="texture", source=source,
                      images_from="scene" if images is None else "given", run_settings=rs)
 
 
@@ -476,7 +501,7 @@ def run(
             raise
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=res.images, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
-                     settings=s, correction=res, mappings=maps, seams=sm, seams_original=sm0, timings=timings,
+                     settings=s, correction=res, mappings=maps, _seams=sm, seams_original=sm0, timings=timings,
                      command="run", source=source, images_from="corrected", originals=originals, run_settings=rs,
                      _background=bg)
 

@@ -10,6 +10,7 @@ import warnings
 import zlib
 
 import numpy as np
+import pytest
 
 import o3d_seqcc as sc
 
@@ -310,6 +311,41 @@ def test_background_report_parts_are_what_save_computes(tmp_path):
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert rep["metrics"] == json.loads(json.dumps(direct))
     assert rep["selection_seams"] == {k: v.summary() for k, v in seams.items()}
+
+
+def test_seam_metric_measured_beside_what_follows_the_run(tmp_path, monkeypatch):
+    """With local threads, texture() / run() return before the seam metric is done (it runs beside save()'s files);
+    ``seams`` waits for it and is the metric of the textured mesh, the report's ``seams`` too; one thread: measured
+    in the run."""
+    import json
+    import threading
+
+    from joblib import parallel_config
+
+    import o3d_seqcc.pipeline as pipeline
+    from o3d_seqcc.evaluation.seams import seam_metric
+
+    sc.make_synthetic_scene(tmp_path / "room", n_views=4, width=160, height=120, cell_size=0.15)
+    gate, calls = threading.Event(), []
+
+    def gated(tm):
+        calls.append(threading.current_thread().name)
+        assert gate.wait(20)
+        return seam_metric(tm)
+
+    monkeypatch.setattr(pipeline, "seam_metric", gated)
+    with parallel_config(n_jobs=2):
+        res = pipeline.texture(tmp_path / "room")  # returns with the metric held at the gate
+    assert calls and calls[0] != threading.current_thread().name and not res._seams.done()
+    gate.set()
+    want = seam_metric(res.textured)
+    assert res.seams.to_dict() == want.to_dict() and want.n_seam_edges > 0 and res.timings["seams"] > 0
+    res.save(tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["seams"]["mean"] == pytest.approx(want.mean)
+    calls.clear()
+    with parallel_config(n_jobs=1):
+        one = pipeline.texture(tmp_path / "room")
+    assert calls == [threading.current_thread().name] and one.seams.to_dict() == want.to_dict()
 
 
 def test_data_costs_same_for_any_threads(tmp_path):
