@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -149,6 +149,11 @@ class RunResult:
         """Seam metric of ``textured`` (None with ``seams=False``); measured beside what follows :func:`run`
         (:meth:`save`): the first read waits for it."""
         return self._seams.result() if isinstance(self._seams, Future) else self._seams
+
+    def __getstate__(self) -> dict:
+        """Pickled with the seam metric waited for and without :func:`run`'s background thread (:meth:`save`
+        computes what it would have given)."""
+        return {**self.__dict__, "_seams": self.seams, "_background": None}
 
     def report(self, files: dict[str, str] | None = None, *, picture_view: str | None = None,
                export: dict[str, Any] | None = None, metrics: dict | None = None,
@@ -280,8 +285,6 @@ class _BackgroundReport:
     """
 
     def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
-        from concurrent.futures import ThreadPoolExecutor
-
         self._key = (originals, res, maps)
         # the photos through the run's cache, the corrections applied on access: caching them here, next to the
         # texturing's arrays, would raise the run's peak memory (save() caches them for the page, as before)
@@ -349,7 +352,6 @@ def _seams_beside(tm: TexturedMesh, timings: dict) -> Any:
     if not isinstance(ex, LocalExecutor) or ex.threads() < 2:
         with _stage("seams", timings):
             return seam_metric(tm)
-    from concurrent.futures import ThreadPoolExecutor
 
     def measure() -> SeamReport:
         t = time.perf_counter()
@@ -359,10 +361,9 @@ def _seams_beside(tm: TexturedMesh, timings: dict) -> Any:
             timings["seams"] = time.perf_counter() - t
 
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-seams")
-    try:
-        return pool.submit(carried(measure))
-    finally:
-        pool.shutdown(wait=False)  # the thread ends after its task (the interpreter's exit waits for it)
+    future = pool.submit(carried(measure))
+    pool.shutdown(wait=False)  # the thread ends after its task (the interpreter's exit waits for it)
+    return future
 
 
 def texture(

@@ -318,6 +318,7 @@ def test_seam_metric_measured_beside_what_follows_the_run(tmp_path, monkeypatch)
     ``seams`` waits for it and is the metric of the textured mesh, the report's ``seams`` too; one thread: measured
     in the run."""
     import json
+    import pickle
     import threading
 
     from joblib import parallel_config
@@ -342,6 +343,8 @@ def test_seam_metric_measured_beside_what_follows_the_run(tmp_path, monkeypatch)
     assert res.seams.to_dict() == want.to_dict() and want.n_seam_edges > 0 and res.timings["seams"] > 0
     res.save(tmp_path / "out")
     assert json.loads((tmp_path / "out" / "report.json").read_text())["seams"]["mean"] == pytest.approx(want.mean)
+    back = pickle.loads(pickle.dumps(res))  # pickled with the metric, as a result measured in the run was
+    assert back.seams.to_dict() == want.to_dict() and np.array_equal(back.selection, res.selection)
     calls.clear()
     with parallel_config(n_jobs=1):
         one = pipeline.texture(tmp_path / "room")
