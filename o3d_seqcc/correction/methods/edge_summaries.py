@@ -18,11 +18,14 @@ import numpy as np
 from ...errors import InputError
 from ...mappings.pairs import BATCH_PAIRS, LazyPairs, thinned_many
 from ..._shared.parallel import LocalExecutor, current as current_executor
+from .value_space import histogram_normalisers_from_colours, map_rows
 
-__all__ = ["TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
+__all__ = ["SATURATION", "TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
 
 #: quantile levels this close to 0 or 1 are left out of the edge summaries
 TRIM = 0.005
+#: values within this of 0 or 1 are censored (clipped by the camera) and not used as observations
+SATURATION = 1.5 / 255
 
 
 def _sorted_quantiles(sorted_rows: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -206,9 +209,18 @@ class EdgeObservations:
     a, b : (E,) int64
         The two views of each edge.
     qa, qb : (E, 3, P) float64 in [0, 1]
-        Matched quantiles of each channel in view a and view b (:func:`edge_quantiles`).
+        Matched quantiles of each channel in view a and view b (:func:`edge_quantiles`), in the
+        views' own values or, with ``normalisers``, in the normalised values.
     n : (E,) int64
         Number of mappings used per edge (after the outlier pass).
+    normalisers : (V, 3, L) float64 or None
+        The per-view tables the colours went through before they were summarised
+        (:func:`~o3d_seqcc.correction.methods.value_space.histogram_normalisers_from_colours`, or :meth:`through`); None:
+        the views' own values.
+    seen : (2, E, 3, P) bool or None
+        Which quantiles of view a (``seen[0]``) and of view b (``seen[1]``) are not censored (clipped by the
+        camera), when they were summarised in other values than the views' own (:meth:`through`); None: the
+        quantiles more than :data:`SATURATION` from 0 and 1.
     """
 
     a: np.ndarray
@@ -216,6 +228,8 @@ class EdgeObservations:
     qa: np.ndarray
     qb: np.ndarray
     n: np.ndarray
+    normalisers: np.ndarray | None = None
+    seen: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         e = len(self.a)
@@ -225,6 +239,35 @@ class EdgeObservations:
                 f"qa {np.shape(self.qa)}, qb {np.shape(self.qb)}; need (E,), (E,), (E,), (E, 3, P), (E, 3, P)"
             )
 
+    def through(self, normalisers: np.ndarray) -> "EdgeObservations":
+        """These summaries with every view's values through its monotone (3, L) table ``normalisers[v]`` (the
+        quantiles of ``T(X)`` are ``T`` of the quantiles of ``X``); what was censored stays censored."""
+        if self.normalisers is not None:
+            raise InputError("EdgeObservations.through: these summaries are normalised already")
+        norm = np.asarray(normalisers, dtype=np.float64)
+        grid = np.linspace(0.0, 1.0, norm.shape[2])
+
+        def mapped(views: np.ndarray, q: np.ndarray) -> np.ndarray:
+            out = np.empty_like(q)
+            for v in np.unique(views):
+                sel = views == v
+                for c in range(3):
+                    out[sel, c] = np.interp(q[sel, c], grid, norm[v, c])
+            return out
+
+        seen = np.stack([np.stack(self.observed(c), axis=0) for c in range(3)], axis=2)  # (2, E, 3, P)
+        return EdgeObservations(a=self.a, b=self.b, qa=mapped(self.a, self.qa), qb=mapped(self.b, self.qb), n=self.n,
+                                normalisers=norm, seen=seen)
+
+    def observed(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """(E, P) masks of channel ``c``'s quantiles of view a and of view b that are not censored."""
+        if self.seen is not None:
+            return self.seen[0, :, c, :], self.seen[1, :, c, :]
+        out = []
+        for q in (self.qa[:, c, :], self.qb[:, c, :]):
+            out.append((q > SATURATION) & (q < 1.0 - SATURATION))
+        return out[0], out[1]
+
 
 def edge_observations(
     ctx,
@@ -233,8 +276,9 @@ def edge_observations(
     levels: int = 64,
     max_mappings: int | None = 8000,
     outlier_k: float | None = 3.0,
+    normalise_to: int | None = None,
     n_jobs: int | None = None,
-) -> EdgeObservations:
+) -> EdgeObservations | tuple[EdgeObservations, EdgeObservations]:
     """Quantile summaries of the colours at the mappings of ``edges`` (see the module docstring).
 
     Parameters
@@ -253,7 +297,12 @@ def edge_observations(
         Drop mappings whose colours disagree with the pair's quantile-quantile curve by more
         than this many robust sigmas jointly over the channels
         (:func:`o3d_seqcc.correction.methods.seqcc.colour_inliers`); None keeps all.
-    n_jobs : int or None, default None
+    normalise_to : int or None, default None
+        A view index: also summarise the same colours with every other view's through its histogram normaliser
+        toward that view (:func:`~o3d_seqcc.correction.methods.value_space.histogram_normalisers_from_colours`),
+        before that summary's outlier pass, so that it does not move with any view's monotone change of its
+        values; the normalisers are kept in its :attr:`EdgeObservations.normalisers`, what was censored in its
+        :attr:`EdgeObservations.seen`. : int or None, default None
         Threads of the local executor (joblib semantics: None = the active
         ``joblib.parallel_config`` or 1, -1 = all cores). The colours are sampled by one task
         per view on the active executor (:mod:`o3d_seqcc._shared.parallel`: its image read once, at
@@ -262,12 +311,9 @@ def edge_observations(
 
     Returns
     -------
-    EdgeObservations
+    EdgeObservations, or (own, normalised) EdgeObservations with ``normalise_to``
     """
     E, P = len(edges), int(levels)
-    qa = np.zeros((E, 3, P))
-    qb = np.zeros((E, 3, P))
-    ns = np.zeros(E, dtype=np.int64)
     q = np.linspace(TRIM, 1.0 - TRIM, P)
 
     def pick(n: int) -> np.ndarray | None:
@@ -315,11 +361,42 @@ def edge_observations(
         offset[a] += m
         offset[b] += m
     local = LocalExecutor(local_jobs)
-    # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
-    live = [i for i in range(E) if pairs[i][0].shape[1]]
-    for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [pairs[i] for i in live], q, outlier_k,
-                                                   desc="edge summaries", unit="edge")):
-        qa[i], qb[i], ns[i] = qa_i, qb_i, n_i
     arr = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns)
+    live = [i for i in range(E) if pairs[i][0].shape[1]]
+
+    def summarise(items: list) -> EdgeObservations:
+        # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
+        qa, qb, ns = np.zeros((E, 3, P)), np.zeros((E, 3, P)), np.zeros(E, dtype=np.int64)
+        for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [items[i] for i in live], q, outlier_k,
+                                                       desc="edge summaries", unit="edge")):
+            qa[i], qb[i], ns[i] = qa_i, qb_i, n_i
+        return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns)
+
+    own = summarise(pairs)
+    if normalise_to is None:
+        return own
+    n_views = len(ctx.images)
+    norm = histogram_normalisers_from_colours(colours, reference=int(normalise_to), n_views=n_views,
+                                              lut_size=ctx.lut_size)
+    mapped = {v: map_rows(norm[v], c) for v, c in colours.items()}
+    offset = {v: 0 for v in views}
+    normed = []
+    for (a, b), m in zip(edges, sizes):
+        a, b = int(a), int(b)
+        normed.append((mapped[a][:, offset[a] : offset[a] + m], mapped[b][:, offset[b] : offset[b] + m]))
+        offset[a] += m
+        offset[b] += m
+    out = summarise(normed)
+    # censored where the view's own value is: a quantile at or below the table's value at the censoring threshold
+    grid = np.linspace(0.0, 1.0, norm.shape[2])
+    seen = np.ones((2, E, 3, P), dtype=bool)
+    for side, (views_, qs) in enumerate(((out.a, out.qa), (out.b, out.qb))):
+        for v in np.unique(views_):
+            sel = views_ == v
+            for c in range(3):
+                own_c = colours[int(v)][c]
+                lo = np.interp(SATURATION, grid, norm[v, c]) if (own_c <= SATURATION).any() else -np.inf
+                hi = np.interp(1.0 - SATURATION, grid, norm[v, c]) if (own_c >= 1.0 - SATURATION).any() else np.inf
+                seen[side, sel, c] = (qs[sel, c] > lo) & (qs[sel, c] < hi)
+    return own, EdgeObservations(a=out.a, b=out.b, qa=out.qa, qb=out.qb, n=out.n, normalisers=norm, seen=seen)
 

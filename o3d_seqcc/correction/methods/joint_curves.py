@@ -25,14 +25,12 @@ import numpy as np
 
 from ...errors import InputError
 from ..._shared.parallel import LocalExecutor
-from .edge_summaries import EdgeObservations
+from .edge_summaries import SATURATION, EdgeObservations
 
-__all__ = ["BLACK_WEIGHT", "SATURATION", "RefineResult", "linear_start", "refine_curves"]
+__all__ = ["BLACK_WEIGHT", "SATURATION", "RefineResult", "linear_start", "observed_support", "refine_curves"]
 
 logger = logging.getLogger(__name__)
 
-#: values within this of 0 or 1 are censored (clipped by the camera) and not used as observations
-SATURATION = 1.5 / 255
 #: weight of the black anchor of :func:`refine_curves` (a view's response at reference black is
 #: 0), relative to one edge's data term: stiff
 BLACK_WEIGHT = 1e3
@@ -276,7 +274,7 @@ def refine_curves(
     # small dense systems: one BLAS thread (threaded BLAS on a busy 2-core machine was 100x slower)
     def channel(c: int):
         return None if F == 0 else _adjust_channel(
-            obs.a, obs.b, obs.qa[:, c, :], obs.qb[:, c, :], keep_e, base_w, col, free, response[:, c, :].copy(),
+            obs.a, obs.b, obs.qa[:, c, :], obs.qb[:, c, :], obs.observed(c), keep_e, base_w, col, free, response[:, c, :].copy(),
             luts[:, c, :], uk, grid, D, reg_block, smooth=smooth, prior=prior, anchor=anchor,
             iterations=int(iterations), plain_iterations=int(plain_iterations), edge_robust_c=edge_robust_c,
             monotone_steps=monotone_steps, channel=c,
@@ -352,7 +350,8 @@ def linear_start(
 
     for c in range(3):
         xa, xb = obs.qa[:, c, :], obs.qb[:, c, :]
-        ok = (xa > SATURATION) & (xa < 1 - SATURATION) & (xb > SATURATION) & (xb < 1 - SATURATION) & keep_e[:, None]
+        oka, okb = obs.observed(c)
+        ok = oka & okb & keep_e[:, None]
         e_idx = np.broadcast_to(np.arange(E)[:, None], (E, P))[ok]
         R = e_idx.size
         if R == 0:
@@ -380,12 +379,20 @@ def linear_start(
     return out
 
 
+def observed_support(obs: EdgeObservations, *, n_views: int, tail: float = 0.01) -> np.ndarray:
+    """(V, 3, 2) lowest and highest value of each view's channels that its edges observed (uncensored), without
+    the sparsest ``tail`` share of its pooled edge quantiles at each end (NaN: none observed), as
+    :attr:`RefineResult.support`."""
+    keep_e = obs.n > 0
+    return np.stack([_support(obs, c, keep_e, int(n_views), float(tail)) for c in range(3)], axis=1)
+
+
 def _support(obs: EdgeObservations, c: int, keep_e: np.ndarray, n_views: int, tail: float) -> np.ndarray:
     """(V, 2) observed range of channel c per view: its pooled edge quantiles (uncensored)
     without their sparsest ``tail`` share at each end (a few edges' extreme quantiles)."""
     vals, views = [], []
-    for vv, mm in ((obs.a, obs.qa[:, c, :]), (obs.b, obs.qb[:, c, :])):
-        ok = (mm > SATURATION) & (mm < 1 - SATURATION) & keep_e[:, None]
+    for vv, mm, seen in zip((obs.a, obs.b), (obs.qa[:, c, :], obs.qb[:, c, :]), obs.observed(c)):
+        ok = seen & keep_e[:, None]
         vals.append(mm[ok])
         views.append(np.broadcast_to(vv[:, None], mm.shape)[ok])
     vals, views = np.concatenate(vals), np.concatenate(views)
@@ -400,12 +407,13 @@ def _support(obs: EdgeObservations, c: int, keep_e: np.ndarray, n_views: int, ta
 
 
 def _adjust_channel(
-    a, b, ma, mb, keep_e, base_w, col, free, phi, start_luts, uk, grid, D, reg_block, *,
+    a, b, ma, mb, seen, keep_e, base_w, col, free, phi, start_luts, uk, grid, D, reg_block, *,
     smooth, prior, anchor, iterations, plain_iterations, edge_robust_c, monotone_steps, channel,
 ):
     """Levenberg-Marquardt bundle adjustment of one channel (see :func:`refine_curves`).
 
-    ``phi`` (V, K): starting responses (the reference's the identity); ``start_luts`` (V, L):
+    ``seen``: the (E, P) masks of the quantiles of view a and of view b that are not censored
+    (:meth:`EdgeObservations.observed`). ``phi`` (V, K): starting responses (the reference's the identity); ``start_luts`` (V, L):
     starting corrections, which place the latents. Returns ``(phi, edge rms residual (E,),
     edge weights (E,))`` or None when no edge has an uncensored observation.
     """
@@ -415,8 +423,8 @@ def _adjust_channel(
     K = uk.size
     F = free.size
     U = F * K
-    oka = (ma > SATURATION) & (ma < 1 - SATURATION) & keep_e[:, None]
-    okb = (mb > SATURATION) & (mb < 1 - SATURATION) & keep_e[:, None]
+    oka = seen[0] & keep_e[:, None]
+    okb = seen[1] & keep_e[:, None]
     lat = oka | okb
     e_lat = np.broadcast_to(np.arange(E)[:, None], (E, P))[lat]
     J = e_lat.size
