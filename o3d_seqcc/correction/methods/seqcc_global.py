@@ -172,7 +172,7 @@ def method_seqcc_global(
     outlier_k: float | None = 3.0,
     extrapolate: str = "power",
     support_tail: float = 0.01,
-    values: str = "auto",
+    values: str = "own",
     refine: bool = True,
     max_slope: float | None = None,
     n_jobs: int | None = None,
@@ -217,11 +217,17 @@ def method_seqcc_global(
         response's own flat ends.
     support_tail : float, default 0.01
         Share of each end of a view's pooled observations not counted as observed.
-    values : {"normalised", "own"}, default "normalised"
-        The values the joint solve works in: each view's colours through its histogram
-        normaliser toward the reference (:mod:`~o3d_seqcc.correction.methods.value_space`: the solve then
-        sees the same numbers whatever monotone change a camera made; the correction is the solved
-        curve after the normaliser), or the views' own values.
+    values : {"own", "normalised", "auto", "sequential"}, default "own"
+        The values the joint solve works in: the photos' own; each view's colours through its
+        histogram normaliser toward the reference (:mod:`~o3d_seqcc.correction.methods.value_space`:
+        the solve then sees the same numbers whatever monotone change a camera made, the outlier
+        pass included; the correction is the solved curve after the normaliser); ``"auto"``:
+        normalised when the views' normalisers lie at most :data:`AUTO_OFFSET` 8-bit levels from
+        their sequential estimates (median view), own otherwise; ``"sequential"``: the sequential
+        estimate's values. Measured (``benchmarks/colour_invariance.py``, README): normalised
+        halves the invariance error on Fountain and its few-view subsets but moves consistent
+        generated photos away from their truth, and the ``"auto"`` criterion does not separate a
+        small generated room from Fountain, so the default stays the photos' own values.
     refine : bool, default True
         Refine the sequential estimate jointly over every edge (the linear start and the bundle
         adjustment); False: the sequential estimate alone (each path's quantile-quantile curves
