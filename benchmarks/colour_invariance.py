@@ -80,6 +80,7 @@ METHOD_SPECS = {
     "global own values": ("seqcc-global", {"values": "own"}),
     "global normalised": ("seqcc-global", {"values": "normalised"}),
     "global slope guard": ("seqcc-global", {"max_slope": 4.0}),
+    "global sequential values": ("seqcc-global", {"values": "sequential"}),
     "global sequential": ("seqcc-global", {"refine": False}),
     "reinhard": ("reinhard", {}),
     "none": ("none", {}),

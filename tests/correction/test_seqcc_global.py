@@ -18,7 +18,6 @@ from o3d_seqcc.correction.methods.edge_summaries import (
 )
 from o3d_seqcc.correction.methods.joint_curves import linear_start, refine_curves
 from o3d_seqcc.correction.methods.seqcc_global import sequential_start
-from o3d_seqcc.correction.methods.seqcc_global import AUTO_OFFSET, VALUE_SPACES, _normaliser_offset
 from o3d_seqcc.correction.methods.value_space import histogram_normaliser, histogram_normalisers_from_colours
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.correction.graph import build_graph, correction_paths
@@ -416,7 +415,7 @@ def test_histogram_normalisers_leave_the_reference_and_missing_views_alone(rng):
     assert np.all(np.diff(out[2], axis=1) >= 0) and not np.allclose(out[2], grid)
 
 
-@pytest.mark.parametrize("values", ["normalised", "own"])
+@pytest.mark.parametrize("values", ["sequential", "normalised", "own"])
 def test_a_hidden_change_of_one_photo_is_undone_in_every_value_space(albedo, values):
     """A chain v0 - v1 - v2 - v3 with camera changes; the known truth comes back in the normalised values too."""
     images = _images(albedo, [identity_photometric(), P1, P2, P3])
@@ -432,36 +431,20 @@ def test_a_hidden_change_of_one_photo_is_undone_in_every_value_space(albedo, val
 def test_normalised_values_make_the_correction_invariant_to_a_hidden_change(albedo):
     """The invariance protocol on a known scene: the correction of a photo with a hidden change and the same
     correction of the untouched photo agree, in the normalised values far closer than in the photos' own
-    (measured: 0.58 against 0.90 CIEDE2000)."""
+    (measured: 0.58 against 0.90 CIEDE2000), in the sequential estimate's closer too."""
     images = _images(albedo, [identity_photometric(), P1, P2, P1])
     maps = _mappings({(0, 1): (4000, _full()), (1, 2): (4000, _full()), (2, 3): (4000, _full())}, 4)
     changed = list(images)
     changed[3] = from_float(apply_photometric(images[3], P3), np.uint8)
     assert _de(changed[3], images[3], _full()) > 5
     score = {}
-    for values in ("normalised", "own"):
+    for values in ("normalised", "sequential", "own"):
         a = correct(_scene(4), images=images, mappings=maps, reference=0, method="seqcc-global", values=values)
         b = correct(_scene(4), images=changed, mappings=maps, reference=0, method="seqcc-global", values=values)
         score[values] = _de(b.images[3], a.images[3], _full())
     assert score["normalised"] < 0.7
     assert score["normalised"] < 0.8 * score["own"]
-
-
-def test_auto_chooses_by_how_far_the_normalisers_lie_from_the_sequential_estimate():
-    """The criterion of values="auto": 0 levels when the normaliser is the sequential estimate, the offset otherwise."""
-    rng = np.random.default_rng(0)
-    L, P = 256, 16
-    q = np.sort(rng.random((2, 3, P)), axis=-1)
-    obs = EdgeObservations(a=np.array([0, 1]), b=np.array([1, 2]), qa=q, qb=q.copy(), n=np.array([100, 100]))
-    grid = np.linspace(0.0, 1.0, L)
-    seq = np.broadcast_to(grid, (3, 3, L)).copy()
-    norm = seq.copy()
-    norm[1] = np.clip(grid + 20 / 255, 0, 1)
-    norm[2] = np.clip(grid + 20 / 255, 0, 1)
-    assert _normaliser_offset(obs, seq.copy(), seq) == 0.0
-    off = _normaliser_offset(obs, norm, seq)
-    assert 15 < off <= 20 and off > AUTO_OFFSET
-    assert VALUE_SPACES[0] == "auto"
+    assert score["sequential"] < 0.9 * score["own"]  # measured 0.76 against 0.90
 
 
 def test_unknown_value_space_is_refused(albedo):
@@ -469,3 +452,23 @@ def test_unknown_value_space_is_refused(albedo):
     maps = _mappings({(0, 1): (2000, _full())}, 2)
     with pytest.raises(ValueError, match="values must be one of"):
         correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", values="linear")
+
+
+def test_responses_continue_above_their_data_along_their_slope():
+    """Knots above the segment of a view's highest latent are set by nothing but the smoothing (on Fountain such a
+    response fell from 149 to 99 above its data and its monotone projection made the correction a cliff to white):
+    they follow the steeper of the last supported segment's slope and the mean slope up to it."""
+    from o3d_seqcc.correction.methods.joint_curves import _continue_above_data, _highest_latent
+
+    knots = np.linspace(0.0, 1.0, 6)
+    phi = np.array([[0.0, 0.1, 0.2, 0.3, 0.25, 0.2],    # top latent 0.5: knots 0.8 and 1.0 are free
+                    [0.0, 0.3, 0.35, 0.4, 0.1, 0.1],    # last segment shallower than the mean: the mean slope
+                    [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]])    # no rows: unchanged
+    top = _highest_latent(np.array([0.5, 0.2, 0.45, 0.9]), np.array([0, 0, 1, -1]), 3)
+    np.testing.assert_allclose(top, [0.5, 0.45, -1.0])
+    out = _continue_above_data(phi, knots, np.array([True, True, False]), top)
+    np.testing.assert_allclose(out[0], [0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    mean = 0.4 / 0.6
+    np.testing.assert_allclose(out[1], [0.0, 0.3, 0.35, 0.4, 0.4 + 0.2 * mean, 0.4 + 0.4 * mean])
+    np.testing.assert_array_equal(out[2], phi[2])
+    np.testing.assert_array_equal(phi[0], [0.0, 0.1, 0.2, 0.3, 0.25, 0.2])  # the input is not modified

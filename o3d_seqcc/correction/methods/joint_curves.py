@@ -94,6 +94,34 @@ def _monotone(rows: np.ndarray) -> np.ndarray:
     return 0.5 * (np.maximum.accumulate(rows, axis=-1) + np.minimum.accumulate(rows[..., ::-1], axis=-1)[..., ::-1])
 
 
+def _highest_latent(u_rows: np.ndarray, r_col: np.ndarray, F: int) -> np.ndarray:
+    """(F,) the highest latent (reference value) any row of each free view reached (-1 where none)."""
+    out = np.full(F, -1.0)
+    free_rows = r_col >= 0
+    np.maximum.at(out, r_col[free_rows], u_rows[free_rows])
+    return out
+
+
+def _continue_above_data(phi: np.ndarray, knots: np.ndarray, has_rows: np.ndarray, top: np.ndarray) -> np.ndarray:
+    """Responses (F, K) continued above the knots their data reached: a knot above the segment that holds a view's
+    highest latent ``top`` is constrained by nothing but the smoothing, which Levenberg-Marquardt's damping leaves
+    near its start (measured on Fountain: a response falling from 149 to 99 above its data, whose monotone
+    projection then flattened its supported top and made the correction a cliff to white). Those knots follow the
+    straight line from the last supported knot, as steep as the last supported segment or as the response's mean
+    slope up to there, whichever is steeper (a view whose top fell short of the reference's does not become a
+    cliff to white), and at least a quarter as steep as the reference."""
+    out = phi.copy()
+    K = knots.size
+    for i in np.flatnonzero(has_rows & (top >= 0)):
+        k = int(min(max(np.searchsorted(knots, top[i], side="left"), 1), K - 1))  # upper knot of top's segment
+        if k >= K - 1:
+            continue
+        last = (out[i, k] - out[i, k - 1]) / (knots[k] - knots[k - 1])
+        mean = (out[i, k] - out[i, 0]) / (knots[k] - knots[0])
+        out[i, k + 1 :] = out[i, k] + max(last, mean, 0.25) * (knots[k + 1 :] - knots[k])
+    return out
+
+
 def _invert(response: np.ndarray, knots: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """Inverse of a non-decreasing piecewise-linear response on ``grid`` (flat beyond its range)."""
     r = np.maximum.accumulate(response) + np.arange(response.size) * 1e-9
@@ -215,7 +243,9 @@ def refine_curves(
         Levenberg-Marquardt iterations per channel and phase (each phase stops earlier when
         the cost improves by less than 0.01 %).
     edge_robust_c : float or None, default 2.0
-        Cauchy scale of the per-edge weights, in median edge residuals; None: no second phase.
+        Cauchy scale of the per-edge weights, in median edge residuals (each residual divided by its response's
+        slope there: in reference units, which a monotone change of a view's values does not move); None: no
+        second phase.
     edge_weight : {"sqrt", "equal", "count"}, default "sqrt"
         Each edge's share of the data term: proportional to the square root of its mapping
         count (relative to the median edge), equal, or proportional to the count.
@@ -478,7 +508,10 @@ def _adjust_channel(
     for it in range(plain_iterations + iterations):
         r, k0, fr, sl = state
         if robust:
-            e_rms = np.sqrt(np.bincount(r_edge, weights=r * r, minlength=E) / np.maximum(rows_per_edge, 1.0))
+            # in reference units (a residual over its response's slope): a camera change of the view's values does
+            # not change which edges the others contradict
+            rr = r / np.maximum(sl, 0.05)
+            e_rms = np.sqrt(np.bincount(r_edge, weights=rr * rr, minlength=E) / np.maximum(rows_per_edge, 1.0))
             m = float(np.median(e_rms[rows_per_edge > 0])) + 1e-9
             ew = 1.0 / (1.0 + (e_rms / (float(edge_robust_c) * m)) ** 2)
         w = w0 * ew[r_edge]
@@ -554,6 +587,7 @@ def _adjust_channel(
     r = state[0]
     logger.debug("refine_curves: channel %d: %d of %d latents at 0, %d at 1", channel, int((u <= 0).sum()), u.size, int((u >= 1).sum()))
     residual = np.sqrt(np.bincount(r_edge, weights=r * r, minlength=E) / np.maximum(rows_per_edge, 1.0))
-    phi[free] = _monotone(phi[free])
+    phi[free] = _monotone(_continue_above_data(phi[free], uk, np.bincount(np.maximum(r_col, 0), minlength=F)[:F] > 0,
+                                               _highest_latent(u[r_lat], r_col, F)))
     return phi, residual, ew
 

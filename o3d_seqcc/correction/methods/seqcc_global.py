@@ -26,8 +26,6 @@ estimate the way global bundle adjustment follows incremental structure-from-mot
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from ..luts import extend_curve, extend_line
@@ -38,13 +36,8 @@ from .seqcc import _method_seqcc, colour_inliers, quantile_luts
 
 __all__ = ["method_seqcc_global", "sequential_start"]
 
-logger = logging.getLogger(__name__)
-
-#: ``values="auto"`` solves in the normalised values when the views' histogram normalisers lie at most this many
-#: 8-bit levels from their sequential estimates (median view), in their own values otherwise
-AUTO_OFFSET = 12.0
 #: the values the joint solve can work in (``values=`` of :func:`method_seqcc_global`)
-VALUE_SPACES = ("auto", "own", "normalised", "sequential")
+VALUE_SPACES = ("sequential", "own", "normalised")
 
 
 def sequential_start(
@@ -123,40 +116,6 @@ def sequential_start(
     return start
 
 
-def _normaliser_offset(obs: EdgeObservations, normalisers: np.ndarray, sequential: np.ndarray) -> float:
-    """Median over views of how far each view's histogram normaliser lies from its sequential estimate, in 8-bit
-    levels: the median over the view's own edge quantiles of the two curves' difference, largest channel."""
-    L = normalisers.shape[2]
-    grid = np.linspace(0.0, 1.0, L)
-    offs = []
-    for v in np.unique(np.concatenate([obs.a, obs.b])):
-        q = np.concatenate([obs.qa[obs.a == v], obs.qb[obs.b == v]])  # (e, 3, P)
-        if not q.size or np.allclose(normalisers[v], grid):
-            continue
-        offs.append(max(float(np.median(np.abs(np.interp(q[:, c], grid, normalisers[v, c])
-                                               - np.interp(q[:, c], grid, sequential[v, c])))) for c in range(3)) * 255)
-    off = float(np.median(offs)) if offs else 0.0
-    logger.info("seqcc-global: normalisers %.2f levels from the sequential estimate (median view)", off)
-    return off
-
-
-def _steepest(lut: np.ndarray, support: np.ndarray, *, window: int = 8) -> float:
-    """Largest slope of a (3, L) curve over ``window`` table steps inside each channel's ``support`` (lo, hi)."""
-    L = lut.shape[1]
-    out = 0.0
-    for c in range(3):
-        lo, hi = support[c]
-        if not (np.isfinite(lo) and np.isfinite(hi)):
-            continue
-        i0, i1 = int(np.ceil(lo * (L - 1))), int(np.floor(hi * (L - 1)))
-        w = min(int(window), max(i1 - i0, 0))
-        if w < 1:
-            continue
-        seg = lut[c, i0 : i1 + 1]
-        out = max(out, float(np.max(seg[w:] - seg[:-w])) * (L - 1) / w)
-    return out
-
-
 def method_seqcc_global(
     ctx: CorrectionContext,
     *,
@@ -172,9 +131,8 @@ def method_seqcc_global(
     outlier_k: float | None = 3.0,
     extrapolate: str = "power",
     support_tail: float = 0.01,
-    values: str = "own",
+    values: str = "sequential",
     refine: bool = True,
-    max_slope: float | None = None,
     n_jobs: int | None = None,
 ) -> list:
     """``seqcc`` refined jointly over every graph edge, curves extended over the whole range.
@@ -217,25 +175,23 @@ def method_seqcc_global(
         response's own flat ends.
     support_tail : float, default 0.01
         Share of each end of a view's pooled observations not counted as observed.
-    values : {"own", "normalised", "auto", "sequential"}, default "own"
-        The values the joint solve works in: the photos' own; each view's colours through its
-        histogram normaliser toward the reference (:mod:`~o3d_seqcc.correction.methods.value_space`:
-        the solve then sees the same numbers whatever monotone change a camera made, the outlier
-        pass included; the correction is the solved curve after the normaliser); ``"auto"``:
-        normalised when the views' normalisers lie at most :data:`AUTO_OFFSET` 8-bit levels from
-        their sequential estimates (median view), own otherwise; ``"sequential"``: the sequential
-        estimate's values. Measured (``benchmarks/colour_invariance.py``, README): normalised
-        halves the invariance error on Fountain and its few-view subsets but moves consistent
-        generated photos away from their truth, and the ``"auto"`` criterion does not separate a
-        small generated room from Fountain, so the default stays the photos' own values.
+    values : {"sequential", "own", "normalised"}, default "sequential"
+        The values the joint solve works in, each view's own through a monotone table: its
+        sequential estimate (step 2: the solve starts from the identity in values that already
+        sit near the reference's, and a camera's monotone change of a view's values moves them
+        only as much as it moves the sequential estimate); the photos' own values (no table); or
+        each view's histogram normaliser toward the reference
+        (:mod:`~o3d_seqcc.correction.methods.value_space`: no monotone change moves those values,
+        the outlier pass included). The correction is the solved curve after the view's table.
+        Measured (``benchmarks/colour_invariance.py``, README): the sequential values are the
+        best or within a few hundredths on every set but the 11-photo Fountain subset; the
+        normalised values undo most of a hidden change on Fountain but move consistent
+        generated photos away from their truth (content that differs between views makes the
+        histogram match a poor start).
     refine : bool, default True
         Refine the sequential estimate jointly over every edge (the linear start and the bundle
         adjustment); False: the sequential estimate alone (each path's quantile-quantile curves
         composed, in ``values``), continued beyond each view's observed values.
-    max_slope : float or None, default 4.0
-        A view whose joint curve rises more than this many times faster than its input over any
-        8-level stretch of its observed values (a cliff: a stretch of its colours blown out) keeps
-        its sequential estimate instead (None: no check).
     n_jobs : int or None, default None
         joblib threads for the edge summaries and the sequential fit (joblib semantics).
 
@@ -266,68 +222,43 @@ def method_seqcc_global(
     else:
         edges = sorted(k for k, c in ctx.mappings.counts.items() if c >= ctx.t_npm)
     edges = [(a, b) for a, b in edges if a in ctx.paths and b in ctx.paths]
-    obs_norm = None
-    if values in ("auto", "normalised"):
-        obs, obs_norm = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
-                                          normalise_to=ctx.reference, n_jobs=n_jobs)
+    if values == "normalised":
+        _, obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
+                                   normalise_to=ctx.reference, n_jobs=n_jobs)
     else:
         obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
                                 n_jobs=n_jobs)
-    sequential = sequential_start(ctx, init=init, obs=obs, outlier_k=outlier_k, n_jobs=n_jobs)
+    start = sequential_start(ctx, init=init, obs=obs, outlier_k=outlier_k, n_jobs=n_jobs)
     grid = np.linspace(0.0, 1.0, L)
-    in_paths = np.isin(np.arange(n), list(ctx.paths))
+    if values == "sequential" and refine:  # the solve in the sequential estimate's values, from the identity
+        obs = obs.through(start)
+        start = np.broadcast_to(grid, start.shape).copy()
     from threadpoolctl import threadpool_limits
 
-    def candidate(space: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(curves (V, 3, L), supports (V, 3, 2), solved (V,)) of one value space, in the views' own values."""
-        if space == "own":
-            o, start = obs, sequential
-        elif space == "normalised":
-            o = obs_norm
-            start = sequential_start(ctx, init="quantile", obs=o, outlier_k=outlier_k, n_jobs=n_jobs)
-        else:  # "sequential": the solve in the sequential estimate's values, from the identity
-            o, start = obs.through(sequential), np.broadcast_to(grid, sequential.shape).copy()
-        if refine:
-            with threadpool_limits(1, user_api="blas"):
-                start = linear_start(o, n_views=n, reference=ctx.reference, init=start, knots=knots, lut_size=L,
-                                     smooth=smooth)
-            res = refine_curves(
-                o, n_views=n, reference=ctx.reference, init=start, knots=knots, lut_size=L, smooth=smooth, prior=prior,
-                iterations=iterations, edge_robust_c=edge_robust_c, edge_weight=edge_weight, support_tail=support_tail,
-            )
-            curves, supports, solved = res.luts.copy(), res.support.copy(), res.solved
-        else:
-            curves, supports, solved = start.copy(), observed_support(o, n_views=n, tail=support_tail), in_paths
-        if o.normalisers is not None:  # the solved curve after the view's normaliser, its support in the view's values
-            ramp = np.arange(L) * 1e-12
-            for v in range(n):
-                norm = o.normalisers[v]
-                curves[v] = np.stack([np.interp(norm[c], grid, curves[v, c]) for c in range(3)])
-                supports[v] = np.stack([np.interp(supports[v, c], norm[c] + ramp, grid) for c in range(3)])
-        return curves, supports, solved
-
-    if values == "auto":
-        spaces = ("normalised",) if _normaliser_offset(obs, obs_norm.normalisers, sequential) <= AUTO_OFFSET else ("own",)
+    if refine:
+        with threadpool_limits(1, user_api="blas"):
+            start = linear_start(obs, n_views=n, reference=ctx.reference, init=start, knots=knots, lut_size=L,
+                                 smooth=smooth)
+        res = refine_curves(
+            obs, n_views=n, reference=ctx.reference, init=start, knots=knots, lut_size=L, smooth=smooth, prior=prior,
+            iterations=iterations, edge_robust_c=edge_robust_c, edge_weight=edge_weight, support_tail=support_tail,
+        )
+        curves, supports, solved = res.luts.copy(), res.support.copy(), res.solved
     else:
-        spaces = (values,)
-    cands = [candidate(sp) for sp in spaces]
-    own_support = observed_support(obs, n_views=n, tail=support_tail)
+        curves, supports = start.copy(), observed_support(obs, n_views=n, tail=support_tail)
+        solved = np.isin(np.arange(n), list(ctx.paths))
     out: list = []
+    ramp = np.arange(L) * 1e-12
     for v in range(n):
         if v == ctx.reference or v not in ctx.paths:
             out.append(IdentityTransform())
             continue
-        # the first value space whose curve has no cliff; else the sequential estimate
-        lut, support, extend = sequential[v].copy(), own_support[v], True
-        for sp, (curves, supports, solved) in zip(spaces, cands):
-            if not solved[v]:
-                continue
-            if max_slope is None or _steepest(curves[v], supports[v]) <= float(max_slope):
-                lut, support, extend = curves[v].copy(), supports[v], True
-                break
-            logger.info("seqcc-global: view %d's curve in the %s values stretches a stretch of its values more than "
-                        "%g times", v, sp, float(max_slope))
-        if extrapolate != "none" and extend:
+        lut, support = curves[v].copy(), supports[v]
+        if obs.normalisers is not None:  # the solved curve after the view's table, its support in the view's values
+            norm = obs.normalisers[v]
+            lut = np.stack([np.interp(norm[c], grid, lut[c]) for c in range(3)])
+            support = np.stack([np.interp(support[c], norm[c] + ramp, grid) for c in range(3)])
+        if extrapolate != "none" and solved[v]:
             for c in range(3):
                 lo, hi = support[c]
                 lut[c] = extend_curve(lut[c], lo, hi) if extrapolate == "power" else extend_line(lut[c], lo, hi)
