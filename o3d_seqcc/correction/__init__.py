@@ -249,4 +249,5 @@ def correct(
         images=out, transforms=transforms, reference=ref, paths=paths, unreachable=unreachable,
         graph_edges=graph_edges(graph), timings=timings, method=method, t_npm=t_eff,
         edge_luts=dict(sorted(ctx.edge_luts.items())), settings=settings,
+        edge_residuals=dict(sorted(ctx.edge_residuals.items())),
     )

@@ -24,6 +24,7 @@ from .._shared.parallel import current as current_executor
 __all__ = [
     "DEFAULT_METHOD",
     "COLOUR_CACHE_BYTES",
+    "OUT_OF_LINE_LEVELS",
     "CorrectedImages",
     "CorrectionContext",
     "CorrectionResult",
@@ -43,6 +44,9 @@ logger = logging.getLogger(__name__)
 #: method of :func:`o3d_seqcc.correction.correct` (and every entry point) when none is given: the
 #: measured best (README, ``benchmarks/table2.py``); ``"seqcc"`` is the paper's
 DEFAULT_METHOD = "seqcc-global"
+#: a view whose edges still differ by more than this many 8-bit levels (root mean square of their matched
+#: quantiles, on average over its edges) after the correction is reported as not brought in line
+OUT_OF_LINE_LEVELS = 4.0
 #: byte budget of a context's cache of the colours sampled at each pair's mappings
 COLOUR_CACHE_BYTES = 64 * 2**20
 
@@ -206,6 +210,11 @@ class CorrectionContext:
     edge_luts : dict[(int, int), (3, L) array]
         Filled by :func:`lut_per_path`: the lookup table of every directed path edge
         ``(target, source)``, before composition (what the report plots, paper Figure 7).
+    edge_residuals : dict[(int, int), (float, float)]
+        Filled by the methods that measure it (``seqcc-global``): per graph edge ``(a, b)`` with
+        ``a < b``, how far apart the pair's two photos are over their shared surface before and
+        after the correction (root-mean-square difference of their matched quantiles, in 8-bit
+        levels).
     """
 
     images: list
@@ -218,6 +227,7 @@ class CorrectionContext:
     lut_size: int = 256
     interpolation: str = "bilinear"
     edge_luts: dict = field(default_factory=dict)
+    edge_residuals: dict = field(default_factory=dict)
     _cache: Any = field(default_factory=lambda: LRUCache(COLOUR_CACHE_BYTES), repr=False)
 
     def colors(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -281,6 +291,10 @@ class CorrectionResult:
         Per directed path edge ``(target, source)``: the colour mapping function fitted on it
         (R, G, B lookup tables over L evenly spaced inputs), for the methods that compose lookup
         tables along the paths (``seqcc``, ``seqcc-joint``, ``vandermonde``); empty otherwise.
+    edge_residuals : dict[(int, int), (float, float)]
+        Per graph edge ``(a, b)``, ``a < b``: the pair's residual before and after the correction,
+        in 8-bit levels (:attr:`CorrectionContext.edge_residuals`; ``seqcc-global``); empty for the
+        methods that do not measure it.
     settings : dict
         The arguments of :func:`~o3d_seqcc.correction.correct` that, with the same images and
         mappings, give this result again: ``t_npm`` (as given: ``"auto"`` or a number), ``seed``,
@@ -298,6 +312,17 @@ class CorrectionResult:
     t_npm: int = 400
     edge_luts: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
+    edge_residuals: dict = field(default_factory=dict)
+
+    def out_of_line(self, *, levels: float = OUT_OF_LINE_LEVELS) -> list[int]:
+        """Views the correction could not bring in line: those (but the reference) whose edges, after it, still
+        differ by more than ``levels`` 8-bit levels on average (every edge of the view counts once); empty when
+        the method measured no residuals."""
+        total: dict[int, list[float]] = {}
+        for (a, b), (_, after) in self.edge_residuals.items():
+            total.setdefault(int(a), []).append(float(after))
+            total.setdefault(int(b), []).append(float(after))
+        return sorted(v for v, r in total.items() if v != self.reference and float(np.mean(r)) > float(levels))
 
 
 def _edge_task(edge: tuple[int, int], make_step: Callable[[int, int], Any]) -> Any:

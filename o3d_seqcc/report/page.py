@@ -127,7 +127,32 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
     table = (f"<details><summary>{len(path_edges(c.paths))} path edges (target → source)</summary><table>"
              f"<tr><th>target</th><th>source</th><th>mappings n</th><th>weight w</th></tr>{rows}</table></details>")
     return (f'<figure data-fig="4-5">{fig}<figcaption>{cap}'
-            f"</figcaption></figure>{table}")
+            f"</figcaption></figure>{table}{_residuals_table(inp)}")
+
+
+def _residuals_table(inp: PageInputs) -> str:
+    """Every graph edge's residual before and after the correction, worst after first, and the photos the
+    correction could not bring in line (what ``correction.edge_residuals`` / ``out_of_line`` hold)."""
+    from ..correction.base import OUT_OF_LINE_LEVELS
+
+    c = inp.correction
+    if not c.edge_residuals:
+        return (f"<p>Method {_esc(c.method)} measures no per-edge residuals (seqcc-global does: how far each pair's "
+                f"two photos are apart before and after the correction).</p>")
+    items = sorted(c.edge_residuals.items(), key=lambda kv: -kv[1][1])
+    rows = "".join(f"<tr class=\"residual\"><td>{_esc(_name(inp, a))}</td><td>{_esc(_name(inp, b))}</td><td>{r0:.2f}</td>"
+                   f"<td>{r1:.2f}</td></tr>" for (a, b), (r0, r1) in items)
+    bad = c.out_of_line()
+    worse = sum(1 for _, (r0, r1) in items if r1 > r0)
+    verdict = (f"Photos the correction could not bring in line (their edges still {OUT_OF_LINE_LEVELS:g} levels or more "
+               f"apart on average): <b>{', '.join(_esc(_name(inp, v)) for v in bad)}</b>." if bad else
+               f"Every photo was brought in line (no photo's edges {OUT_OF_LINE_LEVELS:g} levels or more apart on average "
+               f"after the correction).")
+    return (f'<p data-residuals="{len(items)}">{verdict} {worse} of {len(items)} edges are further apart after the '
+            f"correction than before.</p><details><summary>{len(items)} graph edges: residual before → after "
+            f"(root-mean-square difference of the pair's matched quantiles over its shared surface, in 8-bit levels; "
+            f"worst after first)</summary><table><tr><th>view a</th><th>view b</th><th>before</th><th>after</th></tr>"
+            f"{rows}</table></details>")
 
 
 # --------------------------------------------------------------------------- JIH / CMF (Fig 6-7)

@@ -75,6 +75,11 @@ def correction_section(res: Any, names: list[str], mappings_mode: str | None, *,
         "graph_edges": [{**e, "a_name": names[e["a"]], "b_name": names[e["b"]]} for e in res.graph_edges],
         "timings_s": _seconds(res.timings),
     }
+    residuals = res.edge_residuals
+    if residuals:
+        out["edge_residuals"] = [{"a": int(a), "b": int(b), "a_name": names[a], "b_name": names[b], "before": float(r0),
+                                  "after": float(r1)} for (a, b), (r0, r1) in sorted(residuals.items())]
+        out["out_of_line"] = [names[v] for v in res.out_of_line()]
     if lookup_tables:
         from ..correction.base import IdentityTransform, LutTransform
 

@@ -472,3 +472,37 @@ def test_responses_continue_above_their_data_along_their_slope():
     np.testing.assert_allclose(out[1], [0.0, 0.3, 0.35, 0.4, 0.4 + 0.2 * mean, 0.4 + 0.4 * mean])
     np.testing.assert_array_equal(out[2], phi[2])
     np.testing.assert_array_equal(phi[0], [0.0, 0.1, 0.2, 0.3, 0.25, 0.2])  # the input is not modified
+
+
+def test_the_guard_keeps_a_sequential_estimate_that_fits_the_edges_better():
+    """_joint_worse flags a view whose joint curve fits its edges worse than its sequential estimate (a constant
+    offset against exact neighbours), and no view whose joint curve is the exact one."""
+    from o3d_seqcc.correction.methods.seqcc_global import _joint_worse
+
+    P, L = 32, 256
+    grid = np.linspace(0.0, 1.0, L)
+    u = np.linspace(0.05, 0.9, P)
+    q = np.broadcast_to(u, (3, 3, P)).copy()  # three edges, identity responses: every view sees u
+    obs = EdgeObservations(a=np.array([0, 1, 0]), b=np.array([1, 2, 2]), qa=q, qb=q.copy(), n=np.full(3, 4000))
+    exact = np.broadcast_to(grid, (3, 3, L)).copy()
+    off = exact.copy()
+    off[1] = np.clip(grid + 0.05, 0, 1)  # view 1's joint curve is off
+    np.testing.assert_array_equal(_joint_worse(obs, off, exact), [False, True, False])
+    np.testing.assert_array_equal(_joint_worse(obs, exact, off), [False, False, False])
+
+
+def test_edge_residuals_before_and_after_and_the_photos_out_of_line(albedo):
+    """seqcc-global measures every graph edge's residual before and after (8-bit levels); a chain with known camera
+    changes comes out in line, and a result whose view keeps a large residual names it."""
+    import dataclasses
+
+    images = _images(albedo, [identity_photometric(), P1, P2])
+    maps = _mappings({(0, 1): (4000, _full()), (1, 2): (4000, _full()), (0, 2): (3000, _full())}, 3)
+    res = correct(_scene(3), images=images, mappings=maps, reference=0, method="seqcc-global")
+    assert sorted(res.edge_residuals) == [(0, 1), (0, 2), (1, 2)]
+    for before, after in res.edge_residuals.values():
+        assert before > 10 and after < 1.5, res.edge_residuals
+    assert res.out_of_line() == []
+    worse = dataclasses.replace(res, edge_residuals={(0, 1): (20.0, 9.0), (0, 2): (20.0, 0.5), (1, 2): (20.0, 6.0)})
+    assert worse.out_of_line() == [1]  # view 1: 7.5 on average, view 2: 3.25 (the reference is never named)
+    assert worse.out_of_line(levels=3.0) == [1, 2]

@@ -93,6 +93,11 @@ def test_the_report_shows_this_run(run_dir, scene):
     assert len(svg) == 1 and svg[0].count("<circle ") == n_views
     assert svg[0].split('<g class="arrows" stroke="#000">')[1].split("</g>")[0].count("<line ") == len(edges)
     assert sec["graph"].count("<tr><td>") == len(edges)
+    # every graph edge's residual before and after the correction (seqcc-global, the default, measures them)
+    resid = rep["correction"]["edge_residuals"]
+    assert len(resid) == rep["correction"]["n_graph_edges"] == sec["graph"].count('<tr class="residual">')
+    assert all(r["after"] < r["before"] for r in resid), resid  # the demo room's photos differ by camera changes
+    assert rep["correction"]["out_of_line"] == [] and "Every photo was brought in line" in sec["graph"]
     # Figures 6-7: three channels of the path's edges (at most MAX_DETAIL_EDGES), one thumbnail per path edge
     detail = min(max(len(p) for p in paths.values()) - 1, MAX_DETAIL_EDGES)
     assert len(_images(sec["jih"])) == 3 * detail + len(edges)

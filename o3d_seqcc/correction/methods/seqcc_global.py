@@ -26,6 +26,8 @@ estimate the way global bundle adjustment follows incremental structure-from-mot
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ..luts import extend_curve, extend_line
@@ -35,6 +37,8 @@ from .joint_curves import linear_start, observed_support, refine_curves
 from .seqcc import _method_seqcc, colour_inliers, quantile_luts
 
 __all__ = ["method_seqcc_global", "sequential_start"]
+
+logger = logging.getLogger(__name__)
 
 #: the values the joint solve can work in (``values=`` of :func:`method_seqcc_global`)
 VALUE_SPACES = ("sequential", "own", "normalised")
@@ -116,12 +120,66 @@ def sequential_start(
     return start
 
 
+def _corrected(obs: EdgeObservations, curves: np.ndarray, views: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(E, 3, P) each edge's quantiles ``q`` of ``views`` through their curves (V, 3, L) (linear interpolation)."""
+    L = curves.shape[2]
+    x = np.clip(q, 0.0, 1.0) * (L - 1)
+    i0 = np.minimum(np.floor(x).astype(np.int64), L - 2)
+    f = x - i0
+    ch = np.arange(3)[None, :, None]
+    vv = views[:, None, None]
+    return curves[vv, ch, i0] * (1.0 - f) + curves[vv, ch, i0 + 1] * f
+
+
+def _joint_worse(obs: EdgeObservations, joint: np.ndarray, sequential: np.ndarray) -> np.ndarray:
+    """(V,) views whose edges the joint curves fit worse than the view's sequential estimate would, the other views
+    keeping their joint curves: each edge's root-mean-square difference of its two corrected quantiles (in the
+    reference's values, uncensored levels), averaged over the view's edges with weights sqrt(mappings)."""
+    V = joint.shape[0]
+    seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)  # (2, E, 3, P)
+    both = seen[0] & seen[1] & (obs.n > 0)[:, None, None]
+    cnt = np.maximum(both.sum(axis=(1, 2)), 1)
+    ja, jb = _corrected(obs, joint, obs.a, obs.qa), _corrected(obs, joint, obs.b, obs.qb)
+    sa, sb = _corrected(obs, sequential, obs.a, obs.qa), _corrected(obs, sequential, obs.b, obs.qb)
+
+    def rms(x, y):
+        return np.sqrt(np.where(both, (x - y) ** 2, 0.0).sum(axis=(1, 2)) / cnt)
+
+    w = np.sqrt(obs.n.astype(np.float64)) * (both.any(axis=(1, 2)))
+    wsum = np.bincount(obs.a, weights=w, minlength=V) + np.bincount(obs.b, weights=w, minlength=V)
+    joint_fit = np.bincount(obs.a, weights=w * rms(ja, jb), minlength=V) + np.bincount(obs.b, weights=w * rms(ja, jb),
+                                                                                     minlength=V)
+    seq_fit = np.bincount(obs.a, weights=w * rms(sa, jb), minlength=V) + np.bincount(obs.b, weights=w * rms(ja, sb),
+                                                                                   minlength=V)
+    return (wsum > 0) & (seq_fit < joint_fit)
+
+
+def _record_residuals(ctx: CorrectionContext, obs: EdgeObservations, transforms: list) -> None:
+    """``ctx.edge_residuals``: every edge's root-mean-square difference of its matched quantiles (uncensored
+    levels, in 8-bit levels) in the photos' own values and through the views' final curves."""
+    L = int(ctx.lut_size)
+    grid = np.linspace(0.0, 1.0, L)
+    final = np.stack([tr.lut if isinstance(tr, LutTransform) else np.broadcast_to(grid, (3, L)) for tr in transforms])
+    seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)
+    both = seen[0] & seen[1]
+    cnt = np.maximum(both.sum(axis=(1, 2)), 1)
+
+    def rms(x, y):
+        return np.sqrt(np.where(both, (x - y) ** 2, 0.0).sum(axis=(1, 2)) / cnt) * 255.0
+
+    before = rms(obs.qa, obs.qb)
+    after = rms(_corrected(obs, final, obs.a, obs.qa), _corrected(obs, final, obs.b, obs.qb))
+    for e, (a, b) in enumerate(zip(obs.a, obs.b)):
+        if obs.n[e] > 0 and both[e].any():
+            ctx.edge_residuals[(int(min(a, b)), int(max(a, b)))] = (round(float(before[e]), 3), round(float(after[e]), 3))
+
+
 def method_seqcc_global(
     ctx: CorrectionContext,
     *,
     init: str = "quantile",
     knots: int = 11,
-    levels: int = 32,
+    levels: int = 64,
     smooth: float = 1e-3,
     prior: float = 1e-6,
     iterations: int = 10,
@@ -133,6 +191,7 @@ def method_seqcc_global(
     support_tail: float = 0.01,
     values: str = "sequential",
     refine: bool = True,
+    guard: bool = True,
     n_jobs: int | None = None,
 ) -> list:
     """``seqcc`` refined jointly over every graph edge, curves extended over the whole range.
@@ -153,8 +212,9 @@ def method_seqcc_global(
         Sequential estimate (:func:`sequential_start`).
     knots : int, default 11
         Knots of each view's response (:func:`~o3d_seqcc.correction.methods.joint_curves.refine_curves`).
-    levels : int, default 32
-        Quantile levels per edge and channel (>= 4).
+    levels : int, default 64
+        Quantile levels per edge and channel (>= 4); 64 measured steadier than 32 on the generated
+        6 MP scene with occluders (``benchmarks/colour_invariance.py``).
     smooth : float, default 1e-3
         Weight of the responses' second differences.
     prior : float, default 1e-6
@@ -192,6 +252,12 @@ def method_seqcc_global(
         Refine the sequential estimate jointly over every edge (the linear start and the bundle
         adjustment); False: the sequential estimate alone (each path's quantile-quantile curves
         composed, in ``values``), continued beyond each view's observed values.
+    guard : bool, default True
+        A view whose edges the joint curves fit worse than its sequential estimate would (the others keeping
+        their joint curves; root-mean-square differences of the corrected quantiles, in the reference's values)
+        keeps its sequential estimate: the joint refinement never leaves a view less consistent with its
+        neighbours than its sequential step (not with ``values="normalised"``, whose sequential estimate is in
+        other values).
     n_jobs : int or None, default None
         joblib threads for the edge summaries and the sequential fit (joblib semantics).
 
@@ -223,13 +289,15 @@ def method_seqcc_global(
         edges = sorted(k for k, c in ctx.mappings.counts.items() if c >= ctx.t_npm)
     edges = [(a, b) for a, b in edges if a in ctx.paths and b in ctx.paths]
     if values == "normalised":
-        _, obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
+        own_obs, obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
                                    normalise_to=ctx.reference, n_jobs=n_jobs)
     else:
         obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
                                 n_jobs=n_jobs)
+        own_obs = obs
     start = sequential_start(ctx, init=init, obs=obs, outlier_k=outlier_k, n_jobs=n_jobs)
     grid = np.linspace(0.0, 1.0, L)
+    sequential, observations = start, obs  # in the views' own values (or the normalised ones)
     if values == "sequential" and refine:  # the solve in the sequential estimate's values, from the identity
         obs = obs.through(start)
         start = np.broadcast_to(grid, start.shape).copy()
@@ -247,14 +315,28 @@ def method_seqcc_global(
     else:
         curves, supports = start.copy(), observed_support(obs, n_views=n, tail=support_tail)
         solved = np.isin(np.arange(n), list(ctx.paths))
-    out: list = []
     ramp = np.arange(L) * 1e-12
+    if obs.normalisers is not None and values == "sequential":  # the solved curves after the views' tables
+        for v in range(n):
+            norm = obs.normalisers[v]
+            curves[v] = np.stack([np.interp(norm[c], grid, curves[v, c]) for c in range(3)])
+            supports[v] = np.stack([np.interp(supports[v, c], norm[c] + ramp, grid) for c in range(3)])
+    kept = np.zeros(n, dtype=bool)
+    if refine and guard and values != "normalised":
+        kept = _joint_worse(observations, curves, sequential) & solved
+        kept[ctx.reference] = False
+        curves[kept] = sequential[kept]
+        supports[kept] = observed_support(observations, n_views=n, tail=support_tail)[kept]
+    if kept.any():
+        logger.info("seqcc-global: %d view(s) keep their sequential estimate (the joint curve fits their edges "
+                    "worse): %s", int(kept.sum()), np.flatnonzero(kept).tolist())
+    out: list = []
     for v in range(n):
         if v == ctx.reference or v not in ctx.paths:
             out.append(IdentityTransform())
             continue
         lut, support = curves[v].copy(), supports[v]
-        if obs.normalisers is not None:  # the solved curve after the view's table, its support in the view's values
+        if obs.normalisers is not None and values == "normalised":  # after the view's histogram normaliser
             norm = obs.normalisers[v]
             lut = np.stack([np.interp(norm[c], grid, lut[c]) for c in range(3)])
             support = np.stack([np.interp(support[c], norm[c] + ramp, grid) for c in range(3)])
@@ -263,5 +345,6 @@ def method_seqcc_global(
                 lo, hi = support[c]
                 lut[c] = extend_curve(lut[c], lo, hi) if extrapolate == "power" else extend_line(lut[c], lo, hi)
         out.append(LutTransform(np.clip(lut, 0.0, 1.0)))
+    _record_residuals(ctx, own_obs, out)
     return out
 
