@@ -41,7 +41,7 @@ __all__ = ["method_seqcc_global", "sequential_start"]
 logger = logging.getLogger(__name__)
 
 #: the values the joint solve can work in (``values=`` of :func:`method_seqcc_global`)
-VALUE_SPACES = ("sequential", "own", "normalised")
+VALUE_SPACES = ("auto", "sequential", "own", "normalised")
 
 
 def sequential_start(
@@ -154,12 +154,12 @@ def _joint_worse(obs: EdgeObservations, joint: np.ndarray, sequential: np.ndarra
     return (wsum > 0) & (seq_fit < joint_fit)
 
 
-def _record_residuals(ctx: CorrectionContext, obs: EdgeObservations, transforms: list) -> None:
-    """``ctx.edge_residuals``: every edge's root-mean-square difference of its matched quantiles (uncensored
-    levels, in 8-bit levels) in the photos' own values and through the views' final curves."""
-    L = int(ctx.lut_size)
-    grid = np.linspace(0.0, 1.0, L)
-    final = np.stack([tr.lut if isinstance(tr, LutTransform) else np.broadcast_to(grid, (3, L)) for tr in transforms])
+def _edge_residuals(obs: EdgeObservations, transforms: list, lut_size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every edge's root-mean-square difference of its matched quantiles (uncensored levels, 8-bit levels) in the
+    photos' own values and through ``transforms``, and which edges have any: ``(before, after, valid)`` (E,)."""
+    grid = np.linspace(0.0, 1.0, int(lut_size))
+    final = np.stack([tr.lut if isinstance(tr, LutTransform) else np.broadcast_to(grid, (3, grid.size))
+                      for tr in transforms])
     seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)
     both = seen[0] & seen[1]
     cnt = np.maximum(both.sum(axis=(1, 2)), 1)
@@ -169,9 +169,28 @@ def _record_residuals(ctx: CorrectionContext, obs: EdgeObservations, transforms:
 
     before = rms(obs.qa, obs.qb)
     after = rms(_corrected(obs, final, obs.a, obs.qa), _corrected(obs, final, obs.b, obs.qb))
-    for e, (a, b) in enumerate(zip(obs.a, obs.b)):
-        if obs.n[e] > 0 and both[e].any():
-            ctx.edge_residuals[(int(min(a, b)), int(max(a, b)))] = (round(float(before[e]), 3), round(float(after[e]), 3))
+    return before, after, (obs.n > 0) & both.any(axis=(1, 2))
+
+
+def _residual_score(obs: EdgeObservations, transforms: list) -> float:
+    """Mean residual after ``transforms`` over the edges, each weighted by the square root of its mapping count:
+    what ``values="auto"`` compares (measured to pick the better value space on all six benchmark sets)."""
+    _, after, valid = _edge_residuals(obs, transforms, _lut_size(transforms))
+    w = np.sqrt(obs.n.astype(np.float64)) * valid
+    return float((after * w).sum() / max(w.sum(), 1e-300))
+
+
+def _lut_size(transforms: list) -> int:
+    """Table length of the first lookup-table transform (256 when there is none)."""
+    return next((tr.lut.shape[1] for tr in transforms if isinstance(tr, LutTransform)), 256)
+
+
+def _record_residuals(ctx: CorrectionContext, obs: EdgeObservations, transforms: list) -> None:
+    """``ctx.edge_residuals``: every edge's residual before and after the correction (:func:`_edge_residuals`)."""
+    before, after, valid = _edge_residuals(obs, transforms, ctx.lut_size)
+    for e in np.flatnonzero(valid):
+        a, b = int(obs.a[e]), int(obs.b[e])
+        ctx.edge_residuals[(min(a, b), max(a, b))] = (round(float(before[e]), 3), round(float(after[e]), 3))
 
 
 def method_seqcc_global(
@@ -189,7 +208,7 @@ def method_seqcc_global(
     outlier_k: float | None = 3.0,
     extrapolate: str = "power",
     support_tail: float = 0.01,
-    values: str = "sequential",
+    values: str = "auto",
     refine: bool = True,
     guard: bool = True,
     n_jobs: int | None = None,
@@ -235,7 +254,7 @@ def method_seqcc_global(
         response's own flat ends.
     support_tail : float, default 0.01
         Share of each end of a view's pooled observations not counted as observed.
-    values : {"sequential", "own", "normalised"}, default "sequential"
+    values : {"auto", "sequential", "own", "normalised"}, default "auto"
         The values the joint solve works in, each view's own through a monotone table: its
         sequential estimate (step 2: the solve starts from the identity in values that already
         sit near the reference's, and a camera's monotone change of a view's values moves them
@@ -243,11 +262,15 @@ def method_seqcc_global(
         each view's histogram normaliser toward the reference
         (:mod:`~o3d_seqcc.correction.methods.value_space`: no monotone change moves those values,
         the outlier pass included). The correction is the solved curve after the view's table.
-        Measured (``benchmarks/colour_invariance.py``, README): the sequential values are the
-        best or within a few hundredths on every set but the 11-photo Fountain subset; the
-        normalised values undo most of a hidden change on Fountain but move consistent
-        generated photos away from their truth (content that differs between views makes the
-        histogram match a poor start).
+        ``"auto"`` solves in the sequential and in the own values and keeps the one whose edges
+        agree better after it (each edge's residual, :attr:`CorrectionResult.edge_residuals
+        <o3d_seqcc.correction.CorrectionResult.edge_residuals>`, averaged with weights
+        sqrt(mappings)): no truth needed, one more bundle adjustment. Measured
+        (``benchmarks/colour_invariance.py``, README): the sequential values win on Fountain, its
+        few-view subsets and the generated 6 MP rooms, the own values on the hard synthetic room,
+        and the residual picks the winner on each; the normalised values undo most of a hidden
+        change on Fountain but move consistent generated photos away from their truth (content
+        that differs between views makes the histogram match a poor start).
     refine : bool, default True
         Refine the sequential estimate jointly over every edge (the linear start and the bundle
         adjustment); False: the sequential estimate alone (each path's quantile-quantile curves
@@ -257,7 +280,7 @@ def method_seqcc_global(
         their joint curves; root-mean-square differences of the corrected quantiles, in the reference's values)
         keeps its sequential estimate: the joint refinement never leaves a view less consistent with its
         neighbours than its sequential step (not with ``values="normalised"``, whose sequential estimate is in
-        other values).
+        other values). Measured: it changes no view on the six benchmark sets.
     n_jobs : int or None, default None
         joblib threads for the edge summaries and the sequential fit (joblib semantics).
 
@@ -282,27 +305,50 @@ def method_seqcc_global(
         raise ValueError(f"levels must be an integer >= 4, got {levels!r}")
     if max_mappings is not None and not int(max_mappings) >= 10:
         raise ValueError(f"max_mappings must be >= 10 or None, got {max_mappings!r}")
-    n, L = len(ctx.images), int(ctx.lut_size)
     if ctx.graph is not None:
         edges = sorted((min(a, b), max(a, b)) for a, b in ctx.graph.edges())
     else:
         edges = sorted(k for k, c in ctx.mappings.counts.items() if c >= ctx.t_npm)
     edges = [(a, b) for a, b in edges if a in ctx.paths and b in ctx.paths]
     if values == "normalised":
-        own_obs, obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
-                                   normalise_to=ctx.reference, n_jobs=n_jobs)
+        own_obs, norm_obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings,
+                                              outlier_k=outlier_k, normalise_to=ctx.reference, n_jobs=n_jobs)
     else:
-        obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings, outlier_k=outlier_k,
-                                n_jobs=n_jobs)
-        own_obs = obs
-    start = sequential_start(ctx, init=init, obs=obs, outlier_k=outlier_k, n_jobs=n_jobs)
-    grid = np.linspace(0.0, 1.0, L)
-    sequential, observations = start, obs  # in the views' own values (or the normalised ones)
-    if values == "sequential" and refine:  # the solve in the sequential estimate's values, from the identity
-        obs = obs.through(start)
-        start = np.broadcast_to(grid, start.shape).copy()
+        own_obs = norm_obs = edge_observations(ctx, edges, levels=levels, max_mappings=max_mappings,
+                                               outlier_k=outlier_k, n_jobs=n_jobs)
+    sequential = sequential_start(ctx, init=init, obs=norm_obs, outlier_k=outlier_k, n_jobs=n_jobs)
+    opts = dict(knots=knots, smooth=smooth, prior=prior, iterations=iterations, edge_robust_c=edge_robust_c,
+                edge_weight=edge_weight, support_tail=support_tail, extrapolate=extrapolate, refine=refine,
+                guard=guard)
+    if values == "auto":  # both, and the one whose edges agree better after it
+        tried = {sp: _solve(ctx, own_obs, sequential, space=sp, **opts) for sp in ("sequential", "own")}
+        scores = {sp: _residual_score(own_obs, out) for sp, out in tried.items()}
+        chosen = min(scores, key=lambda sp: (scores[sp], sp != "sequential"))
+        logger.info("seqcc-global: values='auto' chose the %s values (edge residuals after: %s)", chosen,
+                    ", ".join(f"{sp} {sc:.3f}" for sp, sc in scores.items()))
+        out = tried[chosen]
+    else:
+        out = _solve(ctx, norm_obs, sequential, space=values, **opts)
+    _record_residuals(ctx, own_obs, out)
+    return out
+
+
+def _solve(ctx: CorrectionContext, obs: EdgeObservations, sequential: np.ndarray, *, space: str, knots: int,
+           smooth: float, prior: float, iterations: int, edge_robust_c: float | None, edge_weight: str,
+           support_tail: float, extrapolate: str, refine: bool, guard: bool) -> list:
+    """The joint solve (steps 3-4) in one value space (:data:`VALUE_SPACES`): one transform per view.
+
+    ``obs`` are the summaries in the views' own values (in the normalised values for ``space="normalised"``) and
+    ``sequential`` the sequential estimate from them (V, 3, L).
+    """
     from threadpoolctl import threadpool_limits
 
+    n, L = len(ctx.images), int(ctx.lut_size)
+    grid = np.linspace(0.0, 1.0, L)
+    start, observations = sequential, obs
+    if space == "sequential" and refine:  # the solve in the sequential estimate's values, from the identity
+        obs = obs.through(sequential)
+        start = np.broadcast_to(grid, sequential.shape).copy()
     if refine:
         with threadpool_limits(1, user_api="blas"):
             start = linear_start(obs, n_views=n, reference=ctx.reference, init=start, knots=knots, lut_size=L,
@@ -316,13 +362,13 @@ def method_seqcc_global(
         curves, supports = start.copy(), observed_support(obs, n_views=n, tail=support_tail)
         solved = np.isin(np.arange(n), list(ctx.paths))
     ramp = np.arange(L) * 1e-12
-    if obs.normalisers is not None and values == "sequential":  # the solved curves after the views' tables
+    if obs.normalisers is not None and space == "sequential":  # the solved curves after the views' tables
         for v in range(n):
             norm = obs.normalisers[v]
             curves[v] = np.stack([np.interp(norm[c], grid, curves[v, c]) for c in range(3)])
             supports[v] = np.stack([np.interp(supports[v, c], norm[c] + ramp, grid) for c in range(3)])
     kept = np.zeros(n, dtype=bool)
-    if refine and guard and values != "normalised":
+    if refine and guard and space != "normalised":
         kept = _joint_worse(observations, curves, sequential) & solved
         kept[ctx.reference] = False
         curves[kept] = sequential[kept]
@@ -336,7 +382,7 @@ def method_seqcc_global(
             out.append(IdentityTransform())
             continue
         lut, support = curves[v].copy(), supports[v]
-        if obs.normalisers is not None and values == "normalised":  # after the view's histogram normaliser
+        if obs.normalisers is not None and space == "normalised":  # after the view's histogram normaliser
             norm = obs.normalisers[v]
             lut = np.stack([np.interp(norm[c], grid, lut[c]) for c in range(3)])
             support = np.stack([np.interp(support[c], norm[c] + ramp, grid) for c in range(3)])
@@ -345,6 +391,5 @@ def method_seqcc_global(
                 lo, hi = support[c]
                 lut[c] = extend_curve(lut[c], lo, hi) if extrapolate == "power" else extend_line(lut[c], lo, hi)
         out.append(LutTransform(np.clip(lut, 0.0, 1.0)))
-    _record_residuals(ctx, own_obs, out)
     return out
 
