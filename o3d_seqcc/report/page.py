@@ -133,7 +133,7 @@ def _graph_section(inp: PageInputs, f: dict) -> str:
 def _residuals_table(inp: PageInputs) -> str:
     """Every graph edge's residual before and after the correction, worst after first, and the photos the
     correction could not bring in line (what ``correction.edge_residuals`` / ``out_of_line`` hold)."""
-    from ..correction.base import OUT_OF_LINE_LEVELS
+    from ..correction.base import OUT_OF_LINE_LEVELS, OUT_OF_LINE_RATIO
 
     c = inp.correction
     if not c.edge_residuals:
@@ -144,10 +144,11 @@ def _residuals_table(inp: PageInputs) -> str:
                    f"<td>{r1:.2f}</td></tr>" for (a, b), (r0, r1) in items)
     bad = c.out_of_line()
     worse = sum(1 for _, (r0, r1) in items if r1 > r0)
-    verdict = (f"Photos the correction could not bring in line (their edges still {OUT_OF_LINE_LEVELS:g} levels or more "
-               f"apart on average): <b>{', '.join(_esc(_name(inp, v)) for v in bad)}</b>." if bad else
-               f"Every photo was brought in line (no photo's edges {OUT_OF_LINE_LEVELS:g} levels or more apart on average "
-               f"after the correction).")
+    rule = (f"their edges still more than {OUT_OF_LINE_LEVELS:g} levels and more than {OUT_OF_LINE_RATIO:g} times the "
+            f"median photo's apart on average")
+    verdict = (f"Photos the correction could not bring in line ({rule}): "
+               f"<b>{', '.join(_esc(_name(inp, v)) for v in bad)}</b>." if bad else
+               f"Every photo was brought in line (none with {rule} after the correction).")
     return (f'<p data-residuals="{len(items)}">{verdict} {worse} of {len(items)} edges are further apart after the '
             f"correction than before.</p><details><summary>{len(items)} graph edges: residual before → after "
             f"(root-mean-square difference of the pair's matched quantiles over its shared surface, in 8-bit levels; "

@@ -503,6 +503,9 @@ def test_edge_residuals_before_and_after_and_the_photos_out_of_line(albedo):
     for before, after in res.edge_residuals.values():
         assert before > 10 and after < 1.5, res.edge_residuals
     assert res.out_of_line() == []
-    worse = dataclasses.replace(res, edge_residuals={(0, 1): (20.0, 9.0), (0, 2): (20.0, 0.5), (1, 2): (20.0, 6.0)})
-    assert worse.out_of_line() == [1]  # view 1: 7.5 on average, view 2: 3.25 (the reference is never named)
-    assert worse.out_of_line(levels=3.0) == [1, 2]
+    worse = dataclasses.replace(res, reference=0, edge_residuals={
+        (0, 1): (20.0, 1.0), (0, 2): (20.0, 1.4), (0, 3): (20.0, 11.0), (1, 2): (20.0, 1.0), (2, 3): (20.0, 1.0)})
+    # views 1, 2, 3: 1.0, 1.13, 6.0 levels on average; the median view 1.13: view 3 is out of line
+    assert worse.out_of_line() == [3]
+    assert worse.out_of_line(levels=7.0) == []  # above 1.5 x the median, but not above 7 levels
+    assert worse.out_of_line(levels=0.5, ratio=0.5) == [1, 2, 3]  # the reference is never named
