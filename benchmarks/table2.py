@@ -458,7 +458,7 @@ def main(argv=None) -> int:
     ap.add_argument("--t-npm", type=t_npm_value, default=400,
                     help="fountain edge threshold (default 400: vertex units; 'auto': the library's default)")
     ap.add_argument("--fountain-mappings", choices=("vertices", "dense", "surface"), default="vertices")
-    ap.add_argument("--depth-edge-margin", type=float, default=0.0,
+    ap.add_argument("--depth-edge-margin", type=int, default=0,
                     help="fountain: also drop faces within this many px of a depth jump (default 0 = paper's filters)")
     ap.add_argument("--synthetic-views", type=int, default=15)
     ap.add_argument(
