@@ -181,7 +181,7 @@ def _record_stages(monkeypatch, seen: dict) -> None:
     def corr(scene, settings=None, **kw):
         seen["correction"] = settings
         return SimpleNamespace(images=[], timings={}, method="", reference=0, t_npm=1, graph_edges=[], paths={},
-                               unreachable=[], transforms=[], settings={})
+                               unreachable=[], transforms=[], settings={}, edge_residuals={})
 
     def tex(scene, images, v, s, timings, *, want_seams, **kw):
         seen["texture"], seen["seams"] = s, want_seams

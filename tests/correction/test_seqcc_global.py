@@ -509,3 +509,18 @@ def test_edge_residuals_before_and_after_and_the_photos_out_of_line(albedo):
     assert worse.out_of_line() == [3]
     assert worse.out_of_line(levels=7.0) == []  # above 1.5 x the median, but not above 7 levels
     assert worse.out_of_line(levels=0.5, ratio=0.5) == [1, 2, 3]  # the reference is never named
+
+
+def test_auto_holds_out_every_third_edge_off_the_paths():
+    """values="auto" compares its two solves on edges they were not fitted on: every third edge the paths do not
+    use (the sequential estimate uses the path edges), none when every edge is on a path."""
+    from o3d_seqcc.correction.methods.seqcc_global import _held_out
+
+    pairs = [(0, 1), (1, 2), (2, 3), (0, 2), (0, 3), (1, 3), (2, 4), (3, 4)]
+    q = np.zeros((len(pairs), 3, 4))
+    obs = EdgeObservations(a=np.array([a for a, _ in pairs]), b=np.array([b for _, b in pairs]), qa=q, qb=q,
+                           n=np.array([9, 9, 9, 9, 9, 0, 9, 9]))
+    paths = {0: [0], 1: [1, 0], 2: [2, 1, 0], 3: [3, 2, 1, 0], 4: [4, 2, 1, 0]}
+    # off the tree: (0, 2), (0, 3), (1, 3) (no mappings: never), (3, 4) -> every third from the second: (0, 3)
+    np.testing.assert_array_equal(np.flatnonzero(_held_out(obs, paths)), [4])
+    assert not _held_out(obs.subset(np.array([1, 1, 1, 0, 0, 0, 1, 0], bool)), paths).any()

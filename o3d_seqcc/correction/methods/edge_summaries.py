@@ -239,6 +239,12 @@ class EdgeObservations:
                 f"qa {np.shape(self.qa)}, qb {np.shape(self.qb)}; need (E,), (E,), (E,), (E, 3, P), (E, 3, P)"
             )
 
+    def subset(self, keep: np.ndarray) -> "EdgeObservations":
+        """These summaries of the edges where ``keep`` (E,) bool is true."""
+        keep = np.asarray(keep, dtype=bool)
+        return EdgeObservations(a=self.a[keep], b=self.b[keep], qa=self.qa[keep], qb=self.qb[keep], n=self.n[keep],
+                                normalisers=self.normalisers, seen=None if self.seen is None else self.seen[:, keep])
+
     def through(self, normalisers: np.ndarray) -> "EdgeObservations":
         """These summaries with every view's values through its monotone (3, L) table ``normalisers[v]`` (the
         quantiles of ``T(X)`` are ``T`` of the quantiles of ``X``); what was censored stays censored."""
