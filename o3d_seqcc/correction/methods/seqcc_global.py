@@ -16,12 +16,22 @@ estimate the way global bundle adjustment follows incremental structure-from-mot
    values over all edges (convex; a little contracted by the noise), then the robust bundle
    adjustment of per-view, per-channel responses over all edges, in the measured values, which
    no common contraction of the curves can lower; the corrections are the responses' inverses.
+   The measured values are a view's own through a monotone table (``values=``): its sequential
+   estimate from step 2 (a camera's change of the view's values then moves them only as much as
+   it moves that estimate), none, or its histogram normaliser
+   (:mod:`~o3d_seqcc.correction.methods.value_space`); ``values="auto"`` (the default) solves in
+   the first two without every third edge off the paths and keeps the values in which those
+   held-out edges agree better. A view whose edges its sequential estimate fits better than its
+   joint curve keeps the former (``guard``).
 4. :func:`~o3d_seqcc.correction.luts.extend_curve`: beyond the values any edge of a view observed, the
    correction continues as a power law ``f(x) = f(x_b) (x / x_b)^beta`` with ``beta`` its
    log-log slope over the last observed stretch -- the shape of a gamma-type camera response,
    which a change of exposure, white balance and gamma keeps exactly -- instead of a clamp or a
    straight line; below the darkest observation it runs to black ``(0, 0)`` the same way. Values
    inside the range a view's *other* edges observed come from them through step 3.
+
+Every edge's residual before and after the correction is kept in ``ctx.edge_residuals`` (the
+report's table; :meth:`~o3d_seqcc.correction.CorrectionResult.out_of_line`).
 """
 
 from __future__ import annotations
@@ -131,45 +141,43 @@ def _corrected(obs: EdgeObservations, curves: np.ndarray, views: np.ndarray, q: 
     return curves[vv, ch, i0] * (1.0 - f) + curves[vv, ch, i0 + 1] * f
 
 
+def _edge_rms(obs: EdgeObservations, xa: np.ndarray, xb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each edge's root-mean-square difference of its two sides' (E, 3, P) values over the levels neither side has
+    censored, and the edges that have any: ``(rms (E,), valid (E,))``."""
+    seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)  # (2, E, 3, P)
+    both = seen[0] & seen[1]
+    cnt = np.maximum(both.sum(axis=(1, 2)), 1)
+    rms = np.sqrt(np.where(both, (xa - xb) ** 2, 0.0).sum(axis=(1, 2)) / cnt)
+    return rms, (obs.n > 0) & both.any(axis=(1, 2))
+
+
 def _joint_worse(obs: EdgeObservations, joint: np.ndarray, sequential: np.ndarray) -> np.ndarray:
     """(V,) views whose edges the joint curves fit worse than the view's sequential estimate would, the other views
-    keeping their joint curves: each edge's root-mean-square difference of its two corrected quantiles (in the
-    reference's values, uncensored levels), averaged over the view's edges with weights sqrt(mappings)."""
+    keeping their joint curves: each edge's :func:`_edge_rms` of its two corrected quantiles (in the reference's
+    values), averaged over the view's edges with weights sqrt(mappings)."""
     V = joint.shape[0]
-    seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)  # (2, E, 3, P)
-    both = seen[0] & seen[1] & (obs.n > 0)[:, None, None]
-    cnt = np.maximum(both.sum(axis=(1, 2)), 1)
     ja, jb = _corrected(obs, joint, obs.a, obs.qa), _corrected(obs, joint, obs.b, obs.qb)
     sa, sb = _corrected(obs, sequential, obs.a, obs.qa), _corrected(obs, sequential, obs.b, obs.qb)
+    joint_rms, valid = _edge_rms(obs, ja, jb)
+    w = np.sqrt(obs.n.astype(np.float64)) * valid
 
-    def rms(x, y):
-        return np.sqrt(np.where(both, (x - y) ** 2, 0.0).sum(axis=(1, 2)) / cnt)
+    def per_view(rms_a: np.ndarray, rms_b: np.ndarray) -> np.ndarray:  # each view's edges, a side's and b side's
+        return np.bincount(obs.a, weights=w * rms_a, minlength=V) + np.bincount(obs.b, weights=w * rms_b, minlength=V)
 
-    w = np.sqrt(obs.n.astype(np.float64)) * (both.any(axis=(1, 2)))
-    wsum = np.bincount(obs.a, weights=w, minlength=V) + np.bincount(obs.b, weights=w, minlength=V)
-    joint_fit = np.bincount(obs.a, weights=w * rms(ja, jb), minlength=V) + np.bincount(obs.b, weights=w * rms(ja, jb),
-                                                                                     minlength=V)
-    seq_fit = np.bincount(obs.a, weights=w * rms(sa, jb), minlength=V) + np.bincount(obs.b, weights=w * rms(ja, sb),
-                                                                                   minlength=V)
-    return (wsum > 0) & (seq_fit < joint_fit)
+    seq_a, seq_b = _edge_rms(obs, sa, jb)[0], _edge_rms(obs, ja, sb)[0]  # view a's, view b's sequential estimate
+    ones = np.ones(len(w))
+    return (per_view(ones, ones) > 0) & (per_view(seq_a, seq_b) < per_view(joint_rms, joint_rms))
 
 
 def _edge_residuals(obs: EdgeObservations, transforms: list, lut_size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every edge's root-mean-square difference of its matched quantiles (uncensored levels, 8-bit levels) in the
-    photos' own values and through ``transforms``, and which edges have any: ``(before, after, valid)`` (E,)."""
+    """Every edge's :func:`_edge_rms` of its matched quantiles, in 8-bit levels, in the photos' own values and
+    through ``transforms``: ``(before, after, valid)`` (E,)."""
     grid = np.linspace(0.0, 1.0, int(lut_size))
     final = np.stack([tr.lut if isinstance(tr, LutTransform) else np.broadcast_to(grid, (3, grid.size))
                       for tr in transforms])
-    seen = np.stack([np.stack(obs.observed(c), axis=0) for c in range(3)], axis=2)
-    both = seen[0] & seen[1]
-    cnt = np.maximum(both.sum(axis=(1, 2)), 1)
-
-    def rms(x, y):
-        return np.sqrt(np.where(both, (x - y) ** 2, 0.0).sum(axis=(1, 2)) / cnt) * 255.0
-
-    before = rms(obs.qa, obs.qb)
-    after = rms(_corrected(obs, final, obs.a, obs.qa), _corrected(obs, final, obs.b, obs.qb))
-    return before, after, (obs.n > 0) & both.any(axis=(1, 2))
+    before, valid = _edge_rms(obs, obs.qa, obs.qb)
+    after = _edge_rms(obs, _corrected(obs, final, obs.a, obs.qa), _corrected(obs, final, obs.b, obs.qb))[0]
+    return before * 255.0, after * 255.0, valid
 
 
 def _held_out(obs: EdgeObservations, paths: dict) -> np.ndarray:
@@ -181,17 +189,12 @@ def _held_out(obs: EdgeObservations, paths: dict) -> np.ndarray:
     return out
 
 
-def _residual_score(obs: EdgeObservations, transforms: list) -> float:
-    """Mean residual after ``transforms`` over the edges, each weighted by the square root of its mapping count:
-    what ``values="auto"`` compares (measured to pick the better value space on all six benchmark sets)."""
-    _, after, valid = _edge_residuals(obs, transforms, _lut_size(transforms))
+def _residual_score(obs: EdgeObservations, transforms: list, lut_size: int) -> float:
+    """Mean residual after ``transforms`` over the edges of ``obs``, each weighted by the square root of its mapping
+    count: what ``values="auto"`` compares on its held-out edges."""
+    _, after, valid = _edge_residuals(obs, transforms, lut_size)
     w = np.sqrt(obs.n.astype(np.float64)) * valid
     return float((after * w).sum() / max(w.sum(), 1e-300))
-
-
-def _lut_size(transforms: list) -> int:
-    """Table length of the first lookup-table transform (256 when there is none)."""
-    return next((tr.lut.shape[1] for tr in transforms if isinstance(tr, LutTransform)), 256)
 
 
 def _record_residuals(ctx: CorrectionContext, obs: EdgeObservations, transforms: list) -> None:
@@ -337,10 +340,10 @@ def method_seqcc_global(
         if held.any():
             fit = own_obs.subset(~held)
             tried = {sp: _solve(ctx, fit, sequential, space=sp, **opts) for sp in ("sequential", "own")}
-            scores = {sp: _residual_score(own_obs.subset(held), out) for sp, out in tried.items()}
+            scores = {sp: _residual_score(own_obs.subset(held), out, ctx.lut_size) for sp, out in tried.items()}
         else:
             tried = {sp: _solve(ctx, own_obs, sequential, space=sp, **opts) for sp in ("sequential", "own")}
-            scores = {sp: _residual_score(own_obs, out) for sp, out in tried.items()}
+            scores = {sp: _residual_score(own_obs, out, ctx.lut_size) for sp, out in tried.items()}
         chosen = min(scores, key=lambda sp: (scores[sp], sp != "sequential"))
         logger.info("seqcc-global: values='auto' chose the %s values (edge residuals after: %s; %d held out)", chosen,
                     ", ".join(f"{sp} {sc:.3f}" for sp, sc in scores.items()), int(held.sum()))
