@@ -463,10 +463,10 @@ def test_responses_continue_above_their_data_along_their_slope():
     knots = np.linspace(0.0, 1.0, 6)
     phi = np.array([[0.0, 0.1, 0.2, 0.3, 0.25, 0.2],    # top latent 0.5: knots 0.8 and 1.0 are free
                     [0.0, 0.3, 0.35, 0.4, 0.1, 0.1],    # last segment shallower than the mean: the mean slope
-                    [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]])    # no rows: unchanged
+                    [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]])    # no rows (top -1): unchanged
     top = _highest_latent(np.array([0.5, 0.2, 0.45, 0.9]), np.array([0, 0, 1, -1]), 3)
     np.testing.assert_allclose(top, [0.5, 0.45, -1.0])
-    out = _continue_above_data(phi, knots, np.array([True, True, False]), top)
+    out = _continue_above_data(phi, knots, top)
     np.testing.assert_allclose(out[0], [0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
     mean = 0.4 / 0.6
     np.testing.assert_allclose(out[1], [0.0, 0.3, 0.35, 0.4, 0.4 + 0.2 * mean, 0.4 + 0.4 * mean])

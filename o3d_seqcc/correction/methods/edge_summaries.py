@@ -308,7 +308,7 @@ def edge_observations(
         toward that view (:func:`~o3d_seqcc.correction.methods.value_space.histogram_normalisers_from_colours`),
         before that summary's outlier pass, so that it does not move with any view's monotone change of its
         values; the normalisers are kept in its :attr:`EdgeObservations.normalisers`, what was censored in its
-        :attr:`EdgeObservations.seen`. : int or None, default None
+        :attr:`EdgeObservations.seen`.
         Threads of the local executor (joblib semantics: None = the active
         ``joblib.parallel_config`` or 1, -1 = all cores). The colours are sampled by one task
         per view on the active executor (:mod:`o3d_seqcc._shared.parallel`: its image read once, at

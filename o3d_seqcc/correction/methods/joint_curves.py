@@ -102,17 +102,18 @@ def _highest_latent(u_rows: np.ndarray, r_col: np.ndarray, F: int) -> np.ndarray
     return out
 
 
-def _continue_above_data(phi: np.ndarray, knots: np.ndarray, has_rows: np.ndarray, top: np.ndarray) -> np.ndarray:
+def _continue_above_data(phi: np.ndarray, knots: np.ndarray, top: np.ndarray) -> np.ndarray:
     """Responses (F, K) continued above the knots their data reached: a knot above the segment that holds a view's
     highest latent ``top`` is constrained by nothing but the smoothing, which Levenberg-Marquardt's damping leaves
     near its start (measured on Fountain: a response falling from 149 to 99 above its data, whose monotone
     projection then flattened its supported top and made the correction a cliff to white). Those knots follow the
     straight line from the last supported knot, as steep as the last supported segment or as the response's mean
     slope up to there, whichever is steeper (a view whose top fell short of the reference's does not become a
-    cliff to white), and at least a quarter as steep as the reference."""
+    cliff to white), and at least a quarter as steep as the reference. Rows whose ``top`` is negative (no data)
+    are left as they are."""
     out = phi.copy()
     K = knots.size
-    for i in np.flatnonzero(has_rows & (top >= 0)):
+    for i in np.flatnonzero(top >= 0):
         k = int(min(max(np.searchsorted(knots, top[i], side="left"), 1), K - 1))  # upper knot of top's segment
         if k >= K - 1:
             continue
@@ -587,7 +588,6 @@ def _adjust_channel(
     r = state[0]
     logger.debug("refine_curves: channel %d: %d of %d latents at 0, %d at 1", channel, int((u <= 0).sum()), u.size, int((u >= 1).sum()))
     residual = np.sqrt(np.bincount(r_edge, weights=r * r, minlength=E) / np.maximum(rows_per_edge, 1.0))
-    phi[free] = _monotone(_continue_above_data(phi[free], uk, np.bincount(np.maximum(r_col, 0), minlength=F)[:F] > 0,
-                                               _highest_latent(u[r_lat], r_col, F)))
+    phi[free] = _monotone(_continue_above_data(phi[free], uk, _highest_latent(u[r_lat], r_col, F)))
     return phi, residual, ew
 
