@@ -240,7 +240,8 @@ def _registry() -> Registry[MeshLabFilter]:
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
         "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
-        "overflow": "When the atlas is full", "power_of_two": "Power-of-two atlas", "merge_charts": "Merge tiny charts",
+        "overflow": "When the atlas is full", "power_of_two": "Power-of-two atlas",
+        "shrink_to_fit": "Density drop to keep a power of two", "merge_charts": "Merge tiny charts",
         "fill_background": "Fill the background", "leveling": "Global seam leveling",
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",

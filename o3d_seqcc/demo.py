@@ -172,8 +172,9 @@ def run_demo(
         "selection": res.settings.selection, "transitions": res.selection_stats["transitions"],
         "faces": res.selection_stats["faces"], "unseen_faces": res.selection_stats["unseen_faces"],
         **{k: res.selection_stats[k] for k in ("input_faces", "unseen_input_faces", "unseen_area")},
-        "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "pages", "texels_per_pixel", "charts", "coverage",
-                                                      "utilization")},
+        "atlas": {k: res.textured.stats[k] for k in ("atlas_size", "page_width", "page_height", "pages",
+                                                      "texels_per_pixel", "charts", "coverage", "utilization")},
+        "texture_memory_bytes": res.textured.stats["texture_memory"]["gpu_bytes"],
         "seams": None if res.seams is None else res.seams.to_dict(),
         # what the correction bought at the seams: the colour steps in the photos as taken and corrected (the
         # report measured them; the seam metric of the levelled texture is about the same either way)

@@ -187,16 +187,22 @@ def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
     d = _DEFAULTS
     p.add_argument("--atlas-size", default=d.atlas_size, metavar="auto|N",
                    help=f"atlas side (default {d.atlas_size}: sized to the charts at the photos' resolution, pages of "
-                   "up to 8192^2); N: the largest side in texels, a budget: the atlas is the smallest power of two up "
-                   "to it that holds the charts at --texels-per-pixel")
+                   "up to 8192^2); N: the largest side in texels, a budget: the page is the smallest that holds the "
+                   "charts at --texels-per-pixel within N x N")
     p.add_argument("--texels-per-pixel", default=d.texels_per_pixel, metavar="auto|T",
                    help="texel density, atlas texels per photo pixel (default auto: the photos' resolution, 1, each "
                    "texel a copy of a photo pixel; lowered only by an --atlas-size budget)")
     p.add_argument("--atlas-overflow", dest="overflow", choices=OVERFLOWS, default=d.overflow,
                    help="when the charts do not fit an --atlas-size budget at that density: scale the density down (default, "
                    "a warning gives the factor) or write several atlas pages (one material each)")
-    p.add_argument("--no-power-of-two", dest="power_of_two", action="store_false",
-                   help="atlas sides need not be powers of two (multiples of 4, as small as the charts allow)")
+    p.add_argument("--power-of-two", dest="power_of_two", action=argparse.BooleanOptionalAction,
+                   default=d.power_of_two,
+                   help="square pages whose side is a power of two, for engines that want one (default: one page cut "
+                   "to the charts, its sides multiples of 4 for block compression)")
+    p.add_argument("--shrink-to-fit", type=float, default=d.shrink_to_fit, metavar="F",
+                   help="with --power-of-two: accept a texel density up to this share lower (e.g. 0.05) to keep the "
+                   "charts on the power of two below the one they need; reported in report.json (density_scale) and "
+                   "warned (default 0: never)")
     p.add_argument("--padding", type=int, default=d.padding,
                    help=f"texels of gutter (the photo around the chart) between charts, mip-safe to level 2 at the "
                    f"default {d.padding}")
@@ -316,6 +322,7 @@ def print_run_summary(res, out: Path) -> None:
         print(f"corrected {len(names)} views with {c.method} toward {names[c.reference]} ({len(c.unreachable)} unreachable)")
     st = tm.stats
     pages = f"{tm.pages} pages of " if tm.pages > 1 else ""
+    mem = st.get("texture_memory") or {}
     if s.get("split_input_faces"):
         split = (f"textured {s['input_faces']} faces ({s['split_input_faces']} split into parts: {s['faces']} out; "
                  f"{s['unseen_input_faces']} unseen, {s['partly_seen_input_faces']} partly: "
@@ -324,8 +331,12 @@ def print_run_summary(res, out: Path) -> None:
         split = (f"textured {s['faces']} faces ({s['unseen_faces']} unseen: {100 * s.get('unseen_area', 0.0):.1f}% of "
                  "the surface, ")
     print(split + f"{s['transitions']} image transitions, "
-          f"{st['charts']} charts, atlas {pages}{tm.atlas_size}^2 at {st.get('texels_per_pixel', 1.0):.2f} texels/pixel, "
-          f"{100 * st.get('coverage', 0.0):.0f}% covered) in {res.timings['total']:.2f} s -> {out}")
+          f"{st['charts']} charts, atlas {pages}{tm.page_shape[1]}x{tm.page_shape[0]} at "
+          f"{st.get('texels_per_pixel', 1.0):.2f} texels/pixel, {100 * st.get('coverage', 0.0):.0f}% covered) in "
+          f"{res.timings['total']:.2f} s -> {out}")
+    if mem:
+        print(f"texture memory: {mem['gpu_bytes'] / 2**20:.1f} MiB on the GPU (RGBA8 with mipmaps, "
+              f"{len(mem['pages'])} page(s))")
     if res.seams is not None:
         print(f"seams: mean {res.seams.mean:.2f}, p99 {res.seams.p99:.2f}, >5: {res.seams.frac_above_5:.3f}")
     print("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items()))

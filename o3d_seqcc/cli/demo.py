@@ -33,8 +33,9 @@ def _print_summary(res) -> None:
         _print_photometric(s["summary"])
     run_ = s["run"]
     print(f"run: reference {run_['reference']}, {run_['faces'] - run_['unseen_faces']} of {run_['faces']} faces "
-          f"textured from the photos, atlas {run_['atlas']['atlas_size']}^2 with {run_['atlas']['charts']} charts "
-          f"({100 * run_['atlas']['coverage']:.0f}% covered); "
+          f"textured from the photos, atlas {run_['atlas']['page_width']}x{run_['atlas']['page_height']} with "
+          f"{run_['atlas']['charts']} charts ({100 * run_['atlas']['coverage']:.0f}% covered, "
+          f"{run_['texture_memory_bytes'] / 2**20:.1f} MiB of GPU memory); "
           f"outputs in {res.out / 'run'}: {', '.join(run_['outputs'])}")
     steps, seams = run_.get("selection_seams"), run_["seams"]
     if steps:

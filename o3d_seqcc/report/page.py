@@ -462,8 +462,10 @@ table.kv th{text-align:left;font-weight:normal;color:#444}.note{font-size:12.5px
 .legend{list-style:none;padding:0;margin:0;font-size:12px;columns:2}.sw{display:inline-block;width:12px;height:12px;
 margin-right:5px;vertical-align:middle;border:1px solid #999}details{margin:6px 0}code{font-size:12px}
 .tables{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}th.group{text-align:left;font-weight:bold}
-.viewer canvas{display:block;width:100%;height:520px;background:#f2f2f2;border:1px solid #ddd;border-radius:4px;
-touch-action:none}.viewer-modes{display:flex;flex-wrap:wrap;gap:14px;margin:6px 0;font-size:13px}
+.viewer{position:relative}.viewer canvas{display:block;width:100%;height:520px;background:#f2f2f2;
+border:1px solid #ddd;border-radius:4px;touch-action:none}.viewer-loading{position:absolute;left:0;right:0;top:0;
+height:520px;display:flex;align-items:center;justify-content:center;font-size:15px;color:#555;pointer-events:none}
+.viewer:not([data-state="loading"]) .viewer-loading{display:none}.viewer-modes{display:flex;flex-wrap:wrap;gap:14px;margin:6px 0;font-size:13px}
 .callout{background:#fff8e1;border:1px solid #e8c65a;border-radius:4px;padding:6px 10px;max-width:1100px;
 font-size:13px}.closeup .row figure{max-width:330px}.scale{display:flex;align-items:flex-start;gap:10px;font-size:12px;
 margin:6px 0}.scale .bar{display:block;width:240px;height:12px;border:1px solid #999}.scale .ticks{display:flex;
@@ -562,7 +564,15 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
     a = inp.rep.get("atlas") or {}
     if a.get("atlas_size"):
         pages = int(a.get("pages", 1))
-        cards.append(("texture atlas" + (f", {pages} pages" if pages > 1 else ""), f"{a['atlas_size']}²"))
+        w, h = a.get("page_width") or a["atlas_size"], a.get("page_height") or a["atlas_size"]
+        cards.append(("texture atlas" + (f", {pages} pages" if pages > 1 else ""), f"{w} × {h}"))
+        mem = a.get("texture_memory")
+        if mem:
+            cards.append(("GPU texture memory (RGBA8, mipmaps)", f"{mem['gpu_bytes'] / 2**20:.1f} MiB"))
+            if len(mem["pages"]) > 1:
+                for i, pg in enumerate(mem["pages"]):
+                    cards.append((f"atlas page {i + 1}", f"{pg['width']} × {pg['height']}, {100 * pg['coverage']:.0f} % "
+                                  f"covered, {pg['gpu_bytes'] / 2**20:.1f} MiB"))
         if a.get("texels_per_pixel") is not None:
             cards.append(("atlas texels per photo pixel", _num(a["texels_per_pixel"])))
         if a.get("coverage") is not None:

@@ -8,9 +8,10 @@
    welded into a neighbouring chart or into one shared fallback region; tiny charts merged
    into a neighbour's parametrisation;
 2. **packing** (:mod:`~o3d_seqcc.texturing.packing`): xatlas places the charts (turned by 90
-   degrees at most, at ``padding`` texels from each other) in the smallest power-of-two page that
-   holds them at the photos' resolution (``atlas_size="auto"``: up to 8192 x 8192, then more
-   pages; an integer is a budget: when it cannot hold them, the density is scaled down, logged
+   degrees at most, at ``padding`` texels from each other) on one page cut to them at the photos'
+   resolution, its sides multiples of 4 (or the smallest power-of-two square with
+   ``power_of_two``; ``atlas_size="auto"``: up to 8192 x 8192, then more square pages; an
+   integer is a budget: when it cannot hold them, the density is scaled down, logged
    with the factor, or several pages are written); every chart's texel grid is its photo's
    pixel grid, moved by whole texels;
 3. **bake by sampling** (:mod:`~o3d_seqcc.texturing.bake`): every texel inside a face samples
@@ -53,6 +54,7 @@ from .bake import (bary_coefficients, edge_texels, gutter_owner, rasterize_owner
 from .charts import build_charts
 from .fill import push_pull_fill
 from .fallback import fallback_corner_colors
+from .memory import texture_memory
 from .leveling import corner_colors, local_seam_leveling, solve_corner_offsets
 from .packing_child import pack_charts_beside
 from .settings import TextureSettings, VisibilityLike
@@ -358,7 +360,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     # xatlas packs in a child process while the seam leveling is solved here (neither needs the other)
     packing = pack_charts_beside(cs.uv, cs.faces, cs.face_chart, beside=threads > 1, atlas_size=s.atlas_size,
                                  texels_per_pixel=s.texels_per_pixel, overflow=s.overflow, padding=int(s.padding),
-                                 power_of_two=bool(s.power_of_two))
+                                 power_of_two=bool(s.power_of_two), shrink_to_fit=float(s.shrink_to_fit))
     step("seam leveling")
     seen = labels >= 0
     cache = LRUCache(default_cache_bytes())
@@ -384,26 +386,26 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     t_level = time.perf_counter()
     step("pack")
     pk = packing.result()
-    S, P = pk.size, pk.pages
-    H = P * S
+    W, Hp, P = pk.width, pk.height, pk.pages
+    H = P * Hp
     ctxy = pk.txy.copy()
-    ctxy[:, 1] += pk.page * S  # pages stacked vertically
+    ctxy[:, 1] += pk.page * Hp  # pages stacked vertically
     t_pack = time.perf_counter()
     step("rasterize")
     # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
-    owner = rasterize_owner(ctxy, cs.faces, H, S, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
+    owner = rasterize_owner(ctxy, cs.faces, H, W, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
                             threads=threads)
-    eidx, eface = edge_texels(ctxy, cs.faces, None, H, S, free=owner == -1)  # slivers own the texels under their edges
+    eidx, eface = edge_texels(ctxy, cs.faces, None, H, W, free=owner == -1)  # slivers own the texels under their edges
     owner[eidx] = -2 - eface.astype(np.int32)
     del eidx, eface
     if s.padding > 0:
-        gidx, gface = gutter_owner(owner, H, S, float(s.padding) + 1.0, threads=threads)
+        gidx, gface = gutter_owner(owner, H, W, float(s.padding) + 1.0, threads=threads)
         owner[gidx] = -2 - gface.astype(np.int32)
         del gidx, gface
     release_free_memory()
     t_raster = time.perf_counter()
     step("sample")
-    tex = np.zeros((H, S, 3), dtype=np.uint8)
+    tex = np.zeros((H, W, 3), dtype=np.uint8)
     _texel_pass(tex, owner, ctxy, cs.faces, labels, fuv, views_images,
                 add if corner_off is not None or n_unseen else None, pk.texels_per_pixel, cache, threads)
     del cache, add
@@ -418,7 +420,7 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     elif s.local_leveling:
         region = _regions(owner, cs.face_chart, cs.n_image)
         del owner
-        tex, local_stats = local_seam_leveling(tex, region.reshape(H, S), ctxy, cs.faces, cs.face_chart, labels,
+        tex, local_stats = local_seam_leveling(tex, region.reshape(H, W), ctxy, cs.faces, cs.face_chart, labels,
                                                adjacency, wf, band=int(s.local_band), copy=False)
         del region
         logger.info("bake_texture: local seam leveling, %d seam edges, mean step %.1f levels, %d texels, %.2f s",
@@ -429,9 +431,9 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     owner = None  # the atlas-sized face canvas is done
     release_free_memory()
     if s.fill_background and not written.all():
-        w2 = written.reshape(H, S)
+        w2 = written.reshape(H, W)
         for p in range(P):  # page by page, in place
-            push_pull_fill(tex[p * S:(p + 1) * S], w2[p * S:(p + 1) * S], copy=False, threads=threads)
+            push_pull_fill(tex[p * Hp:(p + 1) * Hp], w2[p * Hp:(p + 1) * Hp], copy=False, threads=threads)
     t_end = time.perf_counter()
     p2 = pk.txy[cs.faces]
     tri = 0.5 * np.abs((p2[:, 1, 0] - p2[:, 0, 0]) * (p2[:, 2, 1] - p2[:, 0, 1])
@@ -439,14 +441,16 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     own = 0.5 * np.abs((fuv[:, 1, 0] - fuv[:, 0, 0]) * (fuv[:, 2, 1] - fuv[:, 0, 1])
                        - (fuv[:, 2, 0] - fuv[:, 0, 0]) * (fuv[:, 1, 1] - fuv[:, 0, 1]))
     sized = seen & (own > 1e-6)
+    page_cover = np.bincount(pk.page[cs.faces[:, 0]], weights=tri, minlength=P) / (W * Hp)
     face_tpp = np.sqrt(tri[sized] / own[sized]) if sized.any() else np.ones(1)
     stats = {
-        "atlas_size": S, "requested_atlas_size": s.atlas_size, "pages": P,
+        "atlas_size": max(W, Hp), "page_width": W, "page_height": Hp, "requested_atlas_size": s.atlas_size,
+        "pages": P, "power_of_two": bool(s.power_of_two), "texture_memory": texture_memory(W, Hp, page_cover),
         "texels_per_pixel": pk.texels_per_pixel, "density_scale": pk.scale, "padding": int(s.padding),
         "face_texels_per_pixel": {"min": float(face_tpp.min()), "p1": float(np.percentile(face_tpp, 1)),
                                   "median": float(np.median(face_tpp)),
                                   "below_1": float(np.mean(face_tpp < 0.999 * pk.texels_per_pixel))},
-        "coverage": float(tri.sum() / (P * S * S)), "utilization": float(n_texels / (P * S * S)),
+        "coverage": float(tri.sum() / (P * W * Hp)), "utilization": float(n_texels / (P * W * Hp)),
         "charts": int(cs.n_image), "fallback_charts": int(cs.stats["fallback_charts"]),
         "absorbed_faces": int(cs.stats["absorbed_faces"]), "merged_tiny_charts": int(cs.stats["merged_tiny_charts"]),
         "fallback": s.fallback, "unseen_faces": n_unseen, "vertices_in": int(len(verts)),
@@ -457,12 +461,12 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
         "time_fill_s": t_end - t_local, "time_total_s": t_end - t0,
     }
     logger.info("bake_texture: %d charts, %d page(s) of %dx%d at %.3g texels/pixel, coverage %.0f%%, %d -> %d vertices "
-                "in %.2f s", cs.n_image, P, S, S, pk.texels_per_pixel, 100 * stats["coverage"], len(verts),
+                "in %.2f s", cs.n_image, P, W, Hp, pk.texels_per_pixel, 100 * stats["coverage"], len(verts),
                 len(cs.vertex_index), stats["time_total_s"])
     v_orig = cs.vertex_index
     return TexturedMesh(
         vertices=verts[v_orig], faces=cs.faces,
-        uv=np.stack([(pk.txy[:, 0] + 0.5) / S, 1.0 - (ctxy[:, 1] + 0.5) / H], axis=1),
+        uv=np.stack([(pk.txy[:, 0] + 0.5) / W, 1.0 - (ctxy[:, 1] + 0.5) / H], axis=1),
         texture=np.ascontiguousarray(tex), normals=normals[v_orig], face_view=np.where(seen, labels, -1),
         vertex_index=v_orig, face_chart=cs.face_chart, pages=P, stats=stats,
     )

@@ -18,15 +18,19 @@ pixel (``t = 1``) a texel centre is then a pixel centre and the bake copies the 
 
 Size (:func:`pack_charts`): with ``atlas_size="auto"`` (the default) the atlas is sized to the
 charts at their photos' resolution (``texels_per_pixel="auto"``: exactly 1, or the number
-asked): one page, the smallest power of two (or multiple of 4 with ``power_of_two=False``) that
-holds them, up to :data:`MAX_AUTO_ATLAS_SIZE`; beyond that, as many pages of that size as
-needed. An integer ``atlas_size`` N is a budget, a maximum: the page is the smallest side <= N
-that holds the charts at the asked density (never raised to fill the page: a texel between photo
-pixels blurs the photo once more in every render); when even N cannot hold the charts at that
-density, ``overflow="scale"`` lowers the density (a warning gives the factor) and
-``overflow="pages"`` keeps it and writes several N x N pages. Charts are never resized silently:
-a chart xatlas would have to shrink to fit a page lowers the density of the whole atlas instead
-(with a warning).
+asked). By default (``power_of_two=False``) it is one page cut to them: the rectangle their
+placement without a size limit reaches, with their gutters, each side rounded up to a multiple of
+4 (:func:`tight_side`, as block compression needs), and no xatlas call but that placement's. With
+``power_of_two=True`` it is the smallest square power-of-two page that holds them
+(``shrink_to_fit``: or the one below it at a density at most that share lower, with a warning).
+Up to :data:`MAX_AUTO_ATLAS_SIZE`; beyond that, as many square pages of that size as needed. An
+integer ``atlas_size`` N is a budget, a maximum: the page is the smallest that holds the charts at
+the asked density within N x N (never raised to fill the page: a texel between photo pixels
+blurs the photo once more in every render); when even N cannot hold the charts at that density,
+``overflow="scale"`` lowers the density (a warning gives the factor; the page then cut to the
+charts unless ``power_of_two``) and ``overflow="pages"`` keeps it and writes several N x N
+pages. Charts are never resized silently: a chart xatlas would have to shrink to fit a page
+lowers the density of the whole atlas instead (with a warning).
 """
 
 from __future__ import annotations
@@ -46,6 +50,8 @@ logger = logging.getLogger(__name__)
 
 #: ``atlas_size="auto"``: the largest page; more pages of this side beyond it
 MAX_AUTO_ATLAS_SIZE = 8192
+#: page sides are multiples of this (BC / ASTC 4x4 / ETC block compression)
+BLOCK = 4
 #: xatlas's marker of an unassigned vertex / chart
 _NONE = np.iinfo(np.uint32).max
 
@@ -60,8 +66,9 @@ class Packing:
         Texel coordinates in the vertex's page (x right, y down, texel centres at integers).
     page : (M,) int64
         Page of every vertex.
-    size : int
-        Side of every (square) page in texels.
+    width, height : int
+        Size of every page in texels: square pages (powers of two, or under a budget with several
+        pages), or one page cut to its charts (``power_of_two=False``: sides multiples of 4).
     pages : int
     texels_per_pixel : float
         The density used: atlas texels per source pixel.
@@ -77,13 +84,25 @@ class Packing:
 
     txy: np.ndarray
     page: np.ndarray
-    size: int
+    width: int
+    height: int
     pages: int
     texels_per_pixel: float
     requested: float
     scale: float = 1.0
     utilization: list = field(default_factory=list)
     log: list = field(default_factory=list)
+
+    @property
+    def size(self) -> int:
+        """The larger side of a page (what an ``atlas_size`` budget bounds)."""
+        return max(self.width, self.height)
+
+
+def tight_side(extent: float, padding: int) -> int:
+    """A page side that holds charts reaching texel coordinate ``extent`` (centres at integers) and their
+    gutters (``padding`` + the texel bilinear filtering reads): a multiple of 4, as block compression needs."""
+    return int(BLOCK * math.ceil((float(extent) + int(padding) + 2.0) / BLOCK))
 
 
 class _Packer:
@@ -281,7 +300,9 @@ def _aligned(pk: _Packer, txy: np.ndarray, placed: np.ndarray, t: float, size: i
     return out
 
 
-def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
+def _result(a, pk: _Packer, t: float, requested: float, size: int, *, tight: bool = False) -> Packing:
+    """The :class:`Packing` of xatlas's ``a`` on pages of side ``size``; ``tight``: one page cut to its charts and
+    their gutters (:func:`tight_side`, at most ``size``), the placement unchanged."""
     _, ind, uv = a[0]
     page, _ = a.get_mesh_vertex_assignment(0)
     page = page.astype(np.int64)
@@ -308,17 +329,24 @@ def _result(a, pk: _Packer, t: float, requested: float, size: int) -> Packing:
                 page[fv[m]] = page[other]
         page[page >= _NONE] = 0
         txy[~np.isfinite(txy).all(axis=1)] = 0.0
-    return Packing(txy=txy, page=page, size=int(size), pages=int(a.atlas_count), texels_per_pixel=float(t),
+    width = height = int(size)
+    util = [float(a.get_utilization(i)) for i in range(a.atlas_count)]
+    if tight and a.atlas_count == 1 and len(txy):
+        width, height = (min(int(size), tight_side(float(txy[:, k].max()), pk.padding)) for k in (0, 1))
+        util = [util[0] * size * size / (width * height)]
+        pk.log.append(f"page cut to its charts: {width}x{height}")
+    return Packing(txy=txy, page=page, width=width, height=height, pages=int(a.atlas_count), texels_per_pixel=float(t),
                    requested=float(requested), scale=float(t / requested) if t < requested * 0.999 else 1.0,
-                   utilization=[float(a.get_utilization(i)) for i in range(a.atlas_count)], log=pk.log)
+                   utilization=util, log=pk.log)
 
 
 def pack_charts(
     uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int | str = TextureSettings.atlas_size,
     texels_per_pixel: float | str = TextureSettings.texels_per_pixel, overflow: str = TextureSettings.overflow,
     padding: int = TextureSettings.padding, power_of_two: bool = TextureSettings.power_of_two,
+    shrink_to_fit: float = TextureSettings.shrink_to_fit,
 ) -> Packing:
-    """Pack charts into square pages, sized to them or of at most ``atlas_size`` (see the module docstring).
+    """Pack charts into pages sized to them or of at most ``atlas_size`` (see the module docstring).
 
     Parameters
     ----------
@@ -340,8 +368,14 @@ def pack_charts(
     padding : int, default 4
         Texels between a chart and its neighbours' padding (the gap between two charts is
         twice this).
-    power_of_two : bool, default True
-        Page sides are powers of two.
+    power_of_two : bool, default False
+        Square pages whose side is a power of two; False: one page cut to the charts, its sides
+        multiples of 4 (several square pages when they need more than ``atlas_size`` or
+        :data:`MAX_AUTO_ATLAS_SIZE`).
+    shrink_to_fit : float, default 0.0
+        With ``power_of_two``: the largest density reduction (a share, < 0.5) accepted to keep the
+        charts on the power of two below the one they need at the asked density (a warning gives
+        the factor; ``stats["density_scale"]`` records it). 0: never.
 
     Returns
     -------
@@ -355,11 +389,11 @@ def pack_charts(
         not fit the largest atlas.
     """
     return _pack_charts(uv, faces, chart, atlas_size=atlas_size, texels_per_pixel=texels_per_pixel, overflow=overflow,
-                        padding=padding, power_of_two=power_of_two)
+                        padding=padding, power_of_two=power_of_two, shrink_to_fit=shrink_to_fit)
 
 
 def _pack_charts(uv, faces, chart, *, atlas_size, texels_per_pixel, overflow, padding, power_of_two,
-                 speculate=None) -> Packing:
+                 shrink_to_fit=TextureSettings.shrink_to_fit, speculate=None) -> Packing:
     """:func:`pack_charts`; ``speculate(packer, t, N, power_of_two)``, given a spare core: the page a sure second
     xatlas call will pack, packed in a child process from the start, or None
     (:func:`~o3d_seqcc.texturing.packing_child.speculative_page`): the same packing sooner."""
@@ -374,13 +408,31 @@ def _pack_charts(uv, faces, chart, *, atlas_size, texels_per_pixel, overflow, pa
     pk = _Packer(uv, faces, chart, padding)
     spec = speculate(pk, req, N, power_of_two) if speculate is not None else None
     try:
-        return _pack_sized(pk, req, N, overflow, power_of_two, padding, spec)
+        return _pack_sized(pk, req, N, overflow, power_of_two, padding, spec, shrink_to_fit)
     finally:
         if spec is not None:
             spec.cancel()
 
 
-def _pack_sized(pk: _Packer, req: float, N: int, overflow: str, power_of_two: bool, padding: int, spec) -> Packing:
+def _shrunk_onto(pk: _Packer, req: float, size: int, start: float, most: float) -> Packing | None:
+    """The charts on a page of side ``size`` at a density reduced by at most ``most`` (from ``start`` down in steps
+    of 1 %), with a warning giving the factor; None when even that density does not fit."""
+    t = min(req, start)
+    while t >= req * (1.0 - most) - 1e-12:
+        a, ok = pk.attempt(t, size)
+        if ok:
+            msg = (f"shrink_to_fit: the charts take a {size}x{size} page at {t:.3g} texels per pixel (density scaled "
+                   f"by {t / req:.3f} from {req:g}) instead of a page of twice that side")
+            logger.warning(msg)
+            warn(msg)
+            return _result(a, pk, t, req, size)
+        t *= 0.99
+    pk.log.append(f"shrink_to_fit: no {size}x{size} page within {most:.0%} of {req:g} texels per pixel")
+    return None
+
+
+def _pack_sized(pk: _Packer, req: float, N: int, overflow: str, power_of_two: bool, padding: int, spec,
+                shrink_to_fit: float = TextureSettings.shrink_to_fit) -> Packing:
     # the charts at the asked density without a size limit (its placement serves any page it fits, see unlimited)
     free = pk.unlimited(req)
     if free is None:
@@ -396,7 +448,19 @@ def _pack_sized(pk: _Packer, req: float, N: int, overflow: str, power_of_two: bo
     def fill(size: int) -> float:  # the density that fills a page of this side (estimate)
         return math.sqrt(size * size / area_1) * 0.98
 
+    if not power_of_two:  # one page cut to the charts: their placement without a limit, no other xatlas call
+        side = tight_side(max(tw, th), padding)
+        if side <= N:
+            a = _OnPage(big, R, side) if free is not None else tight
+            if not pk.shrunk(a, req):
+                pk.log.append(f"t={req:.4f}: the unlimited placement")
+                logger.info("packing: the charts' own page at %.3g texels per pixel", req)
+                return _result(a, pk, req, req, side, tight=True)
     k = next((i for i, s_ in enumerate(sizes) if fill(s_) >= req), len(sizes) - 1)
+    if power_of_two and shrink_to_fit > 0 and 0 < k and fill(sizes[k - 1]) >= req * (1.0 - shrink_to_fit):
+        smaller = _shrunk_onto(pk, req, sizes[k - 1], fill(sizes[k - 1]), shrink_to_fit)
+        if smaller is not None:
+            return smaller
     t = min(req, fill(sizes[k]))
     for _ in range(60):
         if t < req * 0.999 and k == len(sizes) - 1 and overflow == "pages":
@@ -419,7 +483,7 @@ def _pack_sized(pk: _Packer, req: float, N: int, overflow: str, power_of_two: bo
                 warn(msg)
             logger.info("packing: %dx%d atlas at %.3g texels per pixel (%d attempts)", sizes[k], sizes[k], t,
                         len(pk.log) - 1)
-            return _result(a, pk, t, req, sizes[k])
+            return _result(a, pk, t, req, sizes[k], tight=not power_of_two)
         # the next try: several pages -> shrink by their total use, else a few percent
         used = sum(a.get_utilization(i) for i in range(a.atlas_count))
         shrink = float(np.clip(math.sqrt(0.95 / used), 0.5, 0.95)) if a.atlas_count > 1 and used > 0 else 0.95

@@ -81,7 +81,7 @@ def pack_speculating(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, **opt
 
 
 #: the options of :func:`pack_charts` (their defaults: :class:`TextureSettings`')
-_OPTIONS = ("atlas_size", "texels_per_pixel", "overflow", "padding", "power_of_two")
+_OPTIONS = ("atlas_size", "texels_per_pixel", "overflow", "padding", "power_of_two", "shrink_to_fit")
 
 
 def _beside(function: str, args: tuple, kwargs: dict, inline, *, sent: bool = False) -> _Packed:

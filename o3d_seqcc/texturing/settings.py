@@ -64,12 +64,12 @@ class TextureSettings(SettingsBase):
         ``"gauss-damping"`` (down-weight) test an iterated Gaussian of the colours (faces seen
         by at least 4; a minority of 2 in 5 is not found).
     atlas_size : int or "auto", default "auto"
-        ``"auto"``: the atlas is sized to the charts at the photos' own resolution: one square
-        page, the smallest power of two that holds them, up to 8192 x 8192, and more pages of
-        8192 x 8192 beyond (:data:`~o3d_seqcc.texturing.packing.MAX_AUTO_ATLAS_SIZE`). An
-        integer: the largest side of the (square) atlas in texels, a budget (e.g. a game
-        engine's), never exceeded: the atlas is the smallest power of two up to it that holds
-        the charts (see ``texels_per_pixel`` and ``overflow``).
+        ``"auto"``: the atlas is sized to the charts at the photos' own resolution: one page cut
+        to them (see ``power_of_two``), up to 8192 x 8192, and more square pages of 8192 x 8192
+        beyond (:data:`~o3d_seqcc.texturing.packing.MAX_AUTO_ATLAS_SIZE`). An integer: the
+        largest side of a page in texels, a budget (e.g. a game engine's), never exceeded: the
+        page is the smallest that holds the charts within it (see ``texels_per_pixel`` and
+        ``overflow``).
     texels_per_pixel : float or "auto", default "auto"
         Texel density, atlas texels per photo pixel. ``"auto"``: the photos' own resolution, 1
         (every texel a copy of a photo pixel; lowered only by an ``atlas_size`` budget with
@@ -79,8 +79,15 @@ class TextureSettings(SettingsBase):
         With an ``atlas_size`` budget, when the charts do not fit it at the asked density (1 for
         ``"auto"``): lower the density (a warning gives the factor), or write several atlas pages
         of ``atlas_size`` (one material each). ``atlas_size="auto"`` always adds pages.
-    power_of_two : bool, default True
-        Atlas sides are powers of two (``False``: multiples of 4, as small as the charts allow).
+    power_of_two : bool, default False
+        Square pages whose side is a power of two (for engines that want one). ``False``: one
+        page cut to the charts, its sides multiples of 4 (block compression's 4 x 4 blocks), and
+        several square pages only when the charts need more than the largest page.
+    shrink_to_fit : float, default 0.0
+        With ``power_of_two``: the largest share (< 0.5) by which the texel density may drop to
+        keep the charts on the power of two below the one they need (e.g. 0.05 when they overflow
+        2048 by a few percent); a warning gives the factor and ``stats["density_scale"]`` records
+        it. 0: the density is never lowered for this.
     padding : int, default 4
         Texels around every chart that hold its gutter (the photo's content around the chart),
         so that bilinear filtering and mip levels 1-2 do not bleed the next chart in; two
@@ -114,7 +121,8 @@ class TextureSettings(SettingsBase):
     atlas_size: int | str = "auto"
     texels_per_pixel: float | str = "auto"
     overflow: str = "scale"
-    power_of_two: bool = True
+    power_of_two: bool = False
+    shrink_to_fit: float = 0.0
     padding: int = 4
     merge_charts: int = 3
     fill_background: bool = True
@@ -134,6 +142,8 @@ class TextureSettings(SettingsBase):
         check_choice("overflow", self.overflow, OVERFLOWS, flag="--atlas-overflow")
         object.__setattr__(self, "atlas_size", parse_atlas_size(self.atlas_size))
         object.__setattr__(self, "texels_per_pixel", parse_texels_per_pixel(self.texels_per_pixel))
+        if not 0.0 <= float(self.shrink_to_fit) < 0.5:
+            raise InputError(f"shrink_to_fit must be a share in [0, 0.5) (--shrink-to-fit), got {self.shrink_to_fit}")
         if isinstance(self.padding, bool) or int(self.padding) != self.padding or not 0 <= self.padding <= 64:
             raise InputError(f"padding must be an integer in 0..64, got {self.padding}")
         if isinstance(self.merge_charts, bool) or int(self.merge_charts) != self.merge_charts or self.merge_charts < 0:

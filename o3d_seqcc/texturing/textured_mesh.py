@@ -7,7 +7,7 @@ top of the image) of a W x H texture is at ``((X + 0.5) / W, 1 - (Y + 0.5) / H)`
 top-left: :mod:`o3d_seqcc.io.export` writes ``(u, 1 - v)`` there.
 
 A :class:`TexturedMesh` holds either a texture atlas with per-vertex UVs (vertices duplicated
-along UV seams), or per-vertex colours. An atlas of several square pages is held as one image
+along UV seams), or per-vertex colours. An atlas of several pages is held as one image
 with the pages stacked vertically (``pages`` > 1; UVs refer to that image, so every reader of
 ``texture`` and ``uv`` works unchanged); :meth:`TexturedMesh.page_textures` and
 :meth:`TexturedMesh.page_uv` give the pages and the page-local UVs the exporters write. It converts to Open3D (:meth:`TexturedMesh.to_open3d`,
@@ -83,13 +83,18 @@ class TexturedMesh:
 
     @property
     def atlas_size(self) -> int:
-        """Side of the (square) texture, or of each page, in texels (the height of a non-square single page)."""
+        """The larger side of a page in texels (what an ``atlas_size`` budget bounds)."""
+        return max(self.page_shape)
+
+    @property
+    def page_shape(self) -> tuple[int, int]:
+        """``(height, width)`` of every page in texels (pages are stacked vertically in ``texture``)."""
         if self.texture is None:
             raise InputError("this mesh has no texture")
-        return int(self.texture.shape[1] if self.pages > 1 else self.texture.shape[0])
+        return int(self.texture.shape[0]) // max(int(self.pages), 1), int(self.texture.shape[1])
 
     def page_textures(self) -> list[np.ndarray]:
-        """The atlas pages, each (S, S, 3) (views into ``texture``)."""
+        """The atlas pages, each (H, W, 3) (views into ``texture``; :attr:`page_shape`)."""
         if self.texture is None:
             raise InputError("this mesh has no texture")
         h = self.texture.shape[0] // max(int(self.pages), 1)

@@ -143,7 +143,9 @@ def test_the_report_shows_this_run(run_dir, scene):
     assert f"{rep['seams']['mean']:.3f}" in sec["seams"]
     # the atlas facts of report.json in the summary cards
     a = rep["atlas"]
-    assert f"<span>texture atlas</span><b>{a['atlas_size']}²</b>" in page
+    assert f"<span>texture atlas</span><b>{a['page_width']} × {a['page_height']}</b>" in page
+    mib = a["texture_memory"]["gpu_bytes"] / 2**20
+    assert f"<span>GPU texture memory (RGBA8, mipmaps)</span><b>{mib:.1f} MiB</b>" in page
     assert f"<span>atlas covered by triangles</span><b>{100 * a['coverage']:.0f} %</b>" in page
 
 

@@ -31,12 +31,13 @@ def _needs_validator():
 # ------------------------------------------------------------------------------ packing
 
 
-def test_pack_synthetic_charts_exact_aligned_and_apart(rng):
-    """60 charts (random quads of 2-40 px at fractional positions, two triangles each): one page, the
-    smallest power of two that holds them at exactly one texel per pixel; every chart is its photo
-    coordinates moved by whole texels (x and y at most swapped: the texel grid is the pixel grid,
-    nothing resampled or stretched); no texel is covered by two charts and charts are at least
-    2 x padding texels apart."""
+@pytest.mark.parametrize("power_of_two", [False, True])
+def test_pack_synthetic_charts_exact_aligned_and_apart(rng, power_of_two):
+    """60 charts (random quads of 2-40 px at fractional positions, two triangles each): one page at exactly
+    one texel per pixel, cut to the charts (sides multiples of 4, holding every chart and its gutter) or the
+    smallest power of two that holds them; every chart is its photo coordinates moved by whole texels (x and y
+    at most swapped: the texel grid is the pixel grid, nothing resampled or stretched); no texel is covered by
+    two charts and charts are at least 2 x padding texels apart."""
     import cv2
 
     n, pad = 60, 2
@@ -47,26 +48,35 @@ def test_pack_synthetic_charts_exact_aligned_and_apart(rng):
     base = 4 * np.arange(n)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
     chart = np.r_[np.arange(n), np.arange(n)]
-    pk = pack_charts(uv, faces, chart, atlas_size="auto", padding=pad)
-    S, t = pk.size, pk.texels_per_pixel
-    assert pk.pages == 1 and S & (S - 1) == 0 and t == 1.0
-    assert pack_charts(uv, faces, chart, atlas_size=S // 2, overflow="pages", padding=pad).pages > 1  # S was needed
+    pk = pack_charts(uv, faces, chart, atlas_size="auto", padding=pad, power_of_two=power_of_two)
+    W, H, t = pk.width, pk.height, pk.texels_per_pixel
+    assert pk.pages == 1 and t == 1.0
+    if power_of_two:
+        assert W == H and W & (W - 1) == 0
+        assert pack_charts(uv, faces, chart, atlas_size=W // 2, overflow="pages", padding=pad,
+                           power_of_two=True).pages > 1  # W was needed
+    else:
+        assert W % 4 == 0 and H % 4 == 0
+        assert (pk.txy.max(axis=0) + pad + 1 <= [W - 0.5, H - 0.5]).all()  # every chart's gutter on the page
+        assert (pk.txy.max(axis=0) + pad + 1 > [W - 4.5, H - 4.5]).all()  # and no 4-texel block more
+        square = pack_charts(uv, faces, chart, atlas_size="auto", padding=pad, power_of_two=True)
+        assert W * H <= 0.8 * square.width * square.height  # the same placement on a smaller page
     vc = np.repeat(np.arange(n), 4)
     for c in range(n):
         d = pk.txy[vc == c] - uv[vc == c]
         ds = pk.txy[vc == c] - uv[vc == c][:, ::-1]
         ok = [np.ptp(x, axis=0).max() < 1e-6 and np.abs(x[0] - np.rint(x[0])).max() < 1e-6 for x in (d, ds)]
         assert any(ok), (c, d, ds)
-    assert pk.txy.min() >= -0.5 and pk.txy.max() <= S - 0.5
+    assert pk.txy.min() >= -0.5 and (pk.txy.max(axis=0) <= [W - 0.5, H - 0.5]).all()
     # disjoint and apart: rasterising chart by chart, each chart's texels dilated by 2 x padding - 1 meet no other
-    own = np.full(S * S, -1)
+    own = np.full(W * H, -1)
     for c in range(n):
-        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], S, S)
+        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], H, W)
         assert (own[idx] < 0).all()
         own[idx] = c
     k = np.ones((4 * pad - 1, 4 * pad - 1), np.uint8)
     for c in range(n):
-        near = cv2.dilate((own == c).reshape(S, S).astype(np.uint8), k).reshape(-1).astype(bool)
+        near = cv2.dilate((own == c).reshape(H, W).astype(np.uint8), k).reshape(-1).astype(bool)
         assert set(np.unique(own[near])) <= {-1, c}
 
 
@@ -282,7 +292,7 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     tm, _ = fountain_baked
     # sized to the charts at the photos' resolution: one page, and the triangles alone would fill more than
     # half of the next smaller power of two (so it is the smallest that can hold them with their gutters)
-    assert tm.pages == 1 and tm.atlas_size == 2048 and tm.stats["texels_per_pixel"] == 1.0
+    assert tm.pages == 1 and tm.atlas_size <= 2048 and tm.stats["texels_per_pixel"] == 1.0
     assert tm.stats["coverage"] * 4 >= 0.5, tm.stats["coverage"]
     assert tm.stats["face_texels_per_pixel"]["median"] == pytest.approx(1.0, abs=1e-6)
     r = mip_bleed(tm, levels=(1, 2))
@@ -295,13 +305,13 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     # gutters removed (every texel outside the faces black, as an atlas without gutter fill): bleeds
     from dataclasses import replace
 
-    S = tm.atlas_size
-    idx, _, _ = rasterize_faces(tm.texel_xy(), tm.faces, S, S)
-    inside = np.zeros(S * S, bool)
+    H, W = tm.page_shape
+    idx, _, _ = rasterize_faces(tm.texel_xy(), tm.faces, H, W)
+    inside = np.zeros(H * W, bool)
     inside[idx] = True
     black = tm.texture.copy().reshape(-1, 3)
     black[~inside] = 0
-    bad = mip_bleed(replace(tm, texture=black.reshape(S, S, 3)), levels=(2,), reach=0.0)
+    bad = mip_bleed(replace(tm, texture=black.reshape(H, W, 3)), levels=(2,), reach=0.0)
     assert bad[2]["p99"] > 5.0 and bad[2]["share_gt2"] > 0.05, bad
 
 

@@ -230,7 +230,8 @@ def test_bake_reproduces_source_colours(rng, method):
     tm = bake_texture(mesh, images, vis, lab, atlas_size=512, padding=3, **RAW)
     for a, b in zip(images, before):
         np.testing.assert_array_equal(a, b)  # inputs untouched
-    assert tm.texture.shape == (tm.atlas_size, tm.atlas_size, 3) and tm.texture.dtype == np.uint8
+    H, W = tm.page_shape
+    assert tm.texture.shape == (H, W, 3) and H % 4 == 0 and W % 4 == 0 and tm.texture.dtype == np.uint8
     assert tm.uv.min() >= 0 and tm.uv.max() <= 1
     np.testing.assert_array_equal(tm.face_view, lab)
     # every face's centroid: atlas colour == colour of its selected image at the centroid's projection
@@ -259,7 +260,7 @@ def test_bake_texels_per_pixel(rng, density):
     lab = select_views(vis, method="largest-area")
     tm = bake_texture(mesh, images, vis, lab, atlas_size=512, texels_per_pixel=density, **RAW)
     assert tm.stats["texels_per_pixel"] == density and tm.stats["density_scale"] == 1.0
-    assert tm.atlas_size & (tm.atlas_size - 1) == 0  # a power of two
+    assert tm.atlas_size <= 512 and tm.atlas_size % 4 == 0  # within the budget, a multiple of 4
     c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     c_img = vis.uv[lab[:, None], mesh.faces].mean(axis=1)  # fronto-parallel-ish: centroid of projections
@@ -311,10 +312,12 @@ def test_atlas_budget_scale_and_pages(scene_vis, rng, tmp_path):
     images = smooth_images(rng, CAMS)
     lab = select_views(vis, method="random")
     full = bake_texture(mesh, images, vis, lab, texels_per_pixel=1.0, **RAW)
-    assert full.pages == 1 and full.atlas_size == 256 and full.stats["density_scale"] == 1.0
+    assert full.pages == 1 and 128 < full.atlas_size <= 256 and full.stats["density_scale"] == 1.0
+    square = bake_texture(mesh, images, vis, lab, texels_per_pixel=1.0, power_of_two=True, **RAW)
+    assert square.atlas_size == 256 and square.page_shape == (256, 256)
     with pytest.warns(O3dSeqccWarning, match=r"density scaled by 0\.\d+"):
         small = bake_texture(mesh, images, vis, lab, atlas_size=128, padding=2, overflow="scale", **RAW)
-    assert small.atlas_size == 128 and small.pages == 1 and small.texture.shape == (128, 128, 3)
+    assert small.atlas_size <= 128 and small.pages == 1 and small.texture.shape == (*small.page_shape, 3)
     assert 0.3 < small.stats["texels_per_pixel"] < 1.0 and small.stats["density_scale"] == small.stats["texels_per_pixel"]
     assert small.uv.min() >= 0 and small.uv.max() <= 1
     paged = bake_texture(mesh, images, vis, lab, atlas_size=128, padding=2, overflow="pages", **RAW)
@@ -328,7 +331,10 @@ def test_atlas_budget_scale_and_pages(scene_vis, rng, tmp_path):
     np.testing.assert_allclose(paged.uv[:, 0], puv[:, 0])
     # 100 texels: not a power of two; the atlas is the largest power of two within it
     with pytest.warns(O3dSeqccWarning, match="scaled"):
-        assert bake_texture(mesh, images, vis, lab, atlas_size=100, padding=1, **RAW).atlas_size == 64
+        assert bake_texture(mesh, images, vis, lab, atlas_size=100, padding=1, power_of_two=True,
+                            **RAW).atlas_size == 64
+    with pytest.warns(O3dSeqccWarning, match="scaled"):
+        assert 64 < bake_texture(mesh, images, vis, lab, atlas_size=100, padding=1, **RAW).atlas_size <= 100
     with pytest.raises(InputError, match="gutters"):  # the gutters alone do not fit 32 x 32
         bake_texture(mesh, images, vis, lab, atlas_size=32, padding=4, **RAW)
     with pytest.raises(InputError, match="texels_per_pixel"):
@@ -370,7 +376,7 @@ def test_fountain_selection_and_bake(fountain_scene):
     assert vis.usable[mrf[seen], np.flatnonzero(seen)].all()
     images = [v.load_image() for v in fountain_scene.views]
     tm = bake_texture(mesh, images, vis, mrf, adjacency=adj, **RAW)
-    assert tm.atlas_size == 2048 and tm.pages == 1 and tm.stats["texels_per_pixel"] >= 1.0
+    assert tm.atlas_size <= 2048 and tm.pages == 1 and tm.stats["texels_per_pixel"] >= 1.0
     c_uv = tm.texel_xy()[tm.faces[seen]].mean(axis=1)
     got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
     cen = mesh.vertices[mesh.faces[seen]].mean(axis=1)
@@ -416,11 +422,11 @@ def _laplacian_var_in_faces(tm) -> float:
 
     from o3d_seqcc.texturing.leveling import _rasterize_uv
 
-    S = tm.atlas_size
-    idx, _, _ = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((S, S), bool))
-    mask = np.zeros(S * S, np.uint8)
+    H, W = tm.page_shape
+    idx, _, _ = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((H, W), bool))
+    mask = np.zeros(H * W, np.uint8)
     mask[idx] = 1
-    mask = cv2.erode(mask.reshape(S, S), np.ones((5, 5), np.uint8)).astype(bool)
+    mask = cv2.erode(mask.reshape(H, W), np.ones((5, 5), np.uint8)).astype(bool)
     grey = cv2.cvtColor(tm.texture, cv2.COLOR_RGB2GRAY).astype(np.float64)
     return float(np.var(cv2.Laplacian(grey, cv2.CV_64F, ksize=1)[mask]))
 
@@ -525,15 +531,15 @@ def _laplacian_var_away_from_seam(tm, min_abs_x: float) -> float:
 
     from o3d_seqcc.texturing.leveling import _rasterize_uv
 
-    S = tm.atlas_size
-    idx, face, bary = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((S, S), bool))
+    H, W = tm.page_shape
+    idx, face, bary = _rasterize_uv(tm.texel_xy(), tm.faces, np.ones((H, W), bool))
     x3 = np.einsum("nk,nk->n", bary, tm.vertices[tm.faces[face], 0])
-    inner = np.zeros(S * S, np.uint8)
+    inner = np.zeros(H * W, np.uint8)
     inner[idx] = 1
-    inner = cv2.erode(inner.reshape(S, S), np.ones((5, 5), np.uint8)).reshape(-1).astype(bool)
-    far = np.zeros(S * S, bool)
+    inner = cv2.erode(inner.reshape(H, W), np.ones((5, 5), np.uint8)).reshape(-1).astype(bool)
+    far = np.zeros(H * W, bool)
     far[idx[np.abs(x3) > min_abs_x]] = True
-    mask = (inner & far).reshape(S, S)
+    mask = (inner & far).reshape(H, W)
     assert mask.sum() > 500
     grey = cv2.cvtColor(tm.texture, cv2.COLOR_RGB2GRAY).astype(np.float64)
     return float(np.var(cv2.Laplacian(grey, cv2.CV_64F, ksize=1)[mask]))
@@ -589,8 +595,8 @@ def test_local_leveling_default_is_a_thin_strip(rng):
     plain = bake_texture(mesh, images, vis, labels, atlas_size=512, **RAW)
     loc = bake_texture(mesh, images, vis, labels, atlas_size=512, leveling=False)
     assert seam_metric(loc).mean < 0.1 * seam_metric(plain).mean
-    S = loc.atlas_size
-    idx, face, bary = _rasterize_uv(loc.texel_xy(), loc.faces, np.ones((S, S), bool))
+    H, W = loc.page_shape
+    idx, face, bary = _rasterize_uv(loc.texel_xy(), loc.faces, np.ones((H, W), bool))
     x3 = np.einsum("nk,nk->n", bary, loc.vertices[loc.faces[face], 0])
     changed = np.abs(loc.texture.reshape(-1, 3)[idx].astype(int) - plain.texture.reshape(-1, 3)[idx]).max(axis=1) > 0
     assert changed.sum() > 50  # the strip along the seam (x = 0) moved ...
