@@ -161,7 +161,9 @@ class Browser:
             if "method" in r:
                 self._event(r)
 
-    def open(self, url: str, *, timeout: float = 60.0) -> Page:
+    def open(self, url: str, *, timeout: float = 60.0, scripts: bool = True) -> Page:
+        """A new tab on ``url``, loaded; ``scripts=False``: the page's own scripts do not run (what a capture taken
+        before they ran shows; ``Page.eval`` still works)."""
         target = self.send("Target.createTarget", {"url": "about:blank"})["targetId"]
         session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
         page = Page(self, session)
@@ -170,6 +172,8 @@ class Browser:
             page.send(f"{domain}.enable")
         page.send("Emulation.setDeviceMetricsOverride", width=self.width, height=self.height, deviceScaleFactor=1,
                   mobile=False)
+        if not scripts:
+            page.send("Emulation.setScriptExecutionDisabled", value=True)
         page.send("Page.navigate", url=url)
         page.wait_for("document.readyState === 'complete'", timeout=timeout)
         return page

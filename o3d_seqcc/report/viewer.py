@@ -10,6 +10,12 @@ report's palette. The viewer itself is three.js with its GLTFLoader and OrbitCon
 bundled by esbuild into ``viewer.min.js`` (package data; ``viewer/build.sh`` in the
 repository rebuilds it from ``viewer/package-lock.json``) and inlined into the page.
 
+The atlas as written (every page, at full resolution up to :data:`VIEWER_FULL_SIZE` texels on
+the stacked image's longest side) travels as one more mode, "full resolution", that the viewer
+decodes only when it is chosen: the page opens as fast as before and still shows the sharpness of
+the result on demand. A loading notice covers the canvas until the model is drawn (and while a
+texture decodes), so a page captured before that shows what it waits for, not an empty box.
+
 Models of more than :data:`VIEWER_MAX_FACES` faces are not embedded (the page would weigh tens
 of megabytes); the section then says so and names the files to open instead.
 """
@@ -33,13 +39,16 @@ from ..scene import View
 from ..evaluation.seams import photo_colors
 from .figures import jpeg
 
-__all__ = ["VIEWER_MAX_FACES", "VIEWER_TEXTURE_SIZE", "model_section", "viewer_bundle", "viewer_html", "viewer_model",
+__all__ = ["VIEWER_FULL_SIZE", "VIEWER_MAX_FACES", "VIEWER_TEXTURE_SIZE", "model_section", "viewer_bundle", "viewer_html", "viewer_model",
            "viewer_textures"]
 
 #: faces of the largest model the report embeds (about 4 MB of GLB per 100k faces)
 VIEWER_MAX_FACES = 200_000
 #: longest side in texels of the viewer's textures (the atlas is reduced to it)
 VIEWER_TEXTURE_SIZE = 1024
+#: longest side of the full-resolution mode's texture (the stacked pages; WebGL 2 implementations hold 8192 at least
+#: in practice, SwiftShader included): the atlas as written up to it, reduced beyond
+VIEWER_FULL_SIZE = 8192
 #: colour of faces seen by no view in the selection colours (as in Figure 9)
 UNSEEN_RGB = (40, 40, 40)
 
@@ -131,8 +140,9 @@ def viewer_html(small: Any, view: View, rotation: np.ndarray, n_views: int, mode
         The scene's frame to the viewer's Y-up frame (:func:`o3d_seqcc.geometry.orientation.up_axis_transform`).
     n_views : int
         Palette size of the selection colours.
-    modes : list of (key, label, texture)
-        The texture modes, first the default; ``texture`` None for the GLB's own (the result).
+    modes : list of (key, label, texture) or (key, label, texture, lazy)
+        The texture modes, first the default; ``texture`` None for the GLB's own (the result);
+        ``lazy``: decoded when the mode is first chosen.
     note : str
         HTML shown under the buttons.
     """
@@ -143,18 +153,20 @@ def viewer_html(small: Any, view: View, rotation: np.ndarray, n_views: int, mode
     palette = [list(UNSEEN_RGB)] + selection_palette(n_views).astype(int).tolist()
     data = {
         "glb": base64.b64encode(glb).decode("ascii"),
-        "modes": [{"key": k, "label": label, "texture": None if t is None else
-                   "data:image/jpeg;base64," + base64.b64encode(jpeg(t, quality=85)).decode("ascii")}
-                  for k, label, t in modes],
+        "modes": [{"key": m[0], "label": m[1], "lazy": bool(m[3]) if len(m) > 3 else False,
+                   "texture": None if m[2] is None else
+                   "data:image/jpeg;base64," + base64.b64encode(jpeg(m[2], quality=85)).decode("ascii")}
+                  for m in modes],
         "selection": base64.b64encode(sel.tobytes()).decode("ascii"),
         "palette": palette,
         "camera": _camera(view, R, np.asarray(small.vertices) @ R.T),
     }
     buttons = "".join(
         f'<label><input type="radio" name="o3d-mode" value="{k}"{" checked" if i == 0 else ""}> {label}</label>'
-        for i, (k, label, _) in enumerate(modes + [("selection", "selection colours (Figure 9)", None)]))
+        for i, (k, label, *_) in enumerate(modes + [("selection", "selection colours (Figure 9)", None)]))
     payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
     return (f'<div id="o3d-viewer" class="viewer" data-state="loading"><canvas></canvas>'
+            f'<div class="viewer-loading" role="status">Loading the 3D model…</div>'
             f'<div class="viewer-modes">{buttons}</div><p class="viewer-note note">{note}</p></div>'
             f'<script type="application/json" id="o3d-viewer-data">{payload}</script>'
             f"<script>{viewer_bundle()}</script>")
@@ -195,8 +207,17 @@ def model_section(tm: Any, view: View, scene, photos, corrected, *, method: str 
             modes += [("corrected", f"corrected photos ({esc(method or '')}), before seam leveling", tex["corrected"]),
                       ("photos", "photos as taken (no correction), before seam leveling", tex["photos"])]
     h, w = small.texture.shape[:2]
+    full = viewer_model(tm, size=VIEWER_FULL_SIZE).texture
+    fh, fw = full.shape[:2]
+    th, tw = np.asarray(tm.texture).shape[:2]
+    if (fh, fw) != (h, w):
+        what = "as written" if (fh, fw) == (th, tw) else f"reduced from {tw}×{th}"
+        modes.insert(1, ("full", f"full resolution ({fw}×{fh} texels, {what})", full, True))
     note = (f"Drag to orbit, wheel or pinch to zoom, right-drag to pan. The model's {n} faces as written, with its "
-            f"texture reduced to {w}×{h} texels; the other textures are the same layout filled from each face's "
+            f"texture reduced to {w}×{h} texels"
+            + (f" (<i>full resolution</i> shows the atlas at {fw}×{fh}, decoded when chosen)" if (fh, fw) != (h, w)
+               else "") +
+            f"; the other textures are the same layout filled from each face's "
             f"photo directly, so switching between them shows what the correction (and the seam leveling) changes. "
             f"The first view is the camera of {esc(view.name)}.")
     return viewer_html(small, view, rotation, len(scene.views), modes, note=note)

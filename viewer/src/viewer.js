@@ -3,13 +3,15 @@
 // The page holds, inline: <div id="o3d-viewer"> with a <canvas> and radio buttons named "o3d-mode", and
 // <script type="application/json" id="o3d-viewer-data"> with
 //   glb        base64 GLB of the textured model (one primitive, unlit, Y-up)
-//   modes      [{key, label, texture}]: texture = a data: URI with the same UV layout, or null for the GLB's own
+//   modes      [{key, label, texture, lazy}]: texture = a data: URI with the same UV layout, or null for the GLB's
+//              own; lazy: decoded only when the mode is first chosen (the full-resolution atlas)
 //   selection  base64 of one uint16 per face (GLB face order): 0 = seen by no view, v + 1 = view v
 //   palette    [[r, g, b], ...] 0..255, indexed like selection
 //   camera     {position, target, fov}: the first view (a photo's viewpoint), world units, Y up
 // Nothing is fetched: the model, the textures and this code are all in the one file.
-// When done it sets data-state="drawn" (or "no-webgl" / "error: ...") and data-coverage (share of canvas
-// pixels the model covers, read back from the drawing buffer) on the viewer element.
+// Until the model is drawn the element has data-state="loading" (the page shows a loading notice over the canvas,
+// also while a lazy texture decodes); when done it sets data-state="drawn" (or "no-webgl" / "error: ...") and
+// data-coverage (share of canvas pixels the model covers, read back from the drawing buffer).
 
 import {
   AmbientLight, BufferAttribute, Color, DirectionalLight, MeshLambertMaterial, PerspectiveCamera, Scene,
@@ -107,15 +109,18 @@ async function start(root) {
   const own = mesh.material.map;
 
   const textures = {};
-  for (const mode of data.modes) {
-    if (!mode.texture) { textures[mode.key] = own; continue; }
+  async function texture(mode) {
     const t = new Texture(await loadImage(mode.texture));
     t.flipY = false; // glTF's UV origin (top-left), like the GLB's own texture
     t.colorSpace = SRGBColorSpace;
     if (own) { t.wrapS = own.wrapS; t.wrapT = own.wrapT; t.magFilter = own.magFilter; t.minFilter = own.minFilter; }
     t.anisotropy = renderer.capabilities.getMaxAnisotropy();
     t.needsUpdate = true;
-    textures[mode.key] = t;
+    return t;
+  }
+  for (const mode of data.modes) {
+    if (!mode.texture) textures[mode.key] = own;
+    else if (!mode.lazy) textures[mode.key] = await texture(mode);
   }
   if (own) own.anisotropy = renderer.capabilities.getMaxAnisotropy();
   let selection = null;
@@ -142,7 +147,15 @@ async function start(root) {
     sun.position.copy(camera.position).sub(controls.target).normalize().add(new Vector3(0, 0.5, 0));
     renderer.render(scene, camera);
   }
-  function setMode(key) {
+  async function setMode(key) {
+    const mode = data.modes.find((m) => m.key === key);
+    if (mode && mode.lazy && !textures[key]) {
+      root.dataset.state = 'loading';
+      const notice = root.querySelector('.viewer-loading');
+      if (notice) notice.textContent = 'Loading the texture: ' + mode.label + '…';
+      textures[key] = await texture(mode);
+      root.dataset.state = 'drawn';
+    }
     if (key === 'selection') {
       if (!selection) { selection = selectionMesh(mesh, data); mesh.parent.add(selection); }
       mesh.visible = false;
@@ -159,14 +172,16 @@ async function start(root) {
   controls.addEventListener('change', draw);
   window.addEventListener('resize', draw);
   for (const input of root.querySelectorAll('input[name="o3d-mode"]')) {
-    input.addEventListener('change', () => { if (input.checked) setMode(input.value); });
+    input.addEventListener('change', () => {
+      if (input.checked) setMode(input.value).catch((e) => { root.dataset.state = 'error: ' + e.message; });
+    });
   }
   const wanted = new URLSearchParams(location.hash.slice(1)).get('viewer');
   const keys = data.modes.map((m) => m.key).concat(['selection']);
   const first = keys.includes(wanted) ? wanted : keys[0];
   const radio = root.querySelector(`input[name="o3d-mode"][value="${first}"]`);
   if (radio) radio.checked = true;
-  setMode(first);
+  await setMode(first);
   root.dataset.coverage = coverage(renderer, canvas).toFixed(4);
   root.dataset.state = 'drawn';
 }
