@@ -224,7 +224,7 @@ def _registry() -> Registry[MeshLabFilter]:
     from o3d_seqcc.correction.graph import WEIGHTS
     from o3d_seqcc.settings import CorrectionSettings, RunSettings
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
-    from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
+    from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
 
     from . import meshset
 
@@ -236,7 +236,7 @@ def _registry() -> Registry[MeshLabFilter]:
     ts_defaults = TextureSettings.defaults()
     ts_docs = _doc_entries(TextureSettings, "Attributes")
     enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS),
-             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS)}
+             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS), "uv": tuple(UV_MODES)}
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
         "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
@@ -246,6 +246,7 @@ def _registry() -> Registry[MeshLabFilter]:
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",
         "data_term": "Selection data term", "outlier_removal": "Photometric outlier removal",
+        "uv": "Texture coordinates",
     }
     if set(labels) != set(ts_defaults):
         raise RuntimeError(f"label the TextureSettings fields {sorted(set(ts_defaults) ^ set(labels))}")

@@ -26,6 +26,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.io.files import write_image, write_json
 from o3d_seqcc.io.meshlab import MeshLayer, load_mlp, save_mlp
@@ -88,9 +90,32 @@ def meshset_scene(ms: Any, folder: str | Path) -> Scene:
     folder = Path(folder).resolve()
     project = folder / "meshset.mlp"
     ms.save_project(str(project))
-    mesh_path = folder / "current_mesh.ply"
-    trimesh.Trimesh(m.transformed_vertex_matrix(), m.face_matrix(), process=False).export(mesh_path)
+    v, f = m.transformed_vertex_matrix(), m.face_matrix()
+    uv = (m.wedge_tex_coord_matrix().reshape(-1, 3, 2) if m.has_wedge_tex_coord() else
+          m.vertex_tex_coord_matrix()[f] if m.has_vertex_tex_coord() else None)
+    if uv is None:
+        mesh_path = folder / "current_mesh.ply"
+        trimesh.Trimesh(v, f, process=False).export(mesh_path)
+    else:  # its texture coordinates too, for uv="keep": an OBJ with one vt per face corner
+        mesh_path = folder / "current_mesh.obj"
+        _write_obj_with_corner_uv(mesh_path, v, f, uv)
     return load_mlp(project, mesh=mesh_path)
+
+
+def _write_obj_with_corner_uv(path: Path, v: np.ndarray, f: np.ndarray, uv: np.ndarray) -> None:
+    """An OBJ of ``v`` and ``f`` with ``uv`` (F, 3, 2) as one ``vt`` per face corner."""
+    from o3d_seqcc.io.obj_text import general_field, int_field, rows
+
+    v, t = np.asarray(v, dtype=np.float64), np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    f = np.asarray(f, dtype=np.int64) + 1
+    c = np.arange(1, 3 * len(f) + 1).reshape(-1, 3)
+    text = b"# o3d_seqcc: the MeshSet's current mesh with its texture coordinates\n"
+    text += rows(["v ", general_field(v[:, 0], 9), " ", general_field(v[:, 1], 9), " ", general_field(v[:, 2], 9),
+                  "\n"])
+    text += rows(["vt ", general_field(t[:, 0], 9), " ", general_field(t[:, 1], 9), "\n"])
+    text += rows(["f ", int_field(f[:, 0]), "/", int_field(c[:, 0]), " ", int_field(f[:, 1]), "/", int_field(c[:, 1]),
+                  " ", int_field(f[:, 2]), "/", int_field(c[:, 2]), "\n"])
+    path.write_bytes(text)
 
 
 def _safe(label: str) -> str:

@@ -60,12 +60,15 @@ def _mesh(mesh: Any) -> Mesh:
         v = np.array(mesh.vertices, dtype=np.float64)
         f = np.array(mesh.triangles, dtype=np.int64)
         n = np.array(mesh.vertex_normals, dtype=np.float64) if mesh.has_vertex_normals() else None
+        uv = np.array(mesh.triangle_uvs, dtype=np.float64).reshape(-1, 3, 2) if mesh.has_triangle_uvs() else None
     elif isinstance(mesh, o3d.t.geometry.TriangleMesh):
         if "positions" not in mesh.vertex or "indices" not in mesh.triangle:
             raise InputError("mesh: the o3d.t.geometry.TriangleMesh has no vertex positions or triangle indices")
         v = mesh.vertex.positions.numpy().astype(np.float64, copy=True)
         f = mesh.triangle.indices.numpy().astype(np.int64, copy=True)
         n = mesh.vertex.normals.numpy().astype(np.float64, copy=True) if "normals" in mesh.vertex else None
+        uv = (mesh.triangle.texture_uvs.numpy().astype(np.float64, copy=True).reshape(-1, 3, 2)
+              if "texture_uvs" in mesh.triangle else None)
     else:
         raise InputError(f"mesh must be an o3d.geometry.TriangleMesh or o3d.t.geometry.TriangleMesh, got "
                          f"{type(mesh).__name__}")
@@ -74,9 +77,11 @@ def _mesh(mesh: Any) -> Mesh:
     if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
         raise InputError("mesh has non-finite vertices or triangle indices outside the vertex array; clean it first")
     n = vertex_normals(v, f, n)
-    for a in (v, f, n):
+    if uv is not None and uv.shape != (len(f), 3, 2):
+        uv = None  # not one (u, v) per triangle corner: unusable, as if absent (uv="keep" then says so)
+    for a in (v, f, n) + ((uv,) if uv is not None else ()):
         a.setflags(write=False)
-    return Mesh(vertices=v, faces=f, vertex_normals=n)
+    return Mesh(vertices=v, faces=f, vertex_normals=n, corner_uv=uv)
 
 
 def _to_array(img: Any, where: str) -> np.ndarray:
@@ -321,7 +326,9 @@ def texture_mesh(
         Options changed from ``settings``, by their flat names (as :func:`o3d_seqcc.pipeline.run`):
         :class:`~o3d_seqcc.texturing.TextureSettings` fields (``selection``: ``"mrf"``,
         ``"largest-area"`` or ``"random"``; ``atlas_size``: ``"auto"``, sized to the charts at the
-        photos' resolution, or an integer budget for its largest side; ...),
+        photos' resolution, or an integer budget for its largest side; ``uv="keep"``: bake into the
+        mesh's own ``triangle_uvs`` / ``triangle.texture_uvs``, the result keeping its triangles and
+        UVs; ...),
         :class:`~o3d_seqcc.correction.settings.CorrectionSettings` fields (``reference``,
         ``method``, ``t_npm``, ...) and :class:`~o3d_seqcc.visibility.settings.VisibilitySettings` fields.
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from ._shared.arguments import check_images_argument
 from .correction import CorrectionResult, correct
+from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
 from .io.files import write_json
@@ -49,8 +50,8 @@ from ._shared.parallel import LocalExecutor, carried, current as current_executo
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder import write_run_folder
-from .report import REPORT_FILE, metrics_sample, write_report
-from .report.parts import correction_parts
+from .report import REPORT_FILE, write_report
+from .report.background import BackgroundReport, table2_metrics
 from .report.schema import correction_section, document
 from .scene import Scene, check_scene_argument, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
@@ -140,7 +141,7 @@ class RunResult:
     images_from: str = "scene"
     originals: list | None = None
     run_settings: RunSettings | None = None
-    #: Table 2 and the report's figures started on a background thread by :func:`run` (:class:`_BackgroundReport`),
+    #: Table 2 and the report's figures started on a background thread by :func:`run` (:class:`~o3d_seqcc.report.background.BackgroundReport`),
     #: used by :meth:`save`
     _background: Any = field(default=None, repr=False, compare=False)
 
@@ -187,7 +188,7 @@ class RunResult:
         save_images: bool = False,
         selection_view: str | int | None = None,
         unlit: bool = False,
-        up_axis: str = "y",
+        up_axis: str = "auto",
         texture_format: str = "png",
         jpeg_quality: int = 90,
         report: bool = True,
@@ -210,12 +211,14 @@ class RunResult:
             default the view seeing the most faces; ``"none"`` skips the picture.
         unlit : bool, default False
             GLB material with ``KHR_materials_unlit``.
-        up_axis : {"y", "z", "none"}, default "y"
+        up_axis : {"auto", "y", "z", "none"}, default "auto"
             Up axis of the GLB, OBJ and PLY (glTF is Y-up): the scene's up direction, estimated
             from its cameras, is rotated onto it and the rotation baked into the vertices
             (:func:`o3d_seqcc.geometry.orientation.up_axis_transform`, recorded in the report's
-            ``export``); ``"none"`` keeps the scene's frame. The MeshLab layer always keeps it
-            (the project's rasters must match it).
+            ``export``); ``"none"`` keeps the scene's frame. ``"auto"``: ``"y"`` for a new atlas,
+            ``"none"`` for a bake into the mesh's own UVs (``uv="keep"``: the mesh comes back as it
+            was given, its positions too). The MeshLab layer always keeps the scene's frame (the
+            project's rasters must match it).
         texture_format : {"png", "jpg", "webp"}, default "png"
             Texture images of the GLB and OBJ (WebP in the GLB through ``EXT_texture_webp``).
         jpeg_quality : int, default 90
@@ -238,6 +241,8 @@ class RunResult:
         """
         fmts = parse_formats(formats)
         tfmt = check_export_options(up_axis=up_axis, texture_format=texture_format, jpeg_quality=jpeg_quality)
+        if str(up_axis).lower() == "auto":
+            up_axis = "none" if self.textured.stats.get("uv") == "keep" else "y"
         rotation, orientation = up_axis_transform(self.scene, up_axis)
         view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
         if view is not None:
@@ -256,7 +261,7 @@ class RunResult:
         if not table2:
             return None, None, None
         bg = self._background if self._background is not None and self._background.matches(self) else None
-        metrics = bg.result() if bg is not None else _table2(images, self.mappings, self.correction.paths)
+        metrics = bg.result() if bg is not None else table2_metrics(images, self.mappings, self.correction.paths)
         steps = bg.seams(self.selection) if bg is not None else None
         if steps is None:
             photos, corrected = images
@@ -266,71 +271,36 @@ class RunResult:
         return metrics, steps, None if bg is None else bg.parts()
 
 
-def _table2(images: tuple, maps: Mappings, paths: dict) -> dict:
-    """Table 2 of a run's report (:func:`~o3d_seqcc.evaluation.metrics.before_after`) on ``(photos, corrected)``."""
-    photos, corrected = images
-    return before_after(photos, corrected, maps, paths, max_per_pair=metrics_sample(maps))
+def own_uv_layout(scene: Scene, s: TextureSettings) -> tuple[Any, np.ndarray] | None:
+    """With ``uv="keep"``: the scene's mesh as read and its corner UVs, checked (before any heavy work); else None."""
+    if s.uv != "keep":
+        return None
+    from .io.mesh_files import read_corner_uv
+    from .texturing.own_uv import check_corner_uv
+
+    mesh = scene.load_mesh()
+    if isinstance(scene.mesh, (str, os.PathLike)):
+        uv, where = read_corner_uv(scene.mesh, mesh.vertices, mesh.faces), f"mesh {scene.mesh}"
+    else:
+        uv, where = mesh.corner_uv, "the mesh"
+        if uv is None:
+            raise InputError("uv='keep': the mesh in memory has no texture coordinates (Mesh.corner_uv; an Open3D "
+                             "mesh's triangle_uvs); give one with UVs or drop uv='keep' for a new atlas")
+    return mesh, check_corner_uv(uv, len(mesh.faces), where=where)
 
 
-class _BackgroundReport:
-    """The parts of :func:`run`'s report that need no atlas, computed on one background thread while it textures.
+def _bake(vis, images, labels, s: TextureSettings, adjacency, own) -> TexturedMesh:
+    """The atlas bake, or with ``own`` (:func:`own_uv_layout`) the bake into the mesh's own UVs."""
+    if own is None:
+        return bake_texture(vis.mesh, images, vis, labels, settings=s, adjacency=adjacency)
+    from .texturing.own_uv import bake_own_uv
 
-    Table 2 and the page's correction figures (the path edges' joint histograms, the views'
-    thumbnails: :func:`~o3d_seqcc.report.parts.correction_parts`) depend on the correction
-    alone, the selection seams' colour steps also on the selection; the selection and the bake
-    leave a core idle much of the time. Started right after the correction (the seams right
-    after the selection), they are ready when :meth:`RunResult.save` writes the report instead
-    of being computed there. The same functions on the same inputs: the same numbers and
-    pictures as computing them in ``save``.
-    """
-
-    def __init__(self, originals: Any, res: CorrectionResult, maps: Mappings) -> None:
-        self._key = (originals, res, maps)
-        # the photos through the run's cache, the corrections applied on access: caching them here, next to the
-        # texturing's arrays, would raise the run's peak memory (save() caches them for the page, as before)
-        self._images = (originals, res.images)
-        self._carried = carried
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="o3d_seqcc-report")
-        self._table2 = self._pool.submit(carried(_table2, "background: table 2"), self._images, maps, res.paths)
-        self._parts = self._pool.submit(carried(correction_parts, "background: report figures"), originals,
-                                        res.images, res, maps)
-        self._seams: tuple | None = None
-
-    def selected(self, mesh: Any, selection: np.ndarray, views: Sequence) -> None:
-        """The selection is known: measure its seams' steps next, then let the thread end."""
-        photos, corrected = self._images
-        self._seams = (selection, self._pool.submit(
-            self._carried(selection_seams_of, "background: selection seams"), mesh.vertices, mesh.faces, selection,
-            views, {"photos": photos, "corrected": corrected}))
-        self.close(cancel=False)
-
-    def close(self, *, cancel: bool = True) -> None:
-        """No more work (``cancel``: drop what has not started, e.g. after an error); the thread ends after its task
-        (the interpreter's exit waits for it: no native code cut off)."""
-        self._pool.shutdown(wait=False, cancel_futures=cancel)
-
-    def matches(self, result: "RunResult") -> bool:
-        """Whether ``result`` holds the correction this was started for (not another one put in by ``replace``)."""
-        originals, res, maps = self._key
-        return result.originals is originals and result.correction is res and result.mappings is maps
-
-    def result(self) -> dict:
-        """Table 2."""
-        return self._table2.result()
-
-    def parts(self) -> Any:
-        """The page's correction figures (:class:`~o3d_seqcc.report.parts.CorrectionParts`)."""
-        return self._parts.result()
-
-    def seams(self, selection: np.ndarray) -> dict | None:
-        """The selection seams' steps (photos, corrected), when measured for this ``selection``."""
-        if self._seams is None or self._seams[0] is not selection:
-            return None
-        return self._seams[1].result()
+    return bake_own_uv(vis.mesh, images, vis, labels, input_mesh=own[0], corner_uv=own[1], parent=vis.parent_faces,
+                       settings=s, adjacency=adjacency)
 
 
 def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, want_seams: bool,
-                   selected: Any = None):
+                   selected: Any = None, own: Any = None):
     mesh = vis.mesh
     with _stage("selection", timings):
         adjacency = face_adjacency(mesh.faces, mesh.vertices)
@@ -340,7 +310,7 @@ def _texture_stage(scene, images, vis, s: TextureSettings, timings: dict, *, wan
     if selected is not None:  # the report's background thread measures the selection seams while the bake works
         selected(mesh, labels, scene.views)
     with _stage("bake", timings):
-        tm = bake_texture(mesh, images, vis, labels, settings=s, adjacency=adjacency)
+        tm = _bake(vis, images, labels, s, adjacency, own)
     return (labels, {**selection_stats(labels, adjacency, len(scene.views)), **coverage(vis, labels)}, tm,
             _seams_beside(tm, timings) if want_seams else None)
 
@@ -411,10 +381,11 @@ def texture(
         imgs = scene_photos(sc.views)  # read when the bake needs them, kept while they fit
     else:
         imgs = check_images_argument(images, sc.views)
+    own = own_uv_layout(sc, s)
     with use_executor(client):
         with _stage("visibility", timings):
             vis = compute_visibility(sc, settings=rs.visibility)
-        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=rs.seams)
+        labels, stats, tm, sm = _texture_stage(sc, imgs, vis, s, timings, want_seams=rs.seams, own=own)
     timings["total"] = time.perf_counter() - t_all
     return RunResult(scene=sc, images=imgs, visibility=vis, selection=labels, selection_stats=stats, textured=tm,
                      settings=s, _seams=sm, timings=timings, command="texture", source=source,
@@ -475,6 +446,7 @@ def run(
     sc = _as_scene(scene, mesh)
     if cs.reference != "auto":
         resolve_view(sc.names, cs.reference)
+    own = own_uv_layout(sc, s)
     originals = scene_photos(sc.views)  # read when a task first needs them, kept while they fit
     if cs.method != "seqcc-global":  # its default start is numpy only: no CMF fit, no scikit-learn (2 s of imports)
         _import_in_background("sklearn.svm", "sklearn.isotonic")  # the colour mapping fits need them
@@ -487,15 +459,15 @@ def run(
             res = correct(sc, mappings=maps, images=originals, settings=cs)
         # the report's Table 2 needs the correction alone: on a spare thread while the texturing runs (local only:
         # a Dask client may be closed before save())
-        bg = _BackgroundReport(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
+        bg = BackgroundReport(originals, res, maps) if isinstance(current_executor(), LocalExecutor) else None
         try:
             labels, stats, tm, sm = _texture_stage(sc, res.images, vis, s, timings, want_seams=rs.seams,
-                                                   selected=None if bg is None else bg.selected)
+                                                   selected=None if bg is None else bg.selected, own=own)
             sm0 = None
             if rs.compare_original:
                 with _stage("compare_original", timings):
                     # the same settings pack the same charts (they do not depend on the images) into the same atlas
-                    sm0 = seam_metric(bake_texture(vis.mesh, originals, vis, labels, settings=s))
+                    sm0 = seam_metric(_bake(vis, originals, labels, s, None, own))
         except BaseException:
             if bg is not None:
                 bg.close()

@@ -345,11 +345,16 @@ class Mesh:
     vertices : (N, 3) float64
     faces : (F, 3) int64, indices into ``vertices``
     vertex_normals : (N, 3) float64, unit length (computed when the file has none)
+    corner_uv : (F, 3, 2) float64 or None
+        Texture coordinates of every face corner (OBJ convention: origin bottom-left), for
+        ``uv="keep"``; a mesh read from a file leaves it None (they are read when asked for:
+        :func:`~o3d_seqcc.io.mesh_files.read_corner_uv`).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     vertex_normals: np.ndarray
+    corner_uv: np.ndarray | None = None
 
     @property
     def face_normals(self) -> np.ndarray:

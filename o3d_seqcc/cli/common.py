@@ -10,14 +10,13 @@ from typing import Any, Callable
 
 from ..correction import available_methods
 from ..errors import InputError
-from ..io.export import FORMATS, TEXTURE_FORMATS
+from ..io.export import EXPORT_UP_AXES, FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
 from ..mappings.compute import MODES
-from ..geometry.orientation import UP_AXES
 from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
 from ..texturing import SELECTION_METHODS, TextureSettings
-from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS
+from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
 
 __all__ = [
     "add_atlas_arguments",
@@ -185,6 +184,9 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
 def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
     """The atlas budget and layout options of :class:`~o3d_seqcc.texturing.TextureSettings` (``texture``, ``run``, ``demo``)."""
     d = _DEFAULTS
+    p.add_argument("--uv", choices=UV_MODES, default=d.uv,
+                   help="atlas (default): a new texture atlas of the charts; keep: bake into the mesh's own texture "
+                   "coordinates (OBJ vt, PLY s/t, GLB TEXCOORD_0), the output keeping its topology and UVs")
     p.add_argument("--atlas-size", default=d.atlas_size, metavar="auto|N",
                    help=f"atlas side (default {d.atlas_size}: sized to the charts at the photos' resolution, pages of "
                    "up to 8192^2); N: the largest side in texels, a budget: the page is the smallest that holds the "
@@ -216,10 +218,11 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
     from ..pipeline import RunResult
 
     d = library_default(RunResult.save)
-    p.add_argument("--up-axis", choices=UP_AXES, default=d["up_axis"],
-                   help=f"up axis of the GLB/OBJ/PLY (default {d['up_axis']}: glTF is Y-up): the scene's up direction, "
-                   "estimated from the cameras, is rotated onto it (recorded in report.json; the MeshLab project "
-                   "keeps the scene's frame); none keeps the scene's frame")
+    p.add_argument("--up-axis", choices=EXPORT_UP_AXES, default=d["up_axis"],
+                   help=f"up axis of the GLB/OBJ/PLY (default {d['up_axis']}: y, as glTF is Y-up, for a new atlas; "
+                   "none with --uv keep): the scene's up direction, estimated from the cameras, is rotated onto it "
+                   "(recorded in report.json; the MeshLab project keeps the scene's frame); none keeps the scene's "
+                   "frame")
     p.add_argument("--texture-format", choices=tuple(TEXTURE_FORMATS), default=d["texture_format"],
                    help=f"texture images (default {d['texture_format']}; webp in the GLB needs EXT_texture_webp)")
     p.add_argument("--jpeg-quality", type=int, default=d["jpeg_quality"],

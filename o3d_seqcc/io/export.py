@@ -53,7 +53,7 @@ from ..geometry.meshops import float32_offset, vertex_normals
 from ..geometry.orientation import UP_AXES
 
 __all__ = [
-    "DEFAULT_FORMATS", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture",
+    "DEFAULT_FORMATS", "EXPORT_UP_AXES", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture",
     "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh", "float32_offset",
     "parse_formats", "texture_file_names",
 ]
@@ -64,6 +64,8 @@ logger = logging.getLogger(__name__)
 FORMATS = ("glb", "obj", "ply")
 #: texture image formats: name -> (file extension, MIME type)
 TEXTURE_FORMATS = {"png": ("png", "image/png"), "jpg": ("jpg", "image/jpeg"), "webp": ("webp", "image/webp")}
+#: ``up_axis`` of the exports: the orientation's axes, and "auto" (:meth:`o3d_seqcc.pipeline.RunResult.save`)
+EXPORT_UP_AXES = ("auto", *UP_AXES)
 #: export formats written by default (:meth:`o3d_seqcc.pipeline.RunResult.save`)
 DEFAULT_FORMATS = ("glb", "obj")
 
@@ -83,8 +85,8 @@ def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpe
 
     Returns the texture format's canonical name; raises InputError naming the bad option.
     """
-    if str(up_axis).lower() not in UP_AXES:
-        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(UP_AXES)}")
+    if str(up_axis).lower() not in EXPORT_UP_AXES:
+        raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(EXPORT_UP_AXES)}")
     fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
     if fmt not in TEXTURE_FORMATS:
         raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")

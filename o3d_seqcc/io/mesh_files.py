@@ -23,7 +23,7 @@ from ..errors import InputError, warn
 from . import files, headers
 from .files import open_regular
 
-__all__ = ["check_mesh_file", "read_mesh", "read_point_cloud"]
+__all__ = ["check_mesh_file", "read_corner_uv", "read_mesh", "read_point_cloud"]
 
 
 @contextmanager
@@ -124,6 +124,53 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarr
         raise InputError(f"mesh {path} has face indices outside the vertex array")
     n = np.array(mesh.vertex_normals, dtype=np.float64) if mesh.has_vertex_normals() else None
     return v, tri, n
+
+
+def read_corner_uv(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The texture coordinates of every face corner of a mesh file, aligned with :func:`read_mesh`'s faces.
+
+    OBJ (``vt``), PLY with per-vertex ``s``/``t``, ``u``/``v`` or ``texture_u``/``texture_v``, glTF / GLB
+    (``TEXCOORD_0``), read with trimesh (``process=False``, the file's vertex and face order) in the OBJ
+    convention: origin at the bottom-left, v up (trimesh flips glTF's top-left origin).
+
+    Parameters
+    ----------
+    path : path
+    vertices, faces : (N, 3) float, (F, 3) int
+        The mesh as :func:`read_mesh` read it (the corners are matched by position).
+
+    Returns
+    -------
+    (F, 3, 2) float64
+
+    Raises
+    ------
+    InputError
+        No texture coordinates, or faces that do not match :func:`read_mesh`'s.
+    """
+    import trimesh
+
+    path = Path(path)
+    with open_regular(path, "mesh") as f:
+        with _decoder_name(path, f) as name:
+            try:
+                t = trimesh.load(name, file_type=path.suffix.lstrip(".").lower() or None, process=False,
+                                 maintain_order=True, force="mesh")
+            except Exception as exc:  # noqa: BLE001 - trimesh raises many types for a file it cannot parse
+                raise InputError(f"mesh {path}: its texture coordinates could not be read ({exc})") from exc
+    uv = getattr(getattr(t, "visual", None), "uv", None)
+    if uv is None or len(uv) != len(t.vertices):
+        raise InputError(f"mesh {path} has no texture coordinates (OBJ vt, PLY s/t, GLB TEXCOORD_0): --uv keep bakes "
+                         "into a mesh's own UV layout; unwrap it first (Blender: UV > Smart UV Project) or drop "
+                         "--uv keep for a new atlas")
+    tv, tf = np.asarray(t.vertices, dtype=np.float64), np.asarray(t.faces, dtype=np.int64)
+    want = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    scale = max(float(np.abs(want).max(initial=0.0)), 1.0)
+    if tf.shape != np.asarray(faces).shape or not np.allclose(tv[tf], want, rtol=0.0, atol=1e-5 * scale):
+        raise InputError(f"mesh {path}: its faces as read with their texture coordinates ({len(tf)}) are not the "
+                         f"{len(faces)} faces read for the geometry (polygons, or a file trimesh and Open3D read "
+                         "differently): triangulate it and save it again as OBJ, PLY or GLB")
+    return np.asarray(uv, dtype=np.float64)[tf]
 
 
 def read_point_cloud(path: str | os.PathLike) -> np.ndarray:

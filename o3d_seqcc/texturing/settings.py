@@ -19,7 +19,7 @@ from ..errors import InputError
 from ..visibility.dense import VisibilityLike  # noqa: F401  (the stages' one visibility protocol, re-exported)
 
 __all__ = ["DATA_TERMS", "FALLBACKS", "LEVELING_SMOOTHNESS", "MAX_ATLAS_SIZE", "MRF_SMOOTHNESS", "OUTLIER_REMOVALS",
-           "OVERFLOWS", "TextureSettings", "VisibilityLike", "parse_atlas_size", "parse_texels_per_pixel"]
+           "OVERFLOWS", "UV_MODES", "TextureSettings", "VisibilityLike", "parse_atlas_size", "parse_texels_per_pixel"]
 
 #: default Potts weight of the ``"mrf"`` selection
 MRF_SMOOTHNESS = 4.0
@@ -27,6 +27,8 @@ MRF_SMOOTHNESS = 4.0
 LEVELING_SMOOTHNESS = 0.03
 #: colours of faces seen by no view
 FALLBACKS = ("smooth", "flat")
+#: ``uv``: a new atlas of the charts, or the mesh's own texture coordinates
+UV_MODES = ("atlas", "keep")
 #: data terms of the "mrf" selection (:mod:`~o3d_seqcc.texturing.data_costs`)
 DATA_TERMS = ("area", "area-cos", "gmi")
 #: photometric outlier removal of the selection (texrecon's --outlier_removal)
@@ -111,6 +113,13 @@ class TextureSettings(SettingsBase):
         texrecon's, median of 8 views: band 8 0.94, 2 0.96, at the same seam metric).
     fallback : {"smooth", "flat"}, default "smooth"
         Colour of the faces seen by no view.
+    uv : {"atlas", "keep"}, default "atlas"
+        ``"atlas"``: a new atlas of the charts (each face's footprint in its photo, packed by
+        xatlas). ``"keep"``: bake into the mesh's own texture coordinates (OBJ ``vt``, PLY
+        ``s``/``t``, GLB ``TEXCOORD_0``; :func:`~o3d_seqcc.texturing.own_uv.bake_own_uv`): the
+        output keeps the input's topology and UVs, one square page sized so that the median face
+        gets ``texels_per_pixel``; zero-area, mirrored and overlapping UVs are reported. The
+        atlas's packing options (``overflow``, ``shrink_to_fit``, ``merge_charts``) do not apply.
     """
 
     selection: str = "mrf"
@@ -131,6 +140,7 @@ class TextureSettings(SettingsBase):
     local_leveling: bool = True
     local_band: int = 2
     fallback: str = "smooth"
+    uv: str = "atlas"
 
     _label = "texture setting"
 
@@ -140,6 +150,7 @@ class TextureSettings(SettingsBase):
         check_choice("data_term", self.data_term, DATA_TERMS, flag="--data-term")
         check_choice("outlier_removal", self.outlier_removal, OUTLIER_REMOVALS, flag="--outlier-removal")
         check_choice("overflow", self.overflow, OVERFLOWS, flag="--atlas-overflow")
+        check_choice("uv", self.uv, UV_MODES, flag="--uv")
         object.__setattr__(self, "atlas_size", parse_atlas_size(self.atlas_size))
         object.__setattr__(self, "texels_per_pixel", parse_texels_per_pixel(self.texels_per_pixel))
         if not 0.0 <= float(self.shrink_to_fit) < 0.5:

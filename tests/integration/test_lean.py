@@ -283,7 +283,7 @@ def test_background_report_parts_are_what_save_computes(tmp_path):
     import json
 
     from o3d_seqcc.evaluation.seams import selection_seams_of
-    from o3d_seqcc.pipeline import _table2
+    from o3d_seqcc.report.background import table2_metrics
     from o3d_seqcc.report import cached_images
     from o3d_seqcc.report.parts import correction_parts
 
@@ -292,7 +292,7 @@ def test_background_report_parts_are_what_save_computes(tmp_path):
     bg = res._background
     assert bg is not None and bg.matches(res)
     images = cached_images(res.originals, res.images)
-    direct = _table2(images, res.mappings, res.correction.paths)
+    direct = table2_metrics(images, res.mappings, res.correction.paths)
     assert bg.result() == direct and direct["before"] != direct["after"]
     assert not bg.matches(dataclasses.replace(res, mappings=sc.compute_mappings(res.scene, visibility=res.visibility)))
     assert bg.matches(dataclasses.replace(res, source="elsewhere"))  # what the command line's replace() keeps
