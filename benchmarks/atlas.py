@@ -1,14 +1,17 @@
-"""Engine-ready atlas (issue 13): fountain decimated (atlas 2048) and 300k (budget 4096), ours vs today vs peers.
+"""Engine-ready atlas (issues 13, 35): Fountain decimated (16k faces), Fountain 300k and a synthetic room, ours vs
+before vs peers.
 
-Rows, on the same scene, selection and colour-corrected photos (seqcc, reference auto, corrected
-once on the decimated mesh; the photos are the same for both meshes):
+Rows, on the same scene, selection and colour-corrected photos (Fountain: corrected once on the decimated mesh, the
+same photos for both meshes; the room, ``room``: 16 photos of 320 x 240 on two rings, ``seen_only``, about 70k faces,
+corrected on its own mesh):
 
-- ``ours (xatlas)``: ``bake_texture`` with the library's defaults (xatlas packing, sampling bake,
-  welded unseen faces, 2-pass local leveling) at ``--atlas-size`` (decimated: 2048; 300k: 4096, a
-  budget), exported as GLB (Y-up, PNG; also JPEG and WebP for the size);
-- ``today (shelf)``: the bake of ``--baseline-commit`` (default main 89e7de7, before issue 13:
-  shelf-packed rectangles copied pixel for pixel, the atlas grown 2x while the charts do not fit),
-  same mesh, selection, corner projections and photos. That commit is checked out with ``git worktree
+- ``ours (xatlas)``: ``bake_texture`` with the library's defaults (xatlas packing, one page cut to the charts, the
+  small charts in one block, sampling bake, welded unseen faces, 2-pass local leveling) at ``--atlas-size``
+  (default ``auto``, the library's; an integer is a budget), exported as GLB (Y-up, PNG; also JPEG and WebP for the
+  size);
+- ``before``: the bake of ``--baseline-commit`` (default main eb143f1, before issue 35: square power-of-two pages,
+  every chart with its 4-texel gutter; ``--baseline-commit 89e7de7`` gives issue 13's shelf packer), same mesh,
+  selection, corner projections and photos. That commit is checked out with ``git worktree
   add`` under a temporary folder (removed at the end) and its own ``bake_texture`` runs in a child
   Python with only that worktree on ``PYTHONPATH``: the retired code is measured as it was, not kept
   alive in the repository;
@@ -20,10 +23,10 @@ Figures per row: ``coverage`` (triangle area in texels / atlas area), ``used`` (
 atlas read by bilinear lookups inside the triangles: the texels within one texel of a triangle;
 the same measure for every tool, from its output file), atlas size, pages, GLB bytes (PNG; JPEG
 q90 and WebP q90 for ours), output / input vertices, seam metric mean and share of edges > 5
-(``o3d_seqcc.evaluation.seams.seam_metric`` on the output file), ``view seams`` (ours and today: CIEDE2000
+(``o3d_seqcc.evaluation.seams.seam_metric`` on the output file), ``view seams`` (ours and before: CIEDE2000
 across every edge between faces textured from two different views, also inside a chart, which the
 seam metric scores 0), sharpness of a 3x3-supersampled render from the reference view (16) over
-the photo's, and the bake time (ours and today: ``--repeats`` alternating runs in this process,
+the photo's, and the bake time (ours and before: ``--repeats`` alternating runs in this process,
 median; MeshLab and Open3D: their filter's wall time, once). Ours also: the mip-bleed test
 (``o3d_seqcc.evaluation.seams.mip_bleed``, levels 1-3), the Khronos validator per texture format, and a Y-up
 picture (the Y-up GLB rendered by a Y-up viewer's camera at the reference view, next to the photo).
@@ -34,7 +37,7 @@ for the 70 % coverage target.
 
 Usage::
 
-    python benchmarks/atlas.py [--out /tmp/o3d_seqcc_atlas] [--meshes dec,300k] [--repeats 3]
+    python benchmarks/atlas.py [--out /tmp/o3d_seqcc_atlas] [--meshes dec,300k,room] [--repeats 3] [--pack-effort fast|best]
         [--no-meshlab] [--no-open3d] [--peers-300k] [--evidence] [--evidence-brute] [--baseline-commit 89e7de7]
 
 Timings are noisy on a shared 2-core machine: compare rows of one run.
@@ -59,10 +62,13 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "datasets" / "fountain_small"
-MESHES = {"dec": ("scene/mesh_decimated_uv_blender.ply", 2048), "300k": ("scene/tsdf_mesh.ply", 4096)}
+MESHES = {"dec": ("scene/mesh_decimated_uv_blender.ply", "auto"), "300k": ("scene/tsdf_mesh.ply", "auto"),
+          "room": (None, "auto")}
 VIEW = 16
-#: main before issue 13: the shelf-packed bake that ``today (shelf)`` measures
-BASELINE_COMMIT = "89e7de7"
+#: the synthetic room's view of the sharpness and the Y-up picture
+ROOM_VIEW = 8
+#: main before issue 35: the bake that ``before`` measures
+BASELINE_COMMIT = "eb143f1"
 
 # the child that runs the baseline commit's bake_texture on arrays (argv: input .npz, output .npz, worktree)
 _BASELINE_CHILD = r"""
@@ -80,19 +86,27 @@ d = np.load(src)
 labels, fuv = d["labels"], d["fuv"]
 
 
-class Vis:  # what that commit's bake reads of a visibility: sizes and the selected views' corner projections
-    n_views, n_faces = int(d["n_views"]), len(labels)
-
-    def face_uv(self, selection):
-        assert np.array_equal(selection, labels)
-        return fuv
-
-
 mesh = SimpleNamespace(vertices=d["vertices"], faces=d["faces"],
                        vertex_normals=d["normals"] if "normals" in d.files else None)
+if "vis_uv" in d.files:  # the whole visibility (a bake that reads other views' projections, e.g. to merge charts)
+    from o3d_seqcc.scene import Mesh
+    from o3d_seqcc.visibility.compute import Visibility
+
+    m = Mesh(vertices=d["vertices"], faces=d["faces"], vertex_normals=d["normals"])
+    vis = Visibility.from_arrays(m, d["vis_uv"], d["vis_usable"], area=d["vis_area"], cos_angle=d["vis_cos"])
+else:
+    class Vis:  # what that commit's bake reads of a visibility: sizes and the selected views' corner projections
+        n_views, n_faces = int(d["n_views"]), len(labels)
+
+        def face_uv(self, selection):
+            assert np.array_equal(selection, labels)
+            return fuv
+
+    vis = Vis()
 images = [d[f"image_{i}"] for i in range(int(d["n_views"]))]
 t = time.perf_counter()
-tm = bake_texture(mesh, images, Vis(), labels, atlas_size=int(d["atlas_size"]), adjacency=d["adjacency"])
+size = str(d["atlas_size"])
+tm = bake_texture(mesh, images, vis, labels, atlas_size=int(size) if size.isdigit() else size, adjacency=d["adjacency"])
 seconds = time.perf_counter() - t
 np.savez(dst, seconds=seconds, stats=json.dumps(tm.stats, default=str), **{
     k: getattr(tm, k) for k in ("vertices", "faces", "uv", "texture", "normals", "face_view", "vertex_index", "face_chart")})
@@ -115,14 +129,15 @@ class Baseline:
         self.env = {**os.environ, "PYTHONPATH": str(self.tree)}
         print(f"baseline: {self.commit[:10]} checked out in {self.tree}", flush=True)
 
-    def bake(self, mesh, images, vis, labels, *, adjacency, atlas_size: int):
+    def bake(self, mesh, images, vis, labels, *, adjacency, atlas_size):
         """That commit's ``bake_texture`` on the same arrays: (TexturedMesh, seconds of the bake alone)."""
         from o3d_seqcc.texturing import TexturedMesh
 
         src, dst = self.tmp / "in.npz", self.tmp / "out.npz"
         normals = getattr(mesh, "vertex_normals", None)
         np.savez(src, vertices=mesh.vertices, faces=mesh.faces, labels=labels, fuv=vis.face_uv(labels),
-                 adjacency=adjacency, n_views=len(images), atlas_size=atlas_size,
+                 adjacency=adjacency, n_views=len(images), atlas_size=atlas_size, vis_uv=vis.uv,
+                 vis_usable=vis.usable, vis_area=vis.area, vis_cos=vis.cos_angle,
                  **({} if normals is None else {"normals": normals}), **{f"image_{i}": im for i, im in enumerate(images)})
         r = subprocess.run([sys.executable, "-c", _BASELINE_CHILD, str(src), str(dst), str(self.tree)], env=self.env,
                            cwd=self.tree, capture_output=True, text=True)  # cwd: `-c` puts it first on sys.path
@@ -193,19 +208,21 @@ def view_seams(tm, adjacency, wf) -> dict:
     return {"view_edges": int(len(pairs)), "view_seam_mean": float(de.mean()), "view_seam_gt5": float((de > 5).mean())}
 
 
-def measure(path_or_tm, scene, photo, n_in: int) -> dict:
+def measure(path_or_tm, scene, photo, n_in: int, view: int = VIEW) -> dict:
     from o3d_seqcc.evaluation.render import raycast, render_textured, sharpness
     from o3d_seqcc.evaluation.seams import seam_metric
     from o3d_seqcc.texturing import load_textured_mesh
+    from o3d_seqcc.texturing.memory import gpu_bytes
 
     tm = load_textured_mesh(path_or_tm)
     rep = seam_metric(tm)
-    h = raycast(tm, scene.views[VIEW])
-    img = render_textured(tm, scene.views[VIEW], supersample=3)
+    h = raycast(tm, scene.views[view])
+    img = render_textured(tm, scene.views[view], supersample=3)
     out = {"seam_mean": rep.mean, "seam_gt5": rep.frac_above_5, "seam_edges_gt5": int(round(rep.frac_above_5 * rep.n_edges)),
            "sharpness": sharpness(img, h.mask) / sharpness(photo, h.mask), "vertices": int(len(tm.vertices)),
            "vertex_ratio": len(tm.vertices) / n_in, "coverage": coverage(tm), "used": used_share(tm),
-           "atlas": f"{tm.texture.shape[1]}x{tm.texture.shape[0]}"}
+           "atlas": f"{tm.texture.shape[1]}x{tm.texture.shape[0]}",
+           "gpu_mib": gpu_bytes(tm.texture.shape[1], tm.texture.shape[0]) / 2**20}
     return out, img
 
 
@@ -218,17 +235,17 @@ def _fmt(r: dict) -> str:
     vs = f"{r['view_seam_mean']:.3f}/{r['view_seam_gt5']:.4f}" if "view_seam_mean" in r else "-"
     bt = r.get("bake_s")
     return (f"{r['method']:<15} {r['coverage'] * 100:6.1f}% {r['used'] * 100:6.1f}% {r['atlas']:>11} {r.get('pages', 1):5d} "
+            f"{r['gpu_mib']:7.1f} "
             f"{mb}{extra:<26} {r['vertex_ratio']:6.3f} {r['seam_mean']:7.4f} {r['seam_gt5']:7.5f} ({r['seam_edges_gt5']:2d}) "
             f"{vs:>15} {r['sharpness']:6.2f} {bt if bt is None else round(bt, 2)!s:>6}")
 
 
-HEADER = (f"{'method':<15} {'cover':>7} {'used':>7} {'atlas':>11} {'pages':>5} {'GLB MB':>6}{'':<26} {'v out/in':>6} "
+HEADER = (f"{'method':<15} {'cover':>7} {'used':>7} {'atlas':>11} {'pages':>5} {'GPU MiB':>7} {'GLB MB':>6}{'':<26} {'v out/in':>6} "
           f"{'seams':>7} {'>5':>7} {'(n)':>4} {'view seams/>5':>15} {'sharp':>6} {'bake s':>6}")
 
 
-def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes: list, pictures: dict,
-             baseline: Baseline) -> dict:
-    from o3d_seqcc import load_scene
+def run_mesh(key: str, args, scene, corrected, out: Path, rows: list, notes: list, pictures: dict,
+             baseline: Baseline, view: int = VIEW) -> dict:
     from o3d_seqcc.io.export import export_glb
     from o3d_seqcc.io.gltf_validator import find_validator, validate_glb
     from o3d_seqcc.geometry.meshops import face_adjacency, weld_vertices
@@ -237,22 +254,20 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
     from o3d_seqcc.texturing import TextureSettings, bake_texture, select_views
     from o3d_seqcc.visibility.compute import compute_visibility
 
-    mesh_rel, size = MESHES[key]
-    size = args.atlas_size or size
-    scene = load_scene(DATA, mesh=DATA / mesh_rel)
+    size = args.atlas_size or MESHES[key][1]
     t = time.perf_counter()
     vis = compute_visibility(scene)
     mesh = vis.mesh
     adj = face_adjacency(mesh.faces, mesh.vertices)
     labels = select_views(vis, method="mrf", adjacency=adj)
     n_in = len(mesh.vertices)
-    print(f"\n== fountain {key}: {len(mesh.faces)} faces, {n_in} vertices, {int((labels < 0).sum())} unseen; visibility + "
+    print(f"\n== {key}: {len(mesh.faces)} faces, {n_in} vertices, {int((labels < 0).sum())} unseen; visibility + "
           f"selection {time.perf_counter() - t:.1f} s; atlas {size}", flush=True)
     wf = weld_vertices(mesh.vertices)[mesh.faces]
     d = out / key
     d.mkdir(parents=True, exist_ok=True)
-    times = {"ours": [], "shelf": []}
-    settings = TextureSettings(atlas_size=size)
+    times: dict[str, list] = {"ours": [], "shelf": []}
+    settings = TextureSettings(atlas_size=size, pack_effort=args.pack_effort)
     for r in range(args.repeats):  # alternate: the same load for both
         for name in ("shelf", "ours") if r % 2 else ("ours", "shelf"):
             if name == "ours":
@@ -265,11 +280,14 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
                 shelf, seconds = baseline.bake(mesh, corrected, vis, labels, adjacency=adj, atlas_size=size)
                 times[name].append(seconds)
     med = {k: statistics.median(v) for k, v in times.items()}
-    print(f"bake time, median of {args.repeats} alternating runs: ours {med['ours']:.2f} s, today (shelf) "
+    print(f"bake time, median of {args.repeats} alternating runs: ours {med['ours']:.2f} s, before "
           f"{med['shelf']:.2f} s, ratio {med['ours'] / med['shelf']:.2f} (runs: ours "
           f"{[round(x, 2) for x in times['ours']]}, shelf {[round(x, 2) for x in times['shelf']]})", flush=True)
     st = tm.stats
-    print(f"ours: {st['pages']} page(s) of {st['atlas_size']}^2 at {st['texels_per_pixel']:.3f} texels/pixel "
+    ftp = st["face_texels_per_pixel"]
+    print(f"ours: {st['pages']} page(s) of {st['page_width']}x{st['page_height']} at {st['texels_per_pixel']:.3f} texels/pixel "
+          f"(faces: median {ftp['median']:.3f}, min {ftp['min']:.3f}, p1 {ftp['p1']:.3f}), GPU "
+          f"{st['texture_memory']['gpu_bytes'] / 2**20:.1f} MiB "
           f"(density scale {st['density_scale']:.3f}), {st['charts']} charts ({st['merged_tiny_charts']} tiny merged, "
           f"{st['absorbed_faces']} unseen faces absorbed, {st['fallback_charts']} fallback charts), xatlas "
           f"utilization {[round(u, 3) for u in st['xatlas_utilization']]}; pack log {st['pack_log']}")
@@ -277,9 +295,10 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
     # ours: GLB in the scene frame (measured), Y-up in PNG / JPEG / WebP (shipped sizes, validator)
     R, orient = up_axis_transform(scene, "y")
     glb = export_glb(tm, d / "ours.glb")
-    m, img_ours = measure(glb, scene, corrected[VIEW], n_in)
+    m, img_ours = measure(glb, scene, corrected[view], n_in, view)
     row = {"method": "ours (xatlas)", "mesh": key, "bake_s": med["ours"], "pages": tm.pages, "glb_bytes": glb.stat().st_size,
-           **m, **view_seams(tm, adj, wf), "texels_per_pixel": st["texels_per_pixel"]}
+           **m, **view_seams(tm, adj, wf), "texels_per_pixel": st["texels_per_pixel"],
+           "face_texels_per_pixel": st["face_texels_per_pixel"], "pack_log": st["pack_log"]}
     validation = {}
     for fmt in ("png", "jpg", "webp"):
         p = export_glb(tm, d / f"ours_yup_{fmt}.glb", transform=R, texture_format=fmt, quality=90)
@@ -296,15 +315,28 @@ def run_mesh(key: str, args, scene_all, corrected, out: Path, rows: list, notes:
     print(f"ours, Khronos validator (errors, warnings) per texture format of the Y-up GLB: {validation}; up axis: "
           f"{orient['nearest_axis']} ({orient['angle_deg']:.1f} deg off) -> +Y, rotation {np.round(R, 3).tolist()}")
     rows.append(row)
-    sm, img_shelf = measure(export_glb(shelf, d / "shelf.glb"), scene, corrected[VIEW], n_in)
-    rows.append({"method": "today (shelf)", "mesh": key, "bake_s": med["shelf"], "pages": 1,
+    sm, img_shelf = measure(export_glb(shelf, d / "shelf.glb"), scene, corrected[view], n_in, view)
+    rows.append({"method": f"before {baseline.commit[:7]}", "mesh": key, "bake_s": med["shelf"], "pages": 1,
                  "glb_bytes": (d / "shelf.glb").stat().st_size, **sm, **view_seams(shelf, adj, wf),
                  "grew": bool(shelf.stats.get("grew")), "mip_bleed": mip_bleed(shelf, reach=float(4 + 1))})
-    pictures[key] = {"ours": img_ours, "shelf": img_shelf}
+    pictures[key] = {"ours": img_ours, "before": img_shelf}
     if key == args.yup_mesh:
         pictures["yup"] = yup_picture(tm, R, scene, corrected, d / "ours_yup_png.glb", out / "yup_check.png")
-    peers(key, args, scene, corrected, size, d, n_in, rows, notes, pictures)
+    if key != "room":
+        peers(key, args, scene, corrected, size if size != "auto" else tm.atlas_size, d, n_in, rows, notes, pictures)
     return {"tm": tm, "vis": vis, "labels": labels, "adj": adj, "scene": scene}
+
+
+def _room(out: Path):
+    """The synthetic room of ``benchmarks/sharpness.py`` (16 photos of 320 x 240, two rings, seen_only) and its
+    photos corrected with the library's defaults: ``(scene, corrected)``."""
+    import o3d_seqcc as sc
+    from o3d_seqcc.correction import correct
+
+    syn = sc.make_synthetic_scene(out / "room_scene", n_views=16, width=320, height=240, seed=0, layout="two-rings",
+                                  seen_only=True, overwrite=True)
+    res = correct(syn.scene, reference=syn.scene.names[0])
+    return syn.scene, list(res.images)
 
 
 def yup_picture(tm, R, scene, images, glb: Path, path: Path) -> Path:
@@ -451,9 +483,11 @@ def evidence(ctx: dict, corrected, args, out: Path) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="/tmp/o3d_seqcc_atlas", help="output folder (overwritten)")
-    ap.add_argument("--meshes", default="dec,300k", help="dec, 300k or both")
-    ap.add_argument("--atlas-size", type=int, default=None, help="override the atlas size (default: 2048 / 4096)")
-    ap.add_argument("--repeats", type=int, default=3, help="alternating bake runs of ours and today's (median)")
+    ap.add_argument("--meshes", default="dec,300k,room", help="any of dec, 300k, room")
+    ap.add_argument("--atlas-size", type=lambda v: v if v == "auto" else int(v), default=None,
+                    help="the atlas size, auto or a budget N (default: the library's, auto)")
+    ap.add_argument("--pack-effort", choices=("fast", "best"), default="fast", help="ours: the packing effort")
+    ap.add_argument("--repeats", type=int, default=3, help="alternating bake runs of ours and before (median)")
     ap.add_argument("--no-meshlab", action="store_true")
     ap.add_argument("--no-open3d", action="store_true")
     ap.add_argument("--peers-300k", action="store_true", help="also run MeshLab and Open3D on the 300k mesh (slow)")
@@ -461,8 +495,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evidence", action="store_true", help="coverage against padding / merging / placement")
     ap.add_argument("--evidence-brute", action="store_true", help="with --evidence: xatlas brute-force placement (slow)")
     ap.add_argument("--baseline-commit", default=BASELINE_COMMIT, metavar="SHA",
-                    help=f"the commit whose bake is the 'today (shelf)' row (default {BASELINE_COMMIT}, main before "
-                         "issue 13), run from a temporary git worktree")
+                    help=f"the commit whose bake is the 'before' row (default {BASELINE_COMMIT}, main before "
+                         "issue 35), run from a temporary git worktree")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -485,30 +519,35 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict] = []
     pictures: dict = {}
     ctx = {}
-    notes.append(f"today (shelf): the bake of {baseline.commit[:10]}, from a git worktree of that commit")
+    notes.append(f"before: the bake of {baseline.commit[:10]}, from a git worktree of that commit")
     for key in [k.strip() for k in args.meshes.split(",") if k.strip()]:
-        ctx[key] = run_mesh(key, args, scene, corrected, out, rows, notes, pictures, baseline)
+        if key == "room":
+            room, room_corrected = _room(out)
+            ctx[key] = run_mesh(key, args, room, room_corrected, out, rows, notes, pictures, baseline, ROOM_VIEW)
+        else:
+            ctx[key] = run_mesh(key, args, load_scene(DATA, mesh=DATA / MESHES[key][0]), corrected, out, rows, notes,
+                                pictures, baseline)
     ev = evidence(ctx["dec"], corrected, args, out) if args.evidence and "dec" in ctx else []
     print()
     for key in ctx:
-        print(f"fountain {key} (atlas {args.atlas_size or MESHES[key][1]}):")
+        print(f"{key} (atlas {args.atlas_size or MESHES[key][1]}):")
         print(HEADER)
         print("-" * len(HEADER))
         for r in rows:
             if r["mesh"] == key:
                 print(_fmt(r))
         o = next(r for r in rows if r["mesh"] == key and r["method"].startswith("ours"))
-        s = next(r for r in rows if r["mesh"] == key and r["method"].startswith("today"))
-        print(f"  ours / today: bake time {o['bake_s'] / s['bake_s']:.2f}x, coverage {o['coverage'] / s['coverage']:.2f}x, "
-              f"GLB {o['glb_bytes'] / s['glb_bytes']:.2f}x, vertices {o['vertices'] / s['vertices']:.2f}x; today's atlas "
-              f"{'grew beyond the budget' if s.get('grew') else 'stayed within'} {args.atlas_size or MESHES[key][1]}")
+        s = next(r for r in rows if r["mesh"] == key and r["method"].startswith("before"))
+        print(f"  ours / before: bake time {o['bake_s'] / s['bake_s']:.2f}x, coverage {o['coverage'] / s['coverage']:.2f}x, "
+              f"GLB {o['glb_bytes'] / s['glb_bytes']:.2f}x, GPU memory {o['gpu_mib'] / s['gpu_mib']:.2f}x, sharpness "
+              f"{o['sharpness'] / s['sharpness']:.3f}x, vertices {o['vertices'] / s['vertices']:.2f}x")
         print("  ours mip bleed p99 L1/L2/L3: " + " / ".join(f"{v['p99']:.3f}" for v in o["mip_bleed"].values())
-              + "; today's: " + " / ".join(f"{v['p99']:.3f}" for v in s["mip_bleed"].values()))
+              + "; before: " + " / ".join(f"{v['p99']:.3f}" for v in s["mip_bleed"].values()))
         print()
     print("(cover: triangle texels / atlas texels; used: texels within 1 texel of a triangle; v out/in: output / input "
           "vertices; seams: seam-metric mean, >5: share of edges above 5 (n: count); view seams: mean and share > 5 "
           "over edges between two views, inside charts too; sharp: render / photo sharpness at view 16; bake s: "
-          "ours and today median of alternating runs, peers their filter)")
+          "ours and before median of alternating runs, peers their filter)")
     for n in notes:
         print("note:", n)
     import cv2

@@ -236,12 +236,15 @@ def _registry() -> Registry[MeshLabFilter]:
     ts_defaults = TextureSettings.defaults()
     ts_docs = _doc_entries(TextureSettings, "Attributes")
     enums = {"selection": tuple(sorted(SELECTION_METHODS)), "overflow": tuple(OVERFLOWS), "fallback": tuple(FALLBACKS),
-             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS), "uv": tuple(UV_MODES)}
+             "data_term": tuple(DATA_TERMS), "outlier_removal": tuple(OUTLIER_REMOVALS), "uv": tuple(UV_MODES),
+             "pack_effort": ("fast", "best")}
     labels = {
         "selection": "View selection", "smoothness": "Selection smoothness", "seed": "Random seed",
         "atlas_size": "Largest atlas size", "padding": "Chart gutter", "texels_per_pixel": "Texels per pixel",
         "overflow": "When the atlas is full", "power_of_two": "Power-of-two atlas",
         "shrink_to_fit": "Density drop to keep a power of two", "merge_charts": "Merge tiny charts",
+        "small_charts": "Small charts (texels)", "small_padding": "Small charts' gutter",
+        "pack_effort": "Packing effort",
         "fill_background": "Fill the background", "leveling": "Global seam leveling",
         "leveling_smoothness": "Seam leveling smoothness", "local_leveling": "Local seam leveling",
         "local_band": "Local leveling band", "fallback": "Colour of unseen faces",

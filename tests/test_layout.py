@@ -30,7 +30,7 @@ TREE: dict[str, set[str]] = {
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "value_space",
                            "pairwise", "global_methods"},
     "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
-                  "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv"},
+                  "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "mappings_npz", "output", "result_files", "export", "obj_text", "gltf_validator"},

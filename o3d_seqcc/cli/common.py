@@ -208,6 +208,14 @@ def add_atlas_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--padding", type=int, default=d.padding,
                    help=f"texels of gutter (the photo around the chart) between charts, mip-safe to level 2 at the "
                    f"default {d.padding}")
+    p.add_argument("--small-charts", type=int, default=d.small_charts, metavar="N",
+                   help=f"charts of at most N texels on their longer side share one block with --small-padding gutters "
+                   f"(default {d.small_charts}; 0: every chart with --padding)")
+    p.add_argument("--small-padding", type=int, default=d.small_padding,
+                   help=f"texels of gutter between the small charts of that block (default {d.small_padding})")
+    p.add_argument("--pack-effort", choices=("fast", "best"), default=d.pack_effort,
+                   help="xatlas's placement search (default fast) or every candidate position (best: about 10 %% more "
+                   "coverage on a fine mesh, the packing about 5x slower)")
     p.add_argument("--merge-charts", type=int, default=d.merge_charts,
                    help=f"charts of at most this many faces join a neighbouring chart's parametrisation where its view "
                    f"sees them (default {d.merge_charts}; 0: off)")

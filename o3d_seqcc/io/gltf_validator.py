@@ -36,7 +36,7 @@ def find_validator() -> tuple[str, Path] | None:
     node = shutil.which("node")
     if node is None:
         return None
-    cands = [os.environ.get("GLTF_VALIDATOR_DIR"), str(Path(__file__).resolve().parents[1] / ".cache" / "node")]
+    cands = [os.environ.get("GLTF_VALIDATOR_DIR"), str(Path(__file__).resolve().parents[2] / ".cache" / "node")]
     npm = shutil.which("npm")
     if npm:
         try:

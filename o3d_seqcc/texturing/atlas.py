@@ -360,7 +360,9 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     # xatlas packs in a child process while the seam leveling is solved here (neither needs the other)
     packing = pack_charts_beside(cs.uv, cs.faces, cs.face_chart, beside=threads > 1, atlas_size=s.atlas_size,
                                  texels_per_pixel=s.texels_per_pixel, overflow=s.overflow, padding=int(s.padding),
-                                 power_of_two=bool(s.power_of_two), shrink_to_fit=float(s.shrink_to_fit))
+                                 power_of_two=bool(s.power_of_two), shrink_to_fit=float(s.shrink_to_fit),
+                                 small_charts=int(s.small_charts), small_padding=int(s.small_padding),
+                                 pack_effort=s.pack_effort)
     step("seam leveling")
     seen = labels >= 0
     cache = LRUCache(default_cache_bytes())

@@ -45,8 +45,9 @@ logger = logging.getLogger(__name__)
 
 #: absorbed unseen components must project inside the host chart's bounding box grown by this fraction
 ABSORB_MARGIN = 1.0
-#: a merged tiny chart's faces need at least this fraction of their own view's projected area in the host view
-MERGE_MIN_AREA_RATIO = 0.5
+#: a merged tiny chart's faces need at least this fraction of their own view's projected area in the host view:
+#: 0.81 keeps them at 0.9 texels per pixel of their own photo or more (issue 35; 0.5 let them fall to 0.71)
+MERGE_MIN_AREA_RATIO = 0.81
 #: fallback-region density: this fraction of the median photo density (pixels per world unit)
 FALLBACK_DENSITY = 1.0
 

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError, warn
+from .blocks import pack_with_block
 from .settings import TextureSettings
 
 __all__ = ["MAX_AUTO_ATLAS_SIZE", "Packing", "pack_charts"]
@@ -50,6 +51,8 @@ logger = logging.getLogger(__name__)
 
 #: ``atlas_size="auto"``: the largest page; more pages of this side beyond it
 MAX_AUTO_ATLAS_SIZE = 8192
+#: ``pack_effort``: xatlas's own placement search, or every position (``bruteForce``)
+PACK_EFFORTS = ("fast", "best")
 #: page sides are multiples of this (BC / ASTC 4x4 / ETC block compression)
 BLOCK = 4
 #: xatlas's marker of an unassigned vertex / chart
@@ -108,7 +111,9 @@ def tight_side(extent: float, padding: int) -> int:
 class _Packer:
     """xatlas calls on one UV mesh (kept across attempts)."""
 
-    def __init__(self, uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, padding: int) -> None:
+    def __init__(self, uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, padding: int, *,
+                 effort: str = "fast") -> None:
+        self.brute_force = effort == "best"
         self.uv64 = np.asarray(uv, dtype=np.float64)
         self.uv = np.ascontiguousarray(uv, dtype=np.float32)
         self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
@@ -135,6 +140,7 @@ class _Packer:
         po.blockAlign = False
         po.rotate_charts = True  # by 90 degrees (xatlas swaps x and y): the texel grid stays the pixel grid
         po.rotate_charts_to_axis = False  # any other angle would resample every texel
+        po.bruteForce = self.brute_force  # "best": every position tried (Fountain 300k: 1.5 -> 7.7 s, +10 % coverage)
         a.generate(xatlas.ChartOptions(), po)
         return a
 
@@ -344,7 +350,8 @@ def pack_charts(
     uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, atlas_size: int | str = TextureSettings.atlas_size,
     texels_per_pixel: float | str = TextureSettings.texels_per_pixel, overflow: str = TextureSettings.overflow,
     padding: int = TextureSettings.padding, power_of_two: bool = TextureSettings.power_of_two,
-    shrink_to_fit: float = TextureSettings.shrink_to_fit,
+    shrink_to_fit: float = TextureSettings.shrink_to_fit, small_charts: int = TextureSettings.small_charts,
+    small_padding: int = TextureSettings.small_padding, pack_effort: str = TextureSettings.pack_effort,
 ) -> Packing:
     """Pack charts into pages sized to them or of at most ``atlas_size`` (see the module docstring).
 
@@ -376,6 +383,14 @@ def pack_charts(
         With ``power_of_two``: the largest density reduction (a share, < 0.5) accepted to keep the
         charts on the power of two below the one they need at the asked density (a warning gives
         the factor; ``stats["density_scale"]`` records it). 0: never.
+    small_charts : int, default 16
+        Charts of at most this many texels on their longer side are packed together in one block
+        at ``small_padding`` (:func:`~o3d_seqcc.texturing.blocks.pack_with_block`); 0: each on its own.
+    small_padding : int, default 1
+        The gutters inside that block.
+    pack_effort : {"fast", "best"}, default "fast"
+        xatlas's placement search, or every candidate position (``bruteForce``: measured on
+        Fountain 300k's charts, coverage 41.8 -> 46.2 %, packing 1.5 -> 7.7 s).
 
     Returns
     -------
@@ -388,12 +403,15 @@ def pack_charts(
         A density that is not positive; with ``overflow="scale"``, charts whose gutters alone do
         not fit the largest atlas.
     """
-    return _pack_charts(uv, faces, chart, atlas_size=atlas_size, texels_per_pixel=texels_per_pixel, overflow=overflow,
-                        padding=padding, power_of_two=power_of_two, shrink_to_fit=shrink_to_fit)
+    return pack_with_block(uv, faces, chart, _pack_charts, small_charts=int(small_charts),
+                           small_padding=int(small_padding), atlas_size=atlas_size, texels_per_pixel=texels_per_pixel,
+                           overflow=overflow, padding=padding, power_of_two=power_of_two, shrink_to_fit=shrink_to_fit,
+                           pack_effort=pack_effort)
 
 
 def _pack_charts(uv, faces, chart, *, atlas_size, texels_per_pixel, overflow, padding, power_of_two,
-                 shrink_to_fit=TextureSettings.shrink_to_fit, speculate=None) -> Packing:
+                 shrink_to_fit=TextureSettings.shrink_to_fit, pack_effort=TextureSettings.pack_effort,
+                 speculate=None) -> Packing:
     """:func:`pack_charts`; ``speculate(packer, t, N, power_of_two)``, given a spare core: the page a sure second
     xatlas call will pack, packed in a child process from the start, or None
     (:func:`~o3d_seqcc.texturing.packing_child.speculative_page`): the same packing sooner."""
@@ -405,7 +423,9 @@ def _pack_charts(uv, faces, chart, *, atlas_size, texels_per_pixel, overflow, pa
     if sized:
         overflow = "pages"
     N = MAX_AUTO_ATLAS_SIZE if sized else int(atlas_size)
-    pk = _Packer(uv, faces, chart, padding)
+    if pack_effort not in PACK_EFFORTS:
+        raise InputError(f"pack_effort must be one of {', '.join(PACK_EFFORTS)}, got {pack_effort!r}")
+    pk = _Packer(uv, faces, chart, padding, effort=pack_effort)
     spec = speculate(pk, req, N, power_of_two) if speculate is not None else None
     try:
         return _pack_sized(pk, req, N, overflow, power_of_two, padding, spec, shrink_to_fit)

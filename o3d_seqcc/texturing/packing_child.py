@@ -77,11 +77,18 @@ def pack_charts_beside(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, *, 
 def pack_speculating(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, **options) -> Packing:
     """:func:`~o3d_seqcc.texturing.packing.pack_charts` with a core to spare: the page a sure second xatlas call
     will want is packed beside the first (:func:`speculative_page`); the same packing."""
-    return _pack_charts(uv, faces, chart, **options, speculate=speculative_page)
+    import functools
+
+    from .blocks import pack_with_block
+
+    small = {k: int(options.pop(k, getattr(TextureSettings, k))) for k in ("small_charts", "small_padding")}
+    return pack_with_block(uv, faces, chart, functools.partial(_pack_charts, speculate=speculative_page), **small,
+                           **options)
 
 
 #: the options of :func:`pack_charts` (their defaults: :class:`TextureSettings`')
-_OPTIONS = ("atlas_size", "texels_per_pixel", "overflow", "padding", "power_of_two", "shrink_to_fit")
+_OPTIONS = ("atlas_size", "texels_per_pixel", "overflow", "padding", "power_of_two", "shrink_to_fit", "small_charts",
+            "small_padding", "pack_effort")
 
 
 def _beside(function: str, args: tuple, kwargs: dict, inline, *, sent: bool = False) -> _Packed:
@@ -215,9 +222,9 @@ class _Snapshot:
 
 
 def _page_snapshot(uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, padding: int, t: float,
-                   size: int) -> _Snapshot:
-    """``_Packer(uv, faces, chart, padding).pack(t, size)`` (the child of :func:`_speculative_page`)."""
-    return _Snapshot(_Packer(uv, faces, chart, padding).pack(t, size))
+                   size: int, effort: str = "fast") -> _Snapshot:
+    """``_Packer(uv, faces, chart, padding, effort=effort).pack(t, size)`` (the child of :func:`_speculative_page`)."""
+    return _Snapshot(_Packer(uv, faces, chart, padding, effort=effort).pack(t, size))
 
 
 class _Speculation:
@@ -246,7 +253,8 @@ def speculative_page(pk: _Packer, t: float, N: int, power_of_two: bool) -> _Spec
     if S is None or _EXTENT_RATIO_LOW * boxes + 1 + pk.largest_chart(t) <= S:
         return None  # several pages, or the unlimited placement may be read off that page: no second call
     logger.debug("packing: a %dx%d page packed beside the unlimited one", S, S)
-    return _Speculation(S, _beside("_page_snapshot", (pk.uv, pk.faces, pk.chart.reshape(-1), pk.padding, t, S), {},
+    effort = "best" if pk.brute_force else "fast"
+    return _Speculation(S, _beside("_page_snapshot", (pk.uv, pk.faces, pk.chart.reshape(-1), pk.padding, t, S, effort), {},
                                    lambda: pk.pack(t, S), sent=True))
 
 

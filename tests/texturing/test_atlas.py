@@ -296,7 +296,10 @@ def test_fountain_mip_bleed_level2_and_coverage(fountain_baked):
     assert tm.stats["coverage"] * 4 >= 0.5, tm.stats["coverage"]
     assert tm.stats["face_texels_per_pixel"]["median"] == pytest.approx(1.0, abs=1e-6)
     r = mip_bleed(tm, levels=(1, 2))
-    assert r[2]["p99"] <= 1.0 and r[2]["share_gt2"] <= 0.001, r
+    assert r[1]["p99"] <= 1.0 and r[1]["share_gt2"] <= 0.001, r
+    # level 2: the small charts' block has 1-texel gutters (mip-safe to level 1; a chart of 16 texels is 4 there),
+    # so a few of them bleed at level 2 (measured: 0.10 % of the faces above 2)
+    assert r[2]["p99"] <= 1.0 and r[2]["share_gt2"] <= 0.003, r
     assert r[1]["p99"] <= r[2]["p99"] + 1e-9
     # counted as foreign, the gutters still hardly change level 2: they continue the photo (a level-2
     # texel spans 4 x 4 photo pixels at one texel per pixel: 2.3 at the 1.64 of a 2048 budget; 4.72 with
@@ -362,3 +365,40 @@ def test_fountain_glb_opens_right_way_up(fountain_scene, fountain_baked, tmp_pat
     upright, flipped = ncc(g, p), ncc(g, p[::-1, ::-1])
     cv2.imwrite(str(tmp_path / "fountain_yup.png"), np.concatenate([render, images[k]], axis=1)[..., ::-1])
     assert mask.mean() > 0.3 and upright > 0.3 and upright > flipped + 0.3, (upright, flipped)
+
+
+def test_small_charts_share_a_block_with_narrow_gutters(rng):
+    """300 charts of 2-10 texels and 20 of 30-60: the small ones go into one block at ``small_padding`` (the log says
+    so), every chart is still its photo coordinates moved by whole texels (x and y at most swapped), no texel is
+    covered by two charts, large charts keep ``2 * padding`` from everything, and the page is smaller than with every
+    chart on its own."""
+    import cv2
+
+    n_small, n_big, pad = 300, 20, 4
+    wh = np.r_[rng.uniform(2, 10, size=(n_small, 2)), rng.uniform(30, 60, size=(n_big, 2))]
+    n = len(wh)
+    off = rng.uniform(0, 500, size=(n, 2))
+    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)
+    base = 4 * np.arange(n)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    chart = np.r_[np.arange(n), np.arange(n)]
+    pk = pack_charts(uv, faces, chart, padding=pad)
+    alone = pack_charts(uv, faces, chart, padding=pad, small_charts=0)
+    assert any(entry.startswith(f"block: {n_small} charts") for entry in pk.log), pk.log
+    assert pk.width * pk.height < 0.85 * alone.width * alone.height
+    vc = np.repeat(np.arange(n), 4)
+    for c in range(n):
+        d = pk.txy[vc == c] - uv[vc == c]
+        ds = pk.txy[vc == c] - uv[vc == c][:, ::-1]
+        assert any(np.ptp(x, axis=0).max() < 1e-6 and np.abs(x[0] - np.rint(x[0])).max() < 1e-6 for x in (d, ds)), c
+    W, H = pk.width, pk.height
+    own = np.full(W * H, -1)
+    for c in range(n):
+        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], H, W)
+        assert (own[idx] < 0).all()
+        own[idx] = c
+    k = np.ones((4 * pad - 1, 4 * pad - 1), np.uint8)
+    for c in range(n_small, n):  # the large charts: the full gutter from every other chart
+        near = cv2.dilate((own == c).reshape(H, W).astype(np.uint8), k).reshape(-1).astype(bool)
+        assert set(np.unique(own[near])) <= {-1, c}
