@@ -129,3 +129,27 @@ def test_texture_engine_options(syn, tmp_path, capsys):
     assert "quality" in capsys.readouterr().err
     assert main(["-q", "texture", scene_json, "--out", str(tmp_path / "t"), "--texels-per-pixel", "dense"]) == 2
     assert "texels_per_pixel" in capsys.readouterr().err
+
+
+def test_atlas_flags_power_of_two_and_texture_memory(syn, tmp_path, capsys):
+    """The default page is cut to the charts (sides multiples of 4), --power-of-two makes it a square power of two;
+    report.json gives every page's size, coverage and GPU bytes, and the summary prints the total."""
+    from o3d_seqcc.texturing.memory import gpu_bytes
+
+    scene_json = str(syn.root / "scene.json")
+    reps = {}
+    for flag in ("--no-power-of-two", "--power-of-two"):
+        out = tmp_path / flag.strip("-")
+        assert main(["texture", scene_json, "--out", str(out), "--format", "glb", "--no-seams", flag]) == 0
+        printed = capsys.readouterr().out
+        a = _report(out)["atlas"]
+        mem = a["texture_memory"]
+        assert f"texture memory: {mem['gpu_bytes'] / 2**20:.1f} MiB on the GPU" in printed
+        assert mem["gpu_bytes"] == sum(p["gpu_bytes"] for p in mem["pages"])
+        assert all(p["gpu_bytes"] == gpu_bytes(a["page_width"], a["page_height"]) for p in mem["pages"])
+        reps[flag] = a
+    cut, square = reps["--no-power-of-two"], reps["--power-of-two"]
+    assert cut["page_width"] % 4 == 0 and cut["page_height"] % 4 == 0 and not cut["power_of_two"]
+    w = square["page_width"]
+    assert w == square["page_height"] and w & (w - 1) == 0 and square["power_of_two"]
+    assert cut["page_width"] * cut["page_height"] <= w * w and cut["coverage"] >= square["coverage"]

@@ -402,3 +402,32 @@ def test_small_charts_share_a_block_with_narrow_gutters(rng):
     for c in range(n_small, n):  # the large charts: the full gutter from every other chart
         near = cv2.dilate((own == c).reshape(H, W).astype(np.uint8), k).reshape(-1).astype(bool)
         assert set(np.unique(own[near])) <= {-1, c}
+
+
+def test_shrink_to_fit_keeps_a_power_of_two_at_a_reported_density(rng):
+    """Charts that overflow a power-of-two page by a few percent: with ``power_of_two`` they take the page twice as
+    large; ``shrink_to_fit=0.1`` keeps the smaller one at a density lowered by at most 10 %, with a warning giving
+    the factor and ``scale`` recording it; never without asking (the default cuts a page to the charts)."""
+    from o3d_seqcc.errors import O3dSeqccWarning
+
+    n = 40
+    wh = rng.uniform(20, 40, size=(n, 2))
+    off = rng.uniform(0, 500, size=(n, 2))
+    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)
+    base = 4 * np.arange(n)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    chart = np.r_[np.arange(n), np.arange(n)]
+    cut = pack_charts(uv, faces, chart, padding=2, small_charts=0)
+    # scale the charts so that they need a little more than the power of two below their square page
+    S = 1 << int(np.ceil(np.log2(max(cut.width, cut.height))))
+    k = (S / 2) / max(cut.width, cut.height) * 1.03
+    uv2 = uv * k
+    big = pack_charts(uv2, faces, chart, padding=2, small_charts=0, power_of_two=True)
+    assert big.width == big.height and big.scale == 1.0 and big.texels_per_pixel == 1.0
+    with pytest.warns(O3dSeqccWarning, match=r"shrink_to_fit: .*density scaled by 0\.9\d\d"):
+        small = pack_charts(uv2, faces, chart, padding=2, small_charts=0, power_of_two=True, shrink_to_fit=0.1)
+    assert small.width == small.height == big.width // 2
+    assert 0.9 <= small.scale < 1.0 and small.texels_per_pixel == pytest.approx(small.scale)
+    none = pack_charts(uv2, faces, chart, padding=2, small_charts=0, power_of_two=True, shrink_to_fit=0.001)
+    assert none.width == big.width and none.scale == 1.0  # 0.1 % is not enough: the larger page, the density kept
