@@ -267,7 +267,9 @@ def run_mesh(key: str, args, scene, corrected, out: Path, rows: list, notes: lis
     d = out / key
     d.mkdir(parents=True, exist_ok=True)
     times: dict[str, list] = {"ours": [], "shelf": []}
-    settings = TextureSettings(atlas_size=size, pack_effort=args.pack_effort)
+    settings = TextureSettings(atlas_size=size, pack_effort=args.pack_effort,
+                               **({} if args.padding is None else {"padding": args.padding}),
+                               **({} if args.small_padding is None else {"small_padding": args.small_padding}))
     for r in range(args.repeats):  # alternate: the same load for both
         for name in ("shelf", "ours") if r % 2 else ("ours", "shelf"):
             if name == "ours":
@@ -487,6 +489,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--atlas-size", type=lambda v: v if v == "auto" else int(v), default=None,
                     help="the atlas size, auto or a budget N (default: the library's, auto)")
     ap.add_argument("--pack-effort", choices=("fast", "best"), default="fast", help="ours: the packing effort")
+    ap.add_argument("--padding", type=int, default=None, help="ours: the charts' gutter (default: the library's, 4)")
+    ap.add_argument("--small-padding", type=int, default=None,
+                    help="ours: the small charts' gutter in their block (default: the library's, 1)")
     ap.add_argument("--repeats", type=int, default=3, help="alternating bake runs of ours and before (median)")
     ap.add_argument("--no-meshlab", action="store_true")
     ap.add_argument("--no-open3d", action="store_true")

@@ -24,7 +24,7 @@ TREE: dict[str, set[str]] = {
     "imaging": {"__init__", "arrays", "sequences"},
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
     "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
-                   "compute"},
+                   "compute", "subpixel"},
     "mappings": {"__init__", "pairs", "sampling", "compute"},
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "value_space",

@@ -159,7 +159,6 @@ def own_uv_page(corner_uv: np.ndarray, fuv: np.ndarray, seen: np.ndarray, s: Tex
     t = top / ratio
     msg = (f"uv='keep': the layout needs a {side}x{side} page for {req:g} texels per pixel; the {top}x{top} page "
            f"(atlas_size) holds {t:.3g}: density scaled by {t / req:.3f} (a larger atlas_size keeps it)")
-    logger.warning(msg)
     warn(msg)
     return top, t, t / req
 

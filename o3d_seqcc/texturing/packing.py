@@ -443,7 +443,6 @@ def _shrunk_onto(pk: _Packer, req: float, size: int, start: float, most: float) 
         if ok:
             msg = (f"shrink_to_fit: the charts take a {size}x{size} page at {t:.3g} texels per pixel (density scaled "
                    f"by {t / req:.3f} from {req:g}) instead of a page of twice that side")
-            logger.warning(msg)
             warn(msg)
             return _result(a, pk, t, req, size)
         t *= 0.99

@@ -64,6 +64,7 @@ from .stray import drop_faces, stray_faces
 from .dense import DenseViews, DenseVisibility, UsableFaces, VisibilityLike
 from .per_view import ViewRecord, VisibilityJob, summarize_records, view_record
 from .settings import FILTERS, VisibilitySettings
+from .subpixel import subpixel_faces, warn_subpixel
 
 __all__ = [
     "FILTERS",
@@ -373,6 +374,9 @@ def compute_visibility(
     ex = current_executor(n_jobs)
     records: list[ViewRecord] = ex.map(view_record, range(len(views)), ex.share(job), desc="visibility", unit="view")
     timings["views"] = time.perf_counter() - t1
+    subpixel = subpixel_faces(records, len(faces))
+    warn_subpixel(subpixel, f" of the mesh {scene.mesh}" if isinstance(getattr(scene, "mesh", None), (str, os.PathLike))
+                  else "")
     parent, split = None, {"rounds": 0, "input_faces": int(len(faces)), "faces_split": 0, "faces_added": 0}
     stray = stray_faces(X, faces, records, np.array([v.center for v in views]).reshape(-1, 3))
     if stray.any():  # far-away junk no photo sees: it would set the scene's scale (the split's too) and take the atlas
@@ -401,7 +405,8 @@ def compute_visibility(
     stats = summarize_records(views, records, opts, scene_mesh=getattr(scene, "mesh", ""))
     timings.update(stats["timings"])
     stats.update(n_faces=int(len(mesh.faces)), degenerate_faces=int(degenerate.sum()), normals_flipped=flipped,
-                 split={"enabled": bool(split_faces), **split}, stray_faces=int(stray.sum()), timings=timings)
+                 split={"enabled": bool(split_faces), **split}, stray_faces=int(stray.sum()), subpixel=subpixel,
+                 timings=timings)
     timings["total"] = time.perf_counter() - t0
     logger.info(
         "visibility: %d views x %d faces: valid %d, occluded %d, depth-inconsistent %d, oblique %d -> usable %d (%.2f s)",
