@@ -345,6 +345,53 @@ def _texel_pass(tex: np.ndarray, owner: np.ndarray, ctxy: np.ndarray, faces: np.
     thread_map(band, range(0, H, rows), threads, name="o3d_seqcc-bake")
 
 
+def corner_additions(views_images, faces: np.ndarray, labels: np.ndarray, fuv: np.ndarray, wf: np.ndarray,
+                     level_chart: np.ndarray, adjacency: np.ndarray, s: TextureSettings, cache: LRUCache,
+                     threads: int) -> tuple[np.ndarray | None, dict | None, int]:
+    """What the texel pass adds per face corner: ``(add, leveling stats, unseen faces)``.
+
+    ``add`` (F, 3 corners, 3 channels) float32: the global seam leveling's offsets (``s.leveling``, regions
+    ``level_chart``) on seen faces, the fallback colours (``s.fallback``) on unseen ones (sampled as 0); None when
+    there is neither. Every seen face's corner colours are read from its view (the images go into ``cache``).
+    """
+    corner_mean, corner_point = _corner_pass(views_images, faces, labels, fuv, cache, threads)
+    seen = labels >= 0
+    lev_stats = corner_off = None
+    if s.leveling:
+        corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, level_chart,
+                                                     smoothness=float(s.leveling_smoothness))
+        lev_stats["smoothness"] = float(s.leveling_smoothness)
+        logger.info("bake: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f",
+                    lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
+                    lev_stats["seam_step_after"])
+    n_unseen = int(np.count_nonzero(~seen))
+    if corner_off is None and not n_unseen:
+        return None, lev_stats, 0
+    add = np.zeros((len(faces), 3, 3), dtype=np.float32)
+    if corner_off is not None:
+        add[seen] = corner_off[seen]
+    if n_unseen:
+        cc = corner_point if corner_off is None else corner_point + corner_off
+        add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
+        logger.info("bake: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
+    return add, lev_stats, n_unseen
+
+
+def owner_canvas(txy: np.ndarray, faces: np.ndarray, seen: np.ndarray, height: int, width: int, padding: int,
+                 threads: int) -> np.ndarray:
+    """(height * width,) int32: the face of every texel, inside a face (the seen faces drawn last), under a thin
+    face's edge or in a gutter of ``padding`` + 1 texels (``-2 - f``), -1 elsewhere."""
+    owner = rasterize_owner(txy, faces, height, width, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
+                            threads=threads)
+    eidx, eface = edge_texels(txy, faces, None, height, width, free=owner == -1)  # slivers own the texels under edges
+    owner[eidx] = -2 - eface.astype(np.int32)
+    del eidx, eface
+    if padding > 0:
+        gidx, gface = gutter_owner(owner, height, width, float(padding) + 1.0, threads=threads)
+        owner[gidx] = -2 - gface.astype(np.int32)
+    return owner
+
+
 def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacency, step) -> TexturedMesh:
     t0 = time.perf_counter()
     step("charts")
@@ -366,25 +413,8 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     step("seam leveling")
     seen = labels >= 0
     cache = LRUCache(default_cache_bytes())
-    corner_mean, corner_point = _corner_pass(views_images, faces, labels, fuv, cache, threads)
-    lev_stats = corner_off = None
-    if s.leveling:
-        corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, cs.level_chart,
-                                                     smoothness=float(s.leveling_smoothness))
-        lev_stats["smoothness"] = float(s.leveling_smoothness)
-        logger.info("bake_texture: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f",
-                    lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
-                    lev_stats["seam_step_after"])
-    # per face corner: the leveling offset (seen faces) or the fallback colour (unseen ones, sampled as 0)
-    add = np.zeros((len(faces), 3, 3), dtype=np.float32)
-    if corner_off is not None:
-        add[seen] = corner_off[seen]
-    n_unseen = int(np.count_nonzero(~seen))
-    if n_unseen:
-        cc = corner_point if corner_off is None else corner_point + corner_off
-        add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
-        logger.info("bake_texture: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
-    del corner_mean, corner_point
+    add, lev_stats, n_unseen = corner_additions(views_images, faces, labels, fuv, wf, cs.level_chart, adjacency, s,
+                                                cache, threads)
     t_level = time.perf_counter()
     step("pack")
     pk = packing.result()
@@ -394,22 +424,12 @@ def _bake(mesh, views_images, visibility, selection, s: TextureSettings, adjacen
     ctxy[:, 1] += pk.page * Hp  # pages stacked vertically
     t_pack = time.perf_counter()
     step("rasterize")
-    # the face of every texel: inside a face (the face drawn last), under a thin face's edge, in a gutter (-2 - f)
-    owner = rasterize_owner(ctxy, cs.faces, H, W, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)],
-                            threads=threads)
-    eidx, eface = edge_texels(ctxy, cs.faces, None, H, W, free=owner == -1)  # slivers own the texels under their edges
-    owner[eidx] = -2 - eface.astype(np.int32)
-    del eidx, eface
-    if s.padding > 0:
-        gidx, gface = gutter_owner(owner, H, W, float(s.padding) + 1.0, threads=threads)
-        owner[gidx] = -2 - gface.astype(np.int32)
-        del gidx, gface
+    owner = owner_canvas(ctxy, cs.faces, seen, H, W, int(s.padding), threads)
     release_free_memory()
     t_raster = time.perf_counter()
     step("sample")
     tex = np.zeros((H, W, 3), dtype=np.uint8)
-    _texel_pass(tex, owner, ctxy, cs.faces, labels, fuv, views_images,
-                add if corner_off is not None or n_unseen else None, pk.texels_per_pixel, cache, threads)
+    _texel_pass(tex, owner, ctxy, cs.faces, labels, fuv, views_images, add, pk.texels_per_pixel, cache, threads)
     del cache, add
     written = owner != -1
     release_free_memory()

@@ -37,12 +37,11 @@ import numpy as np
 from ..errors import InputError, warn
 from ..geometry.meshops import vertex_normals, weld_vertices
 from ..imaging.sequences import LRUCache, default_cache_bytes
-from .atlas import _check, _corner_pass, _regions, _texel_pass, _threads
-from .bake import edge_texels, gutter_owner, rasterize_owner, release_free_memory
+from .atlas import _check, _regions, _texel_pass, _threads, corner_additions, owner_canvas
+from .bake import rasterize_owner, release_free_memory
 from .charts import image_charts
-from .fallback import fallback_corner_colors
 from .fill import push_pull_fill
-from .leveling import local_seam_leveling, solve_corner_offsets
+from .leveling import local_seam_leveling
 from .memory import texture_memory
 from .packing import BLOCK, MAX_AUTO_ATLAS_SIZE
 from .settings import TextureSettings, VisibilityLike
@@ -346,31 +345,11 @@ def bake_own_uv(
     region_chart = image_charts(faces, labels, adjacency)  # connected same-view faces: the leveling's regions
     n_regions = int(region_chart.max()) + 1 if len(region_chart) else 0
     cache = LRUCache(default_cache_bytes())
-    corner_mean, corner_point = _corner_pass(views_images, faces, labels, fuv, cache, threads)
-    corner_off = lev_stats = None
-    if s.leveling:
-        corner_off, lev_stats = solve_corner_offsets(corner_mean, wf, labels, region_chart,
-                                                     smoothness=float(s.leveling_smoothness))
-        lev_stats["smoothness"] = float(s.leveling_smoothness)
-    add = np.zeros((len(faces), 3, 3), dtype=np.float32)
-    if corner_off is not None:
-        add[seen] = corner_off[seen]
-    n_unseen = int(np.count_nonzero(~seen))
-    if n_unseen:
-        cc = corner_point if corner_off is None else corner_point + corner_off
-        add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
-    del corner_mean, corner_point
-    owner = rasterize_owner(txy, cf, H, W, order=np.r_[np.flatnonzero(~seen), np.flatnonzero(seen)], threads=threads)
-    eidx, eface = edge_texels(txy, cf, None, H, W, free=owner == -1)
-    owner[eidx] = -2 - eface.astype(np.int32)
-    del eidx, eface
-    if s.padding > 0:
-        gidx, gface = gutter_owner(owner, H, W, float(s.padding) + 1.0, threads=threads)
-        owner[gidx] = -2 - gface.astype(np.int32)
-        del gidx, gface
+    add, lev_stats, n_unseen = corner_additions(views_images, faces, labels, fuv, wf, region_chart, adjacency, s,
+                                                cache, threads)
+    owner = owner_canvas(txy, cf, seen, H, W, int(s.padding), threads)
     tex = np.zeros((H, W, 3), dtype=np.uint8)
-    _texel_pass(tex, owner, txy, cf, labels, fuv, views_images, add if corner_off is not None or n_unseen else None,
-                tpp, cache, threads)
+    _texel_pass(tex, owner, txy, cf, labels, fuv, views_images, add, tpp, cache, threads)
     del cache, add
     written = owner != -1
     n_texels = int(np.count_nonzero(written))

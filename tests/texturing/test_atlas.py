@@ -31,6 +31,27 @@ def _needs_validator():
 # ------------------------------------------------------------------------------ packing
 
 
+def quad_charts(wh: np.ndarray, off: np.ndarray):
+    """Charts that are axis-aligned quads of sides ``wh`` (n, 2) at ``off`` (n, 2), two triangles each:
+    ``(uv (4n, 2), faces (2n, 3), chart (2n,))``."""
+    n = len(wh)
+    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)  # charts overlap in source space: fine
+    base = 4 * np.arange(n)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    return uv, faces, np.r_[np.arange(n), np.arange(n)]
+
+
+def chart_canvas(pk, faces: np.ndarray, chart: np.ndarray, n: int) -> np.ndarray:
+    """(H * W,) the chart of every texel of ``pk``'s page (-1: none), asserting that no texel is in two charts."""
+    own = np.full(pk.width * pk.height, -1)
+    for c in range(n):
+        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], pk.height, pk.width)
+        assert (own[idx] < 0).all(), c
+        own[idx] = c
+    return own
+
+
 @pytest.mark.parametrize("power_of_two", [False, True])
 def test_pack_synthetic_charts_exact_aligned_and_apart(rng, power_of_two):
     """60 charts (random quads of 2-40 px at fractional positions, two triangles each): one page at exactly
@@ -43,11 +64,7 @@ def test_pack_synthetic_charts_exact_aligned_and_apart(rng, power_of_two):
     n, pad = 60, 2
     wh = rng.uniform(2, 40, size=(n, 2))
     off = rng.uniform(0, 500, size=(n, 2))
-    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
-    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)  # charts overlap in source space: fine
-    base = 4 * np.arange(n)[:, None]
-    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    chart = np.r_[np.arange(n), np.arange(n)]
+    uv, faces, chart = quad_charts(wh, off)
     pk = pack_charts(uv, faces, chart, atlas_size="auto", padding=pad, power_of_two=power_of_two)
     W, H, t = pk.width, pk.height, pk.texels_per_pixel
     assert pk.pages == 1 and t == 1.0
@@ -69,11 +86,7 @@ def test_pack_synthetic_charts_exact_aligned_and_apart(rng, power_of_two):
         assert any(ok), (c, d, ds)
     assert pk.txy.min() >= -0.5 and (pk.txy.max(axis=0) <= [W - 0.5, H - 0.5]).all()
     # disjoint and apart: rasterising chart by chart, each chart's texels dilated by 2 x padding - 1 meet no other
-    own = np.full(W * H, -1)
-    for c in range(n):
-        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], H, W)
-        assert (own[idx] < 0).all()
-        own[idx] = c
+    own = chart_canvas(pk, faces, chart, n)
     k = np.ones((4 * pad - 1, 4 * pad - 1), np.uint8)
     for c in range(n):
         near = cv2.dilate((own == c).reshape(H, W).astype(np.uint8), k).reshape(-1).astype(bool)
@@ -378,11 +391,7 @@ def test_small_charts_share_a_block_with_narrow_gutters(rng):
     wh = np.r_[rng.uniform(2, 10, size=(n_small, 2)), rng.uniform(30, 60, size=(n_big, 2))]
     n = len(wh)
     off = rng.uniform(0, 500, size=(n, 2))
-    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
-    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)
-    base = 4 * np.arange(n)[:, None]
-    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    chart = np.r_[np.arange(n), np.arange(n)]
+    uv, faces, chart = quad_charts(wh, off)
     pk = pack_charts(uv, faces, chart, padding=pad)
     alone = pack_charts(uv, faces, chart, padding=pad, small_charts=0)
     assert any(entry.startswith(f"block: {n_small} charts") for entry in pk.log), pk.log
@@ -393,11 +402,7 @@ def test_small_charts_share_a_block_with_narrow_gutters(rng):
         ds = pk.txy[vc == c] - uv[vc == c][:, ::-1]
         assert any(np.ptp(x, axis=0).max() < 1e-6 and np.abs(x[0] - np.rint(x[0])).max() < 1e-6 for x in (d, ds)), c
     W, H = pk.width, pk.height
-    own = np.full(W * H, -1)
-    for c in range(n):
-        idx, _, _ = rasterize_faces(pk.txy, faces[chart == c], H, W)
-        assert (own[idx] < 0).all()
-        own[idx] = c
+    own = chart_canvas(pk, faces, chart, n)
     k = np.ones((4 * pad - 1, 4 * pad - 1), np.uint8)
     for c in range(n_small, n):  # the large charts: the full gutter from every other chart
         near = cv2.dilate((own == c).reshape(H, W).astype(np.uint8), k).reshape(-1).astype(bool)
@@ -413,11 +418,7 @@ def test_shrink_to_fit_keeps_a_power_of_two_at_a_reported_density(rng):
     n = 40
     wh = rng.uniform(20, 40, size=(n, 2))
     off = rng.uniform(0, 500, size=(n, 2))
-    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
-    uv = (off[:, None] + corners[None] * wh[:, None]).reshape(-1, 2)
-    base = 4 * np.arange(n)[:, None]
-    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    chart = np.r_[np.arange(n), np.arange(n)]
+    uv, faces, chart = quad_charts(wh, off)
     cut = pack_charts(uv, faces, chart, padding=2, small_charts=0)
     # scale the charts so that they need a little more than the power of two below their square page
     S = 1 << int(np.ceil(np.log2(max(cut.width, cut.height))))

@@ -12,7 +12,7 @@ from o3d_seqcc.texturing.own_uv import (_output_vertices, bake_own_uv, check_cor
                                         uv_problems)
 from o3d_seqcc.texturing.settings import TextureSettings
 
-from test_texturing import CAMS, RAW, bilinear, grid_mesh, project, smooth_images
+from test_texturing import CAMS, RAW, centroid_error, grid_mesh, project, smooth_images
 
 
 def _layout(mesh: Mesh, rng) -> np.ndarray:
@@ -105,17 +105,7 @@ def test_bake_into_an_artists_layout_reproduces_the_photos(rng):
     assert 1.0 <= tm.stats["face_texels_per_pixel"]["median"] < 1.05  # the side rounded up to a multiple of 4
     H, W = tm.page_shape
     assert H == W and W % 4 == 0
-    c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
-    got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
-    cen = mesh.vertices[mesh.faces].mean(axis=1)
-    want = np.empty_like(got)
-    for v in range(len(CAMS)):
-        sel = lab == v
-        K, R, t, _, _ = CAMS[v]
-        xc = cen[sel] @ R.T + t
-        p = xc[:, :2] / xc[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
-        want[sel] = bilinear(images[v], p[:, 0], p[:, 1])
-    err = np.abs(got - want)
+    err = centroid_error(tm, mesh, images, lab)
     assert err.mean() < 2.0 and err.max() < 12.0, (err.mean(), err.max())
 
 

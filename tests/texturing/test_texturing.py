@@ -110,6 +110,22 @@ def bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
             + img[y0 + 1, x0] * (1 - fx) * fy + img[y0 + 1, x0 + 1] * fx * fy)
 
 
+def centroid_error(tm, mesh: Mesh, images, lab: np.ndarray) -> np.ndarray:
+    """(F, 3) |texture colour at every face centroid - its selected photo's colour at the centroid's projection|
+    (``tm``'s faces in ``mesh``'s order, cameras :data:`CAMS`)."""
+    c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
+    got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
+    cen = mesh.vertices[mesh.faces].mean(axis=1)
+    want = np.empty_like(got)
+    for v in range(len(CAMS)):
+        sel = lab == v
+        K, R, t, _, _ = CAMS[v]
+        xc = cen[sel] @ R.T + t
+        p = xc[:, :2] / xc[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
+        want[sel] = bilinear(images[v], p[:, 0], p[:, 1])
+    return np.abs(got - want)
+
+
 CAMS = [
     camera([0.0, 0.0, -2.6]),
     camera([0.3, -0.1, -2.2], yaw=0.15),
@@ -235,17 +251,7 @@ def test_bake_reproduces_source_colours(rng, method):
     assert tm.uv.min() >= 0 and tm.uv.max() <= 1
     np.testing.assert_array_equal(tm.face_view, lab)
     # every face's centroid: atlas colour == colour of its selected image at the centroid's projection
-    c_uv = tm.texel_xy()[tm.faces].mean(axis=1)
-    got = bilinear(tm.texture, c_uv[:, 0], c_uv[:, 1])
-    cen = mesh.vertices[mesh.faces].mean(axis=1)
-    want = np.empty_like(got)
-    for v in range(len(CAMS)):
-        sel = lab == v
-        K, R, t, _, _ = CAMS[v]
-        xc = cen[sel] @ R.T + t
-        p = xc[:, :2] / xc[:, 2:3] * [K[0, 0], K[1, 1]] + K[:2, 2]
-        want[sel] = bilinear(images[v], p[:, 0], p[:, 1])
-    err = np.abs(got - want)
+    err = centroid_error(tm, mesh, images, lab)
     assert err.mean() < 1.0 and err.max() < 6.0, (err.mean(), err.max())
     # same geometry, same face order
     np.testing.assert_allclose(tm.vertices[tm.faces], mesh.vertices[mesh.faces])
