@@ -20,10 +20,14 @@ Run::
 
     .venv/bin/python benchmarks/scale.py                       # 50/100/200 views x 250k/1M faces, both backends
     .venv/bin/python benchmarks/scale.py --views 50 --faces 250k --backends local   # one quick point
+    .venv/bin/python benchmarks/scale.py --views 10,30 --faces 100k,400k --sizes 0.3,1.2 --backends local
+    .venv/bin/python benchmarks/scale.py --views 10 --faces 400k --backends cluster --memory-limit 3GB
 
-Prints one line per run and a summary with the log-log slopes (time ~ views^a, faces^b) and the
-peak memory at the largest configuration; writes ``docs/scale.png`` (log-log plots) and the raw
-figures as JSON (``--json``).
+``--sizes`` grids the photo size too (megapixels at 4:3: 0.3 is 640 x 480, 12 is 4000 x 3000; the same field
+of view), ``--memory-limit`` is the cluster workers' ``memory_limit``. Prints one line per run and a summary
+with the log-log slopes of run time and of peak RSS against views, faces and photo size (the others fixed)
+and the peak memory at the largest configuration; writes ``docs/scale.png`` (log-log plots, the smallest
+photos) and the raw figures as JSON (``--json``).
 """
 
 from __future__ import annotations
@@ -104,8 +108,9 @@ def _albedo(P: np.ndarray, rng_table: np.ndarray) -> np.ndarray:
     return np.clip(brick, 0.0, 1.0)
 
 
-def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0) -> Path:
-    """Write a street scene (see the module docstring) to ``out``; returns its ``scene.json``."""
+def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0, width: int = W, height: int = H) -> Path:
+    """Write a street scene (see the module docstring) to ``out``, photos of ``width`` x ``height`` (the 640 x 480
+    camera's field of view at any size); returns its ``scene.json``."""
     import cv2
     import open3d as o3d
     import open3d.core as o3c
@@ -125,7 +130,9 @@ def make_street(out: Path, n_views: int, n_faces: int, *, seed: int = 0) -> Path
     o3d.io.write_triangle_mesh(str(out / "mesh.ply"), m, write_ascii=False)
     rs = o3d.t.geometry.RaycastingScene()
     rs.add_triangles(o3c.Tensor(V.astype(np.float32)), o3c.Tensor(F.astype(np.uint32)))
-    K = np.array([[525.0, 0.0, 319.5], [0.0, 525.0, 239.5], [0.0, 0.0, 1.0]])
+    W, H = int(width), int(height)  # noqa: N806 - the module's names for a photo's size
+    f = 525.0 * W / 640.0
+    K = np.array([[f, 0.0, (W - 1) / 2], [0.0, f, (H - 1) / 2], [0.0, 0.0, 1.0]])
     u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
     d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1).reshape(-1, 3)
     table = rng.random((4096, 3))
@@ -209,7 +216,7 @@ def _warm() -> None:
     import o3d_seqcc.visibility.per_view  # noqa: F401
 
 
-def child(scene: str, backend: str, out: str) -> dict:
+def child(scene: str, backend: str, out: str, memory_limit: str = "auto") -> dict:
     """One run of the pipeline on ``scene``; returns the figures (printed as JSON by ``--child``)."""
     import logging
 
@@ -223,7 +230,7 @@ def child(scene: str, backend: str, out: str) -> dict:
         from dask.distributed import Client, LocalCluster
 
         cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.ERROR, memory_limit=memory_limit)
         client = Client(cluster)
         client.run(_warm)
     _warm()
@@ -330,6 +337,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--views", default="50,100,200")
     p.add_argument("--faces", default="250k,1M")
+    p.add_argument("--sizes", default="0.3", help="photo sizes in megapixels (4:3; 0.3 is 640x480), e.g. 0.3,3,12")
+    p.add_argument("--memory-limit", default="auto",
+                   help="the cluster's memory_limit per worker (dask: e.g. 4GB; auto: the machine's share)")
     p.add_argument("--backends", default="local,cluster")
     p.add_argument("--tmp", default=None, help="folder for the generated scenes (default: the system's temp)")
     p.add_argument("--plot", default=str(REPO / "docs" / "scale.png"))
@@ -338,63 +348,70 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--child", nargs=3, metavar=("SCENE", "BACKEND", "OUT"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child:
-        print("RESULT " + json.dumps(child(*args.child)), flush=True)
+        print("RESULT " + json.dumps(child(*args.child, memory_limit=args.memory_limit)), flush=True)
         return 0
     reference_timing()
     results = []
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH")) if p)}
-    for F in [_faces(s) for s in args.faces.split(",")]:
-        for V in [int(s) for s in args.views.split(",")]:
-            tmp = Path(tempfile.mkdtemp(prefix="o3d_seqcc_scale_", dir=args.tmp))
-            try:
-                t = time.perf_counter()
-                scene = make_street(tmp / "scene", V, F, seed=args.seed)
-                t_gen = time.perf_counter() - t
-                for backend in args.backends.split(","):
-                    cmd = [sys.executable, __file__, "--child", str(scene), backend, str(tmp / f"out_{backend}")]
-                    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-                    line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")), None)
-                    if proc.returncode or line is None:
-                        print(f"{V} views x {F} faces, {backend}: FAILED\n{proc.stderr[-3000:]}")
-                        continue
-                    r = json.loads(line[7:])
-                    r["faces_target"] = F
-                    r["peak_mb"] = max(r["peak_rss_mb"].values())
-                    r["worker_mb"] = max(r["peak_worker_rss_mb"].values(), default=0)
-                    results.append(r)
-                    stage = " ".join(f"{k} {r['stages_s'][k]:.1f}" for k in STAGES)
-                    mem = " ".join(f"{k} {v}" for k, v in r["peak_rss_mb"].items())
-                    wmem = " ".join(f"{k} {v}" for k, v in r["peak_worker_rss_mb"].items())
-                    print(f"{V:4d} views x {r['faces']:8d} faces ({backend:7s}): run+save {r['wall_s']:6.1f} s "
-                          f"[{stage}]; peak RSS {r['peak_mb']} MB [{mem}]"
-                          + (f"; per worker {r['worker_mb']} MB [{wmem}]" if wmem else "")
-                          + f"; {r['usable_incidences']} usable face-views, records {r['records_mb']} MB, "
-                          f"atlas {r['atlas']}, scene generated in {t_gen:.0f} s", flush=True)
-            finally:
-                shutil.rmtree(tmp, ignore_errors=True)
+    grid = [(F, V, mp) for mp in [float(s) for s in args.sizes.split(",")] for F in [_faces(s) for s in args.faces.split(",")]
+            for V in [int(s) for s in args.views.split(",")]]
+    for F, V, mp in grid:
+        w = int(16 * round(np.sqrt(mp * 1e6 * 4 / 3) / 16))  # 0.3 -> 640 x 480, 3 -> 2000 x 1500, 12 -> 4000 x 3000
+        h = w * 3 // 4
+        tmp = Path(tempfile.mkdtemp(prefix="o3d_seqcc_scale_", dir=args.tmp))
+        try:
+            t = time.perf_counter()
+            scene = make_street(tmp / "scene", V, F, seed=args.seed, width=w, height=h)
+            t_gen = time.perf_counter() - t
+            for backend in args.backends.split(","):
+                cmd = [sys.executable, __file__, "--child", str(scene), backend, str(tmp / f"out_{backend}"),
+                       "--memory-limit", args.memory_limit]
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+                line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")), None)
+                if proc.returncode or line is None:
+                    print(f"{V} views x {F} faces, {backend}: FAILED\n{proc.stderr[-3000:]}")
+                    continue
+                r = json.loads(line[7:])
+                r["faces_target"] = F
+                r["mp"], r["photo"] = mp, f"{w}x{h}"
+                r["peak_mb"] = max(r["peak_rss_mb"].values())
+                r["worker_mb"] = max(r["peak_worker_rss_mb"].values(), default=0)
+                results.append(r)
+                stage = " ".join(f"{k} {r['stages_s'][k]:.1f}" for k in STAGES)
+                mem = " ".join(f"{k} {v}" for k, v in r["peak_rss_mb"].items())
+                wmem = " ".join(f"{k} {v}" for k, v in r["peak_worker_rss_mb"].items())
+                print(f"{V:4d} views of {w}x{h} x {r['faces']:8d} faces ({backend:7s}): run+save {r['wall_s']:6.1f} s "
+                      f"[{stage}]; peak RSS {r['peak_mb']} MB [{mem}]"
+                      + (f"; per worker {r['worker_mb']} MB [{wmem}]" if wmem else "")
+                      + f"; {r['usable_incidences']} usable face-views, records {r['records_mb']} MB, "
+                      f"atlas {r['atlas']}, scene generated in {t_gen:.0f} s", flush=True)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
     if not results:
         return 1
-    print("\nsummary (log-log slopes: time ~ views^a at fixed faces, ~ faces^b at fixed views; <= 1 is at most linear)")
+    print("\nsummary (log-log slopes of run time and of peak RSS against views, faces and photo size, the others "
+          "fixed; <= 1 is at most linear)")
     for backend in sorted({r["backend"] for r in results}):
         rs = [r for r in results if r["backend"] == backend]
-        for F in sorted({r["faces_target"] for r in rs}):
-            s = sorted((r for r in rs if r["faces_target"] == F), key=lambda r: r["views"])
-            pts = ", ".join(f"{r['views']}: {r['wall_s']:.1f} s" for r in s)
-            slope = _slope([r["views"] for r in s], [r["wall_s"] for r in s])
-            print(f"  {backend:7s} {F:8d} faces: time vs views slope {slope:.2f} ({pts})")
-        for V in sorted({r["views"] for r in rs}):
-            s = sorted((r for r in rs if r["views"] == V), key=lambda r: r["faces"])
-            if len(s) >= 2:
-                pts = ", ".join(f"{r['faces']}: {r['wall_s']:.1f} s" for r in s)
-                slope = _slope([r["faces"] for r in s], [r["wall_s"] for r in s])
-                print(f"  {backend:7s} {V:8d} views: time vs faces slope {slope:.2f} ({pts})")
-        big = max(rs, key=lambda r: (r["views"], r["faces"]))
-        print(f"  {backend:7s} largest ({big['views']} views x {big['faces']} faces): peak RSS {big['peak_mb']} MB"
-              + (f", per worker {big['worker_mb']} MB" if backend == "cluster" else ""))
+        for x, fixed, unit in (("views", ("faces_target", "mp"), "views"), ("faces", ("views", "mp"), "faces"),
+                               ("mp", ("faces_target", "views"), "MP")):
+            for key in sorted({tuple(r[k] for k in fixed) for r in rs}):
+                s = sorted((r for r in rs if tuple(r[k] for k in fixed) == key), key=lambda r: r[x])
+                if len(s) < 2:
+                    continue
+                xs = [r[x] for r in s]
+                at = ", ".join(f"{k} {v:g}" for k, v in zip(fixed, key))
+                pts = ", ".join(f"{r[x]:g}: {r['wall_s']:.1f} s / {r['peak_mb']} MB" for r in s)
+                print(f"  {backend:7s} against {unit} ({at}): time slope {_slope(xs, [r['wall_s'] for r in s]):.2f}, "
+                      f"peak RSS slope {_slope(xs, [r['peak_mb'] for r in s]):.2f} ({pts})")
+        big = max(rs, key=lambda r: (r["views"] * r["mp"], r["faces"]))
+        print(f"  {backend:7s} largest ({big['views']} views of {big['photo']} x {big['faces']} faces): peak RSS "
+              f"{big['peak_mb']} MB" + (f", per worker {big['worker_mb']} MB" if backend == "cluster" else ""))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
-    if args.plot and len(results) > 1:
-        plot(results, Path(args.plot))
+    first = [r for r in results if r["mp"] == min(r_["mp"] for r_ in results)]  # the plot: the smallest photos
+    if args.plot and len(first) > 1:
+        plot(first, Path(args.plot))
         print(f"plot: {args.plot}")
     return 0
 
