@@ -284,6 +284,17 @@ def reference_timing(sizes=(400, 1000), seed: int = 0) -> None:
               f"reference {t_fixed:.3f} s (ratio {t_auto / max(t_fixed, 1e-9):.1f}x)", flush=True)
 
 
+def _same_outputs(a: Path, b: Path) -> dict:
+    """Whether two run folders hold the same selection, texture and Table 2 (the cluster's against the local run)."""
+    import cv2
+
+    sel = bool(np.array_equal(np.load(a / "selection.npy"), np.load(b / "selection.npy")))
+    ta, tb = (cv2.imread(str(p / "mesh.png"), cv2.IMREAD_UNCHANGED) for p in (a, b))
+    tex = ta is not None and tb is not None and ta.shape == tb.shape and bool(np.array_equal(ta, tb))
+    ma, mb = (json.loads((p / "report.json").read_text()).get("metrics") for p in (a, b))
+    return {"selection": sel, "texture": tex, "table2": ma == mb}
+
+
 def _faces(s: str) -> int:
     s = s.strip().lower()
     return int(float(s[:-1]) * (1000 if s.endswith("k") else 10**6)) if s[-1] in "km" else int(s)
@@ -385,6 +396,11 @@ def main(argv: list[str] | None = None) -> int:
                       + (f"; per worker {r['worker_mb']} MB [{wmem}]" if wmem else "")
                       + f"; {r['usable_incidences']} usable face-views, records {r['records_mb']} MB, "
                       f"atlas {r['atlas']}, scene generated in {t_gen:.0f} s", flush=True)
+            if (tmp / "out_local").is_dir() and (tmp / "out_cluster").is_dir():
+                same = _same_outputs(tmp / "out_local", tmp / "out_cluster")
+                for r in results[-2:]:
+                    r["cluster_same_as_local"] = same
+                print(f"     cluster outputs against local: {same}", flush=True)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     if not results:
