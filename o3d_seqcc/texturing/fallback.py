@@ -25,6 +25,13 @@ def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iter
 
     ``pairs`` (E, 2): undirected neighbour pairs. Rows that no front reaches after ``iters``
     steps get :data:`FALLBACK_GREY`. Returns a new array.
+
+    Each step computes the rows next to the last front only (the unknown rows with a known
+    neighbour are exactly the last front's unknown neighbours), from the rows of the adjacency
+    they need: every row is averaged once, so the whole fill costs one pass over the edges, not
+    one per step (a sub-pixel mesh's large unseen regions took 256 passes: 14.9 s of a 2.2M-face
+    bake). The sums run over the same entries in the same order as a whole-matrix product:
+    the same numbers.
     """
     import scipy.sparse as sp
 
@@ -34,14 +41,20 @@ def _propagate(values: np.ndarray, known: np.ndarray, pairs: np.ndarray, *, iter
     if len(pairs) and not have.all():
         adj = sp.coo_matrix((np.ones(2 * len(pairs)), (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
                             shape=(n, n)).tocsr()
+        masked = col * have[:, None]  # the known rows' values, 0 elsewhere
+        front = np.flatnonzero(have > 0)
         for _ in range(int(iters)):
-            ssum = adj @ (col * have[:, None])
-            cnt = adj @ have
-            upd = (have == 0) & (cnt > 0)
-            if not upd.any():
+            cand = np.unique(adj[front].indices)
+            cand = cand[have[cand] == 0]
+            if not len(cand):
                 break
-            col[upd] = ssum[upd] / cnt[upd, None]
-            have[upd] = 1.0
+            sub = adj[cand]
+            ssum = sub @ masked
+            cnt = sub @ have
+            col[cand] = ssum / cnt[:, None]
+            have[cand] = 1.0
+            masked[cand] = col[cand]
+            front = cand
     col[have == 0] = FALLBACK_GREY
     return col
 
