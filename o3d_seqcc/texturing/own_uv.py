@@ -387,11 +387,10 @@ def bake_own_uv(
                                   "median": float(np.median(face_tpp)),
                                   "below_1": float(np.mean(face_tpp < 0.999 * tpp))},
         "coverage": float(tri.sum() / (W * H)), "utilization": float(n_texels / (W * H)),
-        "charts": int(n_regions), "uv_islands": None, "unseen_faces": n_unseen, "vertices_in": int(len(in_v)),
+        "charts": int(n_regions), "uv_islands": int(islands.max()) + 1 if len(islands) else 0, "unseen_faces": n_unseen, "vertices_in": int(len(in_v)),
         "vertices_out": int(len(vertex_index)), "uv_layout": problems, "leveling": lev_stats,
         "local_leveling": local_stats, "time_total_s": t_end - t0,
     }
-    stats["uv_islands"] = int(islands.max()) + 1 if len(islands) else 0
     logger.info("bake_own_uv: %dx%d page at %.3g texels/pixel (median pixel), coverage %.0f%%, %d UV islands, "
                 "%d zero-area / %d mirrored / %d overlapping faces, in %.2f s", W, H, tpp, 100 * stats["coverage"],
                 stats["uv_islands"], problems["zero_area_faces"], problems["mirrored_faces"],
