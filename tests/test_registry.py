@@ -73,7 +73,8 @@ def test_every_dispatcher_rejects_an_unknown_name_with_the_sorted_valid_names(tm
                               "seqcc-global, seqcc-joint, vandermonde"),
         "CMF method": "csvr, isotonic, linear, polynomial",
         "selection method": "largest-area, mrf, random",
-        "scene format": "colmap, meshlab, meshroom, openmvs, rgbd-folder, scene.json",
+        "scene format": ("bundler, cam-folder, colmap, meshlab, meshroom, metashape, mve, nvm, openmvs, rgbd-folder, "
+                         "scene.json"),
         "MeshLab filter": "seqcc_color_correct_rasters, seqcc_texture_from_rasters",
     }
     calls = {

@@ -11,7 +11,20 @@ distortion coefficients in one of :data:`MODELS`:
 - ``"meshlab"``: MeshLab's ``LensDistortion`` ``(k0, k1)`` as vcglib's ``Camera::Project``
   applies it (its ``UndistortedToDistorted``, on the image-plane coordinates in millimetres,
   about the distortion centre MeshLab's project reader leaves at viewport pixel (0, 0); only
-  ``k0`` is used, as in vcglib), so a raster projects where MeshLab projects it.
+  ``k0`` is used, as in vcglib), so a raster projects where MeshLab projects it;
+- ``"pixel-radial"``: ``(k1, k2, cx, cy, n)``, radial distortion in pixels about a centre of
+  its own: the photo shows the pinhole pixel ``p = K (x, y, 1)`` at
+  ``c + (p - c) (1 + k1 rho^2 + k2 rho^4)``, ``rho = |p - c| / n`` (MVE's
+  ``image_undistort_k2k4``, when the principal point is not the distortion centre);
+- ``"pixel-radial-inverse"``: ``(k1, cx, cy, n)``, the same defined the other way round: the
+  photo's pixel ``d`` shows the pinhole pixel ``c + (d - c) (1 + k1 rho_d^2)``,
+  ``rho_d = |d - c| / n`` (VisualSfM's model, MVE's ``image_undistort_vsfm``); inverted in
+  closed form (the root continuous from the centre; none beyond the fold of a ``k1 < 0``);
+- ``"metashape"``: Agisoft Metashape's frame camera ``(k1, k2, k3, k4, p1, p2, b1, b2)`` as its
+  manual's "Camera models" appendix writes it, on focal-normalised ``(x, y)``: ``x' = x (1 + k1
+  r^2 + k2 r^4 + k3 r^6 + k4 r^8) + p1 (r^2 + 2 x^2) + 2 p2 x y``, ``y' = y (...) + p2 (r^2 + 2
+  y^2) + 2 p1 x y``, then ``u = cx + x' (f + b1) + y' b2``, ``v = cy + y' f`` (``f``, ``cx``,
+  ``cy`` of the intrinsic); for the cameras OpenCV's model cannot express (``k4`` or ``b2``).
 
 The scene's view gets the pinhole camera :meth:`Distortion.pinhole` (the photo's own matrix
 when every pixel of the undistorted image then comes from inside the photo, else the same
@@ -34,7 +47,10 @@ from ..errors import InputError
 __all__ = ["MAP_CACHE_BYTES", "MODELS", "Distortion"]
 
 #: distortion models and the numbers of coefficients each takes
-MODELS: dict[str, tuple[int, ...]] = {"opencv": (4, 5, 8), "fisheye": (4,), "meshlab": (2,)}
+MODELS: dict[str, tuple[int, ...]] = {"opencv": (4, 5, 8), "fisheye": (4,), "meshlab": (2,), "pixel-radial": (5,),
+                                      "pixel-radial-inverse": (4,), "metashape": (8,)}
+#: models whose last three coefficients are the distortion centre and radius (cx, cy, n), not distortion terms
+_PIXEL_RADIAL = {"pixel-radial": 2, "pixel-radial-inverse": 1}
 #: byte budget of the undistortion maps kept (6 bytes per pixel and camera)
 MAP_CACHE_BYTES = 256 * 2**20
 
@@ -56,9 +72,10 @@ class Distortion:
 
     Parameters
     ----------
-    model : {"opencv", "fisheye", "meshlab"}
+    model : {"opencv", "fisheye", "meshlab", "pixel-radial", "pixel-radial-inverse", "metashape"}
     coefficients : sequence of float
-        4, 5 or 8 (opencv), 4 (fisheye), 2 (meshlab).
+        4, 5 or 8 (opencv), 4 (fisheye), 2 (meshlab), 5 (pixel-radial), 4 (pixel-radial-inverse),
+        8 (metashape).
     intrinsic : (3, 3) float
         The photo's own pinhole matrix (pixel centres at integers), before undistortion.
     meshlab : dict, optional
@@ -87,6 +104,8 @@ class Distortion:
         if len(k) not in MODELS[self.model] or not all(math.isfinite(x) for x in k):
             raise InputError(f"the {self.model} distortion model takes {' or '.join(map(str, MODELS[self.model]))} "
                              f"finite coefficients, got {list(k)}")
+        if self.model in _PIXEL_RADIAL and not k[-1] > 0:
+            raise InputError(f"the {self.model} distortion's radius n (its last coefficient) must be > 0, got {k[-1]}")
         object.__setattr__(self, "coefficients", k)
         K = np.array(self.intrinsic, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
@@ -109,8 +128,8 @@ class Distortion:
 
     @property
     def is_zero(self) -> bool:
-        """All coefficients are zero (a pinhole camera)."""
-        return not any(self.coefficients)
+        """All distortion coefficients are zero (a pinhole camera)."""
+        return not any(self.coefficients[:_PIXEL_RADIAL.get(self.model)])
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Distortion):
@@ -159,6 +178,10 @@ class Distortion:
         K = self.intrinsic
         if self.model == "meshlab":
             return self._meshlab_distort(xy)
+        if self.model in _PIXEL_RADIAL:
+            return self._pixel_radial_distort(xy)
+        if self.model == "metashape":
+            return _metashape_distort(xy, self.coefficients, K)
         import cv2
 
         pts = np.concatenate([xy, np.ones((len(xy), 1))], axis=1).reshape(-1, 1, 3)
@@ -190,6 +213,19 @@ class Distortion:
         """vcglib's ``ViewportPxTo_neg1_1(DistorCenterPx)``: ``2 (DistorCenterPx - CenterPx) / ViewportPx``."""
         m = self.meshlab
         return 2.0 * (np.asarray(m["distortion_center_px"]) - np.asarray(m["center_px"])) / np.asarray(m["viewport_px"])
+
+    def _pixel_radial_distort(self, xy: np.ndarray) -> np.ndarray:
+        """``"pixel-radial"`` / ``"pixel-radial-inverse"``: the pinhole pixel moved radially about ``(cx, cy)``."""
+        K, k = self.intrinsic, self.coefficients
+        c, n = np.array(k[-3:-1]), k[-1]
+        p = np.stack([K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2], K[1, 1] * xy[:, 1] + K[1, 2]], axis=1)
+        q = p - c
+        rho2 = np.einsum("ij,ij->i", q, q) / (n * n)
+        if self.model == "pixel-radial":
+            scale = 1.0 + rho2 * (k[0] + k[1] * rho2)
+        else:
+            scale = _inverse_radial_scale(np.sqrt(rho2), k[0])
+        return c + q * scale[:, None]
 
     def pinhole(self, width: int, height: int) -> np.ndarray:
         """(3, 3) matrix of the undistorted image (``width`` x ``height``): every pixel inside the photo.
@@ -317,3 +353,32 @@ def _vcg_undistorted_to_distorted(u: np.ndarray, dc: np.ndarray, k0: float) -> n
     same = Ru == 0
     out[same] = u[same]
     return out
+
+
+def _inverse_radial_scale(rho_u: np.ndarray, k: float) -> np.ndarray:
+    """``rho_d / rho_u`` for the root ``rho_d`` of ``rho_d (1 + k rho_d^2) = rho_u`` continuous from 0.
+
+    Closed form, stable for small ``k``: ``rho_d = 2 sinh(asinh(b) / 3) / sqrt(3k)`` with
+    ``b = 1.5 rho_u sqrt(3k)`` for ``k > 0`` (the one real root), ``2 sin(asin(a) / 3) /
+    sqrt(-3k)`` with ``a = 1.5 rho_u sqrt(-3k)`` for ``k < 0`` (the smallest positive root; NaN
+    for ``a > 1``, beyond the fold, where no direction is seen).
+    """
+    rho_u = np.asarray(rho_u, dtype=np.float64)
+    if k == 0:
+        return np.ones_like(rho_u)
+    s = math.sqrt(3.0 * abs(k))
+    with np.errstate(invalid="ignore"):
+        rho_d = (2.0 / s) * (np.sinh(np.arcsinh(1.5 * rho_u * s) / 3.0) if k > 0
+                             else np.sin(np.arcsin(1.5 * rho_u * s) / 3.0))
+    return np.where(rho_u > 0, rho_d / np.where(rho_u > 0, rho_u, 1.0), 1.0)
+
+
+def _metashape_distort(xy: np.ndarray, k: tuple[float, ...], K: np.ndarray) -> np.ndarray:
+    """Photo pixels of undistorted focal-normalised points under Metashape's frame camera model."""
+    k1, k2, k3, k4, p1, p2, b1, b2 = k
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
+    xd = x * radial + p1 * (r2 + 2.0 * x * x) + 2.0 * p2 * x * y
+    yd = y * radial + p2 * (r2 + 2.0 * y * y) + 2.0 * p1 * x * y
+    return np.stack([K[0, 2] + xd * (K[0, 0] + b1) + yd * (K[0, 1] + b2), K[1, 2] + yd * K[1, 1]], axis=1)

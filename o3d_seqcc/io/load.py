@@ -19,7 +19,7 @@ from ..visibility.camera_checks import FLIP, check_cameras
 from ..errors import InputError, warn
 from .._shared.registry import Registry
 from ..scene import Scene, View
-from . import colmap, meshlab, meshroom, openmvs, rgbd_folder, scene_json
+from . import bundler, colmap, meshlab, meshroom, metashape, mve, nvm, openmvs, rgbd_folder, scene_json
 from .files import find_file
 
 __all__ = ["AXES", "EXTRINSIC_CONVENTIONS", "SCENE_FORMATS", "SceneFormat", "detect_format", "load_scene",
@@ -76,6 +76,14 @@ SCENE_FORMATS: Registry[SceneFormat] = Registry("scene format", {
         SceneFormat("colmap", "a COLMAP model folder (cameras/images .txt or .bin)", colmap.detect, colmap.load,
                     "world-to-camera"),
         SceneFormat("openmvs", "an OpenMVS interface file (scene.mvs)", openmvs.detect, openmvs.load),
+        SceneFormat("nvm", "a VisualSFM NVM_V3 file (.nvm)", nvm.detect, nvm.load),
+        SceneFormat("metashape", "an Agisoft Metashape cameras export (cameras.xml or its folder)", metashape.detect,
+                    metashape.load),
+        SceneFormat("mve", "an MVE scene folder (views/*.mve/meta.ini)", mve.detect, mve.load),
+        SceneFormat("cam-folder", "a texrecon camera folder (NAME.cam beside each photo)", mve.detect_cam_folder,
+                    mve.load_cam_folder),
+        SceneFormat("bundler", "a Bundler v0.3 file (bundle.out, or its folder, with list.txt)", bundler.detect,
+                    bundler.load),
     )
 })
 
@@ -131,9 +139,14 @@ def load_scene(
     path : path-like
         A ``scene.json`` manifest (or its folder), a MeshLab project (``.mlp``), Meshroom's
         ``cameras.sfm`` (or its folder), an Open3D RGB-D folder, a COLMAP model folder (text
-        or binary) or an OpenMVS interface file (``scene.mvs``); see :data:`SCENE_FORMATS`.
+        or binary), an OpenMVS interface file (``scene.mvs``), a VisualSFM ``NVM_V3`` file
+        (``.nvm``: its first model), an Agisoft Metashape cameras export (``cameras.xml``, or
+        its folder), an MVE scene folder (``views/*.mve``; the ``undistorted`` images, else
+        ``original``), a texrecon camera folder (``NAME.cam`` beside each photo) or a Bundler
+        v0.3 ``bundle.out`` (or its folder) with its ``list.txt``; see :data:`SCENE_FORMATS`.
     mesh : path-like, optional
-        Mesh file; required for RGB-D folders, COLMAP and Meshroom, overrides the others'.
+        Mesh file; required for RGB-D folders, COLMAP, Meshroom, NVM, Metashape, MVE, texrecon
+        camera folders and Bundler, overrides the others'.
     format : str, default "auto"
         A name of :data:`SCENE_FORMATS` to skip detection.
     intrinsic : (3, 3) array or path-like, optional
@@ -142,7 +155,7 @@ def load_scene(
         3x3 matrix); default PrimeSense (fx = fy = 525, cx = 319.5, cy = 239.5), which only
         640x480 images may use.
     image_dir : path-like, optional
-        COLMAP, Meshroom and OpenMVS only: folder of the images.
+        COLMAP, Meshroom, OpenMVS, NVM, Metashape and Bundler only: folder of the images.
     depth_dir : path-like, optional
         Folder of depth maps registered to the images, for the views that have none (MeshLab
         projects, COLMAP and Meshroom models carry no depth): ``<view name>.png`` or the image's

@@ -199,12 +199,14 @@ def test_mlp_through_load_scene_and_cli(tmp_path, rng, capsys):
 
 def test_loader_table_checks(tmp_path, colmap_model):
     _, root, mesh = colmap_model
-    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap", "openmvs"]
+    assert list(SCENE_FORMATS) == ["scene.json", "meshlab", "meshroom", "rgbd-folder", "colmap", "openmvs", "nvm",
+                                 "metashape", "mve", "cam-folder", "bundler"]
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError) as e:
         load_scene(tmp_path / "empty")
     assert all(f.description in str(e.value) for f in SCENE_FORMATS.values())
-    with pytest.raises(InputError, match="unknown scene format 'ply'; valid: colmap, meshlab, meshroom, openmvs, rgbd-folder, scene.json, or 'auto'"):
+    with pytest.raises(InputError, match="unknown scene format 'ply'; valid: bundler, cam-folder, colmap, meshlab, meshroom, metashape, mve, nvm, "
+                       "openmvs, rgbd-folder, scene.json, or 'auto'"):
         load_scene(root / "sparse_txt", format="ply", mesh=mesh)
     with pytest.raises(InputError, match="is not a MeshLab project"):
         load_scene(root / "sparse_txt", format="meshlab", mesh=mesh)
