@@ -64,8 +64,10 @@ __all__ = ["bake_texture", "push_pull_fill"]
 
 logger = logging.getLogger(__name__)
 
-#: canvas texels per band of the bake's passes over the atlas (a band's temporaries: about 80 bytes per written texel)
-_BAND_TEXELS = 1 << 21
+#: canvas texels per band of the bake's passes over the atlas (a band's temporaries: about 80 bytes per written texel,
+#: one band per thread at a time: 2 x 512k texels hold about 80 MB; 2M-texel bands held 220 MB more at the peak of
+#: Fountain 300k's texel pass for no measurable speed)
+_BAND_TEXELS = 1 << 19
 
 
 def _check(mesh: Any, images: Sequence[np.ndarray], visibility: VisibilityLike, selection: np.ndarray):

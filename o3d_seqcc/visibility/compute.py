@@ -88,7 +88,7 @@ _DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area"
 #: photo by up to 1/16 px: a rendered-back photo kept 0.93 of its sharpness, 0.99 at 1/256)
 FACE_UV_STEPS = 256
 #: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
-CACHE_BYTES = 128 * 2**20
+CACHE_BYTES = 32 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
