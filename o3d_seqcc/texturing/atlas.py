@@ -366,15 +366,18 @@ def corner_additions(views_images, faces: np.ndarray, labels: np.ndarray, fuv: n
         logger.info("bake: seam leveling, %d seam pairs, mean |offset| %.1f levels, step %.1f -> %.1f",
                     lev_stats["seam_pairs"], lev_stats["mean_abs_offset"], lev_stats["seam_step_before"],
                     lev_stats["seam_step_after"])
+    del corner_mean  # (F, 3, 3) float64 arrays: each one 22 MB at 300k faces, dropped as soon as they are used
     n_unseen = int(np.count_nonzero(~seen))
     if corner_off is None and not n_unseen:
         return None, lev_stats, 0
     add = np.zeros((len(faces), 3, 3), dtype=np.float32)
     if corner_off is not None:
         add[seen] = corner_off[seen]
+        if n_unseen:
+            corner_point += corner_off  # the leveled corner colours the fallback starts from
+        del corner_off
     if n_unseen:
-        cc = corner_point if corner_off is None else corner_point + corner_off
-        add[~seen] = fallback_corner_colors(cc, wf, labels, adjacency, fallback=s.fallback)[~seen]
+        add[~seen] = fallback_corner_colors(corner_point, wf, labels, adjacency, fallback=s.fallback)[~seen]
         logger.info("bake: %d faces seen by no view get %s fallback colours", n_unseen, s.fallback)
     return add, lev_stats, n_unseen
 
