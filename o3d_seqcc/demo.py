@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .io.output import write_output_file, write_output_json
+from .io.output import check_output, check_output_file, write_output_file, write_output_json
 from .evaluation.metrics import image_delta_e
 from .pipeline import RunResult, run
 from .datasets import DatasetUnavailable, fountain
@@ -136,6 +136,9 @@ def run_demo(
     unknown = sorted(set(scene_options) - set(_SCENE_KEYS))
     if unknown:
         raise TypeError(f"run_demo got unknown option(s) {unknown}; valid: {sorted(_SCENE_KEYS)}")
+    check_output(out / "run", overwrite=True)  # what the demo writes, checked before any work
+    for name in ("report.html", "demo_summary.json"):
+        check_output_file(out / name, option="--out")
     if dataset == "fountain" and scene_options:
         raise TypeError(f"scene options {sorted(scene_options)} apply to the synthetic dataset only")
     timings: dict[str, float] = {}

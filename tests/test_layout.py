@@ -33,7 +33,7 @@ TREE: dict[str, set[str]] = {
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
-           "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "result_files",
+           "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest", "result_files",
            "export", "obj_text", "gltf_validator"},
     "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background"},
     "synthetic": {"__init__", "room", "generate"},

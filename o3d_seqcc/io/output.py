@@ -49,6 +49,7 @@ from typing import Iterable, Iterator
 from ..errors import InputError, warn
 from .._shared.interrupts import Terminated, interruptible
 from .files import atomic_path, atomic_write_bytes, default_mode
+from .manifest import MANIFEST, listing as _listing, manifest_bytes as _manifest, own_files as _own_files
 
 __all__ = ["MANIFEST", "Terminated", "add_output_file", "check_output", "check_output_file", "interruptible",
            "output_file", "output_folder", "write_output_file", "write_output_json"]
@@ -56,8 +57,6 @@ __all__ = ["MANIFEST", "Terminated", "add_output_file", "check_output", "check_o
 logger = logging.getLogger(__name__)
 
 #: file in every output folder listing what o3d_seqcc wrote there
-MANIFEST = ".o3d_seqcc.json"
-MANIFEST_FORMAT = "o3d_seqcc.output/1"
 #: refuse to start when the output disk has less free space than this (MB)
 MIN_FREE_MB = 64
 _LOCK_NAME = re.compile(r"^\..+\.o3d_seqcc\.lock$")
@@ -72,33 +71,6 @@ def _pid_alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-def _own_files(out: Path) -> set[str] | None:
-    """Relative paths listed in ``out``'s manifest, or None without a readable manifest."""
-    try:
-        data = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(data, dict) or data.get("format") != MANIFEST_FORMAT or not isinstance(data.get("files"), list):
-        return None
-    return {str(f) for f in data["files"]}
-
-
-def _listing(folder: Path) -> list[str]:
-    """Every entry under ``folder`` that holds data, relative: files, symbolic links (never followed), other
-    non-folders, and empty folders (``name/``)."""
-    out = []
-    for root, dirs, files in os.walk(folder):
-        rel = Path(root).relative_to(folder)
-        for d in list(dirs):
-            if os.path.islink(os.path.join(root, d)):  # a link to a folder is an entry, not a folder of ours
-                dirs.remove(d)
-                files.append(d)
-        out += [(rel / f).as_posix() for f in files]
-        if not files and not dirs and root != str(folder):
-            out.append(rel.as_posix() + "/")
-    return sorted(out)
 
 
 def _foreign(folder: Path) -> list[str]:
@@ -434,10 +406,6 @@ def output_folder(
         except BaseException:
             shutil.rmtree(stage, ignore_errors=True)
             raise
-
-
-def _manifest(command: str, files: list[str]) -> bytes:
-    return (json.dumps({"format": MANIFEST_FORMAT, "command": command, "files": files}, indent=1) + "\n").encode("utf-8")
 
 
 def add_output_file(out: str | os.PathLike, name: str, data: bytes) -> Path:
