@@ -7,7 +7,7 @@ import importlib.util
 import warnings
 from types import ModuleType
 
-__all__ = ["InputError", "O3dSeqccWarning", "require", "warn"]
+__all__ = ["InputError", "MissingImagesError", "O3dSeqccWarning", "require", "warn"]
 
 
 class InputError(ValueError):
@@ -15,6 +15,37 @@ class InputError(ValueError):
 
     The message always names the offending file or view and says how to fix it.
     """
+
+
+class MissingImagesError(InputError):
+    """Photos a scene names that are missing or unreadable, every one of them in one error.
+
+    Built by :func:`o3d_seqcc.io.missing.missing_images`; ``load_scene(skip_missing=True)``
+    (``--skip-missing-images``) goes on with :attr:`scene`.
+
+    Attributes
+    ----------
+    missing : tuple of o3d_seqcc.io.missing.MissingImage
+        View name, image path, what is wrong and (where known) the file and line naming it.
+    scene : Scene or None
+        The scene without those views (None when none would be left).
+    total : int
+        Photos the scene names, the missing ones included.
+    where : str
+        The scene file or folder.
+    """
+
+    def __init__(self, message: str, *, missing: tuple = (), scene: object = None, total: int = 0,
+                 where: str = "") -> None:
+        super().__init__(message)
+        self.missing, self.scene, self.total, self.where = tuple(missing), scene, int(total), where
+
+    def __reduce__(self):  # the attributes survive pickling (a worker process raising it)
+        return (_rebuild_missing, (self.args[0], self.missing, self.scene, self.total, self.where))
+
+
+def _rebuild_missing(message: str, missing: tuple, scene: object, total: int, where: str) -> MissingImagesError:
+    return MissingImagesError(message, missing=missing, scene=scene, total=total, where=where)
 
 
 class O3dSeqccWarning(UserWarning):

@@ -25,7 +25,11 @@ Accepted inputs (checked before any work; a wrong type or size raises
   ``project_images_to_albedo`` takes them ((3, 3) and (4, 4) world-to-camera, arrays or tensors);
 - ``depths``: optional, one per image: Open3D depth images (uint16 in ``depth_scale`` units per
   metre, or float metres), ``o3d.geometry.RGBDImage`` (its float depth in metres), point clouds
-  (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays.
+  (``o3d.geometry.PointCloud`` / ``o3d.t.geometry.PointCloud``, world coordinates), or arrays;
+- ``masks``: optional, one per image (or None for an image without one): (H, W) bool / uint8
+  arrays or Open3D images of the image's size, or mask files (:mod:`o3d_seqcc.io.masks`);
+  nonzero = keep, 0 = masked out (``mask_invert=True``: the other way round). Masked pixels
+  colour nothing: not the visibility, the colour mappings, the view selection or the bake.
 
 Everything runs in memory (an in-memory :class:`~o3d_seqcc.scene.Scene`): nothing is written.
 The cameras are checked against the mesh first (:func:`~o3d_seqcc.visibility.camera_checks.check_cameras`):
@@ -179,6 +183,21 @@ def _depth(d: Any, i: int, size: tuple[int, int], depth_scale: float) -> dict[st
     return {"depth_map": a.astype(np.float64) / scale}
 
 
+def _mask(m: Any, i: int, size: tuple[int, int], invert: bool) -> dict[str, Any]:
+    """``{"mask_map": array}`` or ``{"mask": path}`` (the header checked) for ``masks[i]``; ``{}`` for None."""
+    import os
+
+    from .io.masks import check_mask_file
+
+    w, h = size
+    if m is None:
+        return {}
+    if isinstance(m, (str, os.PathLike)):
+        check_mask_file(m, shape=(h, w), view=f"images[{i}]")
+        return {"mask": m, "mask_invert": invert}
+    return {"mask_map": _to_array(m, f"masks[{i}]"), "mask_invert": invert}
+
+
 def _check_options(*, depth_scale: Any, **flags: Any) -> None:
     """The front door's own options: ``depth_scale`` a positive number, the flags booleans (named when not)."""
     if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float, np.integer, np.floating)) \
@@ -191,7 +210,8 @@ def _check_options(*, depth_scale: Any, **flags: Any) -> None:
 
 def scene_from_open3d(
     mesh: Any, images: Sequence[Any], cameras: Any, *, depths: Sequence[Any] | None = None,
-    depth_scale: float = View.depth_scale, names: Sequence[str] | None = None,
+    depth_scale: float = View.depth_scale, names: Sequence[str] | None = None, masks: Sequence[Any] | None = None,
+    mask_invert: bool = False,
 ) -> tuple[Scene, list[np.dtype]]:
     """An in-memory :class:`~o3d_seqcc.scene.Scene` from Open3D objects (see the module docstring).
 
@@ -207,12 +227,17 @@ def scene_from_open3d(
     cams = _cameras(cameras, len(pix), sizes)
     if depths is not None and len(depths) != len(pix):
         raise InputError(f"depths: {len(depths)} given for {len(pix)} images; give one per image (or None)")
+    if masks is not None and (isinstance(masks, (str, bytes)) or not isinstance(masks, Sequence)
+                              or len(masks) != len(pix)):
+        raise InputError(f"masks: give one mask per image (or None for an image without one), a list of "
+                         f"{len(pix)}; got {type(masks).__name__}")
     names = [f"{i:03d}" for i in range(len(pix))] if names is None else [str(n) for n in names]
     if len(names) != len(pix):
         raise InputError(f"names: {len(names)} given for {len(pix)} images")
     views = []
     for i, ((p, _), (K, E), name) in enumerate(zip(pix, cams, names)):
         extra = {} if depths is None or depths[i] is None else _depth(depths[i], i, sizes[i], depth_scale)
+        extra.update({} if masks is None else _mask(masks[i], i, sizes[i], mask_invert))
         try:
             views.append(View(name=name, image=None, pixels=p, intrinsic=K, extrinsic=E, width=sizes[i][0],
                               height=sizes[i][1], **extra))
@@ -256,6 +281,8 @@ def correct_images(
     cameras: Any,
     *,
     depths: Sequence[Any] | None = None,
+    masks: Sequence[Any] | None = None,
+    mask_invert: bool = False,
     depth_scale: float = View.depth_scale,
     return_report: bool = False,
     settings: RunSettings | None = None,
@@ -265,8 +292,10 @@ def correct_images(
 
     Parameters
     ----------
-    mesh, images, cameras, depths
-        Open3D objects or arrays (see the module docstring).
+    mesh, images, cameras, depths, masks
+        Open3D objects or arrays (see the module docstring): ``masks`` one per image (None: no mask).
+    mask_invert : bool, default False
+        The masks' other convention: nonzero = masked out.
     depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
         Units per metre of integer depth images.
     return_report : bool, default False
@@ -287,9 +316,10 @@ def correct_images(
     list, or (list, dict)
         The corrected images, in the type and dtype each came in.
     """
-    _check_options(depth_scale=depth_scale, return_report=return_report)
+    _check_options(depth_scale=depth_scale, return_report=return_report, mask_invert=mask_invert)
     rs = RunSettings.resolve(settings, options, where="correct_images", exclude=("metrics",))
-    scene, dtypes = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
+    scene, dtypes = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale, masks=masks,
+                                      mask_invert=mask_invert)
     job = pipeline.correct_scene(scene, settings=rs, metrics=return_report)
     out = [_like(orig, px, dt) for orig, px, dt in zip(images, job.result.images, dtypes)]
     return (out, job.report) if return_report else out
@@ -301,6 +331,8 @@ def texture_mesh(
     cameras: Any,
     *,
     depths: Sequence[Any] | None = None,
+    masks: Sequence[Any] | None = None,
+    mask_invert: bool = False,
     correct: bool = True,
     depth_scale: float = View.depth_scale,
     return_result: bool = False,
@@ -311,8 +343,10 @@ def texture_mesh(
 
     Parameters
     ----------
-    mesh, images, cameras, depths
-        Open3D objects or arrays (see the module docstring).
+    mesh, images, cameras, depths, masks
+        Open3D objects or arrays (see the module docstring): ``masks`` one per image (None: no mask).
+    mask_invert : bool, default False
+        The masks' other convention: nonzero = masked out.
     correct : bool, default True
         Colour-correct the images first (as :func:`correct_images`); False textures with the
         images as they are.
@@ -339,11 +373,12 @@ def texture_mesh(
         and the atlas as the ``albedo`` map of its material: ``o3d.visualization.draw`` shows it
         textured and ``o3d.t.io.write_triangle_mesh`` writes it.
     """
-    _check_options(depth_scale=depth_scale, return_result=return_result, correct=correct)
+    _check_options(depth_scale=depth_scale, return_result=return_result, correct=correct, mask_invert=mask_invert)
     where = "texture_mesh" + ("" if correct else "(correct=False)")
     exclude = ("metrics",) if correct else CORRECTION_ONLY
     rs = RunSettings.resolve(settings, options, where=where, exclude=exclude)
-    scene, _ = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale)
+    scene, _ = scene_from_open3d(mesh, images, cameras, depths=depths, depth_scale=depth_scale, masks=masks,
+                                 mask_invert=mask_invert)
     res = pipeline.run(scene, settings=rs) if correct else pipeline.texture(scene, settings=rs)
     out = res.textured.to_open3d()
     return (out, res) if return_result else out

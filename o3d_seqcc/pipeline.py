@@ -588,5 +588,6 @@ def correct_scene(
     report = document("correct", scene=str(scene) if not isinstance(scene, Scene) else "", **scene_paths(sc),
                       images="scene", views=list(sc.names),
                       correction=correction_section(res, sc.names, mappings, lookup_tables=True), metrics=table2,
+                      visibility_stats=getattr(getattr(maps, "visibility", None), "stats", None),
                       timings_s={"mappings": t_map, "correction": res.timings.get("total", 0.0), "metrics": t_metrics})
     return CorrectionRun(scene=sc, result=res, mappings=maps, originals=originals, report=report)

@@ -20,7 +20,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .geometry.distortion import Distortion
-from .io.files import check_depth_file, check_image_file, open_regular, read_depth, read_image
+from .io.files import check_depth_file, open_regular, read_depth, read_image
+from .io.missing import MissingImage, check_photo, missing_images, near_miss  # noqa: F401 (near_miss: moved there)
+from .io.masks import check_mask_file, mask_array, mask_distorted, view_mask
 from .io.mesh_files import read_mesh, read_point_cloud
 from .geometry.meshops import face_normals
 from ._shared.arguments import shown
@@ -149,9 +151,15 @@ class View:
     points : (M, 3) float array, optional
         Partial point cloud in memory, instead of a file.
     distortion : Distortion, optional
-        The photo's lens distortion: the image (and depth map) is undistorted as it is read
-        (:meth:`load_image`, :meth:`load_depth`) to the pinhole camera ``intrinsic`` (same size);
-        see :mod:`o3d_seqcc.geometry.distortion`.
+        The photo's lens distortion: the image (and depth map, and mask) is undistorted as it is
+        read (:meth:`load_image`, :meth:`load_depth`, :meth:`load_mask`) to the pinhole camera
+        ``intrinsic`` (same size); see :mod:`o3d_seqcc.geometry.distortion`.
+    mask : pathlib.Path, optional
+        The photo's mask (:mod:`o3d_seqcc.io.masks`), its size: nonzero = kept, 0 = masked out (used nowhere).
+    mask_invert : bool, default False
+        The mask's other convention: nonzero = masked out.
+    mask_map : (H, W) bool / integer array, optional
+        The mask in memory (nonzero = kept unless ``mask_invert``), instead of a mask file.
     """
 
     name: str
@@ -167,6 +175,9 @@ class View:
     depth_map: np.ndarray | None = field(default=None, repr=False)
     points: np.ndarray | None = field(default=None, repr=False)
     distortion: Distortion | None = field(default=None, repr=False)
+    mask: Path | None = None
+    mask_invert: bool = False
+    mask_map: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -182,6 +193,8 @@ class View:
         object.__setattr__(self, "image", None if self.image is None else Path(self.image))
         object.__setattr__(self, "depth", None if self.depth is None else Path(self.depth))
         object.__setattr__(self, "point_cloud", None if self.point_cloud is None else Path(self.point_cloud))
+        object.__setattr__(self, "mask", None if self.mask is None else Path(self.mask))
+        object.__setattr__(self, "mask_invert", bool(self.mask_invert))
         object.__setattr__(self, "intrinsic", _frozen_array(self.intrinsic, (3, 3), f"{where}: intrinsic"))
         object.__setattr__(self, "extrinsic", _frozen_array(self.extrinsic, (4, 4), f"{where}: extrinsic"))
         _check_intrinsic(self.intrinsic, where)
@@ -222,6 +235,8 @@ class View:
             d[~np.isfinite(d) | (d < 0)] = 0.0
             d.setflags(write=False)
             object.__setattr__(self, "depth_map", d)
+        if self.mask_map is not None:
+            object.__setattr__(self, "mask_map", mask_array(self.mask_map, (self.height, self.width), where))
         if self.points is not None:
             p = np.array(self.points, dtype=np.float64, copy=True).reshape(-1, 3)
             p = p[np.isfinite(p).all(axis=1)]
@@ -250,9 +265,10 @@ class View:
             and np.array_equal(self.extrinsic, other.extrinsic)
             and (self.width, self.height, self.depth, self.depth_scale, self.point_cloud)
             == (other.width, other.height, other.depth, other.depth_scale, other.point_cloud)
-            and all(a is b for a, b in zip((self.pixels, self.depth_map, self.points),
-                                           (other.pixels, other.depth_map, other.points)))
+            and all(a is b for a, b in zip((self.pixels, self.depth_map, self.points, self.mask_map),
+                                           (other.pixels, other.depth_map, other.points, other.mask_map)))
             and self.distortion == other.distortion
+            and (self.mask, self.mask_invert) == (other.mask, other.mask_invert)
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -316,6 +332,16 @@ class View:
         if self.distortion is not None and self.distortion.depth and not self.distortion.is_zero:
             d = self.distortion.undistort(d, self.intrinsic, nearest=True)
         return d
+
+    @property
+    def has_mask(self) -> bool:
+        """The photo has a mask (a file or in memory)."""
+        return self.mask is not None or self.mask_map is not None
+
+    def load_mask(self) -> np.ndarray | None:
+        """Read the mask: (H, W) bool, True where the photo's pixels count, False where they are masked out
+        (:func:`o3d_seqcc.io.masks.view_mask`: ``mask_invert`` applied, undistorted with a distorted photo), or None."""
+        return view_mask(self)
 
     def load_points(self) -> np.ndarray | None:
         """The partial point cloud ((M, 3) float64 world points), or None without one."""
@@ -484,72 +510,59 @@ class Scene:
         """Every file the scene reads: its source (manifest, project, model folder), mesh, images, depth, point clouds."""
         paths = ([] if isinstance(self.mesh, Mesh) else [self.mesh]) + ([self.source] if self.source else [])
         for v in self.views:
-            paths += [p for p in (v.image, v.depth, v.point_cloud) if p is not None]
+            paths += [p for p in (v.image, v.depth, v.point_cloud, v.mask) if p is not None]
         return paths
 
     def replace_images(self, images: Sequence[str | os.PathLike]) -> "Scene":
         """A copy whose views point at other image files (same cameras), taken to be undistorted (pinhole)
-        images: a view's lens distortion then applies to its depth map only."""
+        images: a view's lens distortion then applies to its depth map and its mask only (masks in memory have
+        no file: they are not carried)."""
         if len(images) != len(self.views):
             raise ValueError("one image per view is needed")
         from dataclasses import replace
 
         # the views' pixels in memory (if any) give way to the files
         def undistorted(v: View) -> Distortion | None:  # the new images are the pinhole ones; a depth map is not
-            if v.distortion is None or v.depth is None:
+            if v.distortion is None or (v.depth is None and v.mask is None):
                 return None
-            return replace(v.distortion, images=False)
+            return replace(v.distortion, images=False, masks=mask_distorted(v) if v.mask else None)
 
-        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v), pixels=None)
+        return Scene(self.mesh, tuple(replace(v, image=Path(p), distortion=undistorted(v), pixels=None, mask_map=None)
                                       for v, p in zip(self.views, images)), source=self.source, options=self.options)
 
     def validate(self, *, check_images: bool = True) -> None:
         """Check that every referenced file exists and images have the declared size and type.
 
-        Reads only image headers (Pillow), not pixels. Raises :class:`InputError`.
+        Reads only image headers (Pillow), not pixels. Raises :class:`InputError`; the photos that are
+        missing or unreadable are listed together in one :class:`~o3d_seqcc.errors.MissingImagesError`,
+        which carries the scene without them.
         """
         self.load_mesh()
+        missing: list[MissingImage] = []
         for v in self.views:
             if check_images and not v.in_memory:
-                _check_image_header(v)
+                size = check_photo(v.name, v.image)
+                if isinstance(size, MissingImage):
+                    missing.append(size)
+                    continue
+                _check_size(v, size)
             try:
                 if v.depth is not None:  # the header only: size and pixel budget before any decoding
                     check_depth_file(v.depth, shape=(v.height, v.width))
                 if v.point_cloud is not None:
                     open_regular(v.point_cloud, "point cloud").close()
+                if v.mask is not None:  # the header only: the size before any decoding
+                    check_mask_file(v.mask, shape=(v.height, v.width), view=v.name)
             except InputError as e:
                 raise InputError(f"view {v.name!r}: {e}") from None
+        if missing:
+            gone = {m.view for m in missing}
+            kept = tuple(v for v in self.views if v.name not in gone)
+            rest = Scene(self.mesh, kept, source=self.source, options=self.options) if kept else None
+            raise missing_images(missing, total=len(self.views), where=str(self.source or ""), scene=rest)
 
 
-def near_miss(path: Path) -> str:
-    """``"; found NAME beside it: did you mean it?"`` for a missing file with a near namesake, else ``""``.
-
-    A near namesake is a file in the same folder whose name differs only in case or in the
-    extension (``img00.jpg`` for ``img00.png``, as COLMAP models written before a conversion
-    name them); a missing folder is said as such.
-    """
-    folder = Path(path).parent
-    if not folder.is_dir():
-        return f"; the folder {folder} does not exist"
-    name, stem = Path(path).name.lower(), Path(path).stem.lower()
-    try:
-        entries = [e for e in os.scandir(folder) if e.is_file()]
-    except OSError:
-        return ""
-    same = [e.name for e in entries if e.name.lower() == name]
-    other = sorted(e.name for e in entries if Path(e.name).stem.lower() == stem and e.name.lower() != name)
-    found = same or other
-    if not found:
-        return ""
-    return f"; found {found[0]} beside it: did you mean it?"
-
-
-def _check_image_header(v: View) -> None:
-    try:
-        size = check_image_file(v.image)[:2]
-    except InputError as e:
-        hint = near_miss(v.image) if not v.image.is_file() else ""
-        raise InputError(f"view {v.name!r}: {e}{hint}") from None
+def _check_size(v: View, size: tuple[int, int]) -> None:
     if size != (v.width, v.height):
         raise InputError(
             f"view {v.name!r}: image {v.image} is {size[0]}x{size[1]} but the scene says {v.width}x{v.height}; "
@@ -567,6 +580,7 @@ def summarise(scene: Scene) -> dict:
         "image_size": sorted({f"{v.width}x{v.height}" for v in scene.views}),
         "with_depth": sum(v.depth is not None for v in scene.views),
         "with_point_cloud": sum(v.point_cloud is not None for v in scene.views),
+        "with_mask": sum(v.has_mask for v in scene.views),
         "distorted": sum(v.distorted for v in scene.views),
         "mesh": "(in memory)" if isinstance(scene.mesh, Mesh) else str(scene.mesh),
         "mesh_vertices": int(len(m.vertices)),

@@ -24,7 +24,7 @@ TREE: dict[str, set[str]] = {
     "imaging": {"__init__", "arrays", "sequences"},
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
     "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
-                   "compute", "subpixel"},
+                   "compute", "subpixel", "masks"},
     "mappings": {"__init__", "pairs", "sampling", "compute"},
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "value_space",
@@ -32,11 +32,11 @@ TREE: dict[str, set[str]] = {
     "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
-    "io": {"__init__", "files", "headers", "mesh_files", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
+    "io": {"__init__", "files", "headers", "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest", "result_files",
-           "export", "obj_text", "gltf_validator"},
-    "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background"},
-    "synthetic": {"__init__", "room", "generate"},
+           "export", "obj_text", "gltf_validator", "masks"},
+    "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks"},
+    "synthetic": {"__init__", "room", "generate", "occluder"},
     "cli": {"__init__", "common", "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info",
             "demo", "synthetic"},
 }
@@ -48,7 +48,7 @@ MAX_TOP_LEVEL = 8
 #: and the image sequences; its formats (readers and writers) sit above the stages whose objects they write.
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
-    ("_shared", "io.files", "io.headers", "io.mesh_files"),
+    ("_shared", "io.files", "io.headers", "io.mesh_files", "io.masks", "io.missing"),
     ("imaging",),
     ("geometry",),
     ("scene",),

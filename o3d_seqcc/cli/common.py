@@ -47,6 +47,7 @@ _CORRECTION, _VISIBILITY, _RUN = CorrectionSettings(), VisibilitySettings(), Run
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The scene argument and the loader options every command shares."""
     from ..io.load import AXES, EXTRINSIC_CONVENTIONS
+    from ..visibility.camera_checks import MIN_AREA_SEEN
 
     p.add_argument("scene", help="scene.json (or its folder), a MeshLab .mlp, Meshroom cameras.sfm, an Open3D RGB-D "
                    "folder, a COLMAP model folder (text or binary), or an OpenMVS scene.mvs")
@@ -68,8 +69,20 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--intrinsic", metavar="FILE",
                    help="RGB-D folders: the colour camera's intrinsic, Open3D's PinholeCameraIntrinsic JSON (default "
                    "PrimeSense, for 640x480 images only)")
+    p.add_argument("--masks", metavar="DIR",
+                   help="folder of per-photo masks (PNG/JPG/TIF of the photo's size, named after the image or the view: "
+                   "<stem>.png, ...; Meshroom's <viewId>.png, OpenMVS's <stem>.mask.png): nonzero = keep, 0 = masked "
+                   "out; masked pixels colour nothing (visibility, mappings, view selection, bake)")
+    p.add_argument("--mask-invert", action="store_true",
+                   help="the masks' other convention: nonzero = masked out (for --masks and the masks the scene names)")
     p.add_argument("--no-camera-check", dest="camera_check", action="store_false",
                    help="skip the check of the cameras against the mesh (camera-to-world, OpenGL axes, other units)")
+    p.add_argument("--skip-missing-images", dest="skip_missing", action="store_true",
+                   help="go on without the photos that are missing or unreadable (one warning names them; report.json "
+                   "lists them under scene_options.skipped_images); by default they are an error listing them all")
+    p.add_argument("--allow-unseen", dest="allow_unseen", action="store_true",
+                   help=f"go on (with a warning) when the cameras see less than {100 * MIN_AREA_SEEN:g}%% of the mesh; "
+                   "by default an error (a mesh from another scene, other units or camera conventions)")
 
 
 def scene_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
@@ -78,7 +91,9 @@ def scene_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
     return {"mesh": args.mesh, "image_dir": args.image_dir, "depth_dir": args.depth_dir,
             "depth_scale": args.depth_scale, "extrinsic": args.extrinsic, "axes": args.axes,
-            "intrinsic": args.intrinsic, "check_cameras": args.camera_check}
+            "intrinsic": args.intrinsic, "check_cameras": args.camera_check, "masks": args.masks,
+            "mask_invert": args.mask_invert, "skip_missing": args.skip_missing,
+            "allow_unseen": args.allow_unseen}
 
 
 def scene_from_args(args: argparse.Namespace):

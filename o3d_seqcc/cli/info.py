@@ -5,7 +5,8 @@ folder, COLMAP text or binary model, OpenMVS scene.mvs), checks every file and i
 checks the cameras against the mesh (camera-to-world matrices given as world-to-camera, OpenGL
 axes, mesh units, intrinsics of another image size) and prints the format, the views (sizes,
 depth, lens distortion), the mesh, how much of it the cameras see and the warnings; --json
-prints the same as JSON. A likely camera mistake is printed, then reported as the error (exit 2).
+prints the same as JSON. A likely camera mistake, or a mesh the photos do not show (less than 10 %
+of it seen, without --allow-unseen), is printed, then reported as the error (exit 2).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import argparse
 import json
 import warnings
 
-from ..visibility.camera_checks import check_cameras
+from ..visibility.camera_checks import MIN_AREA_SEEN, check_cameras
 from ..errors import InputError
 from ..io.load import camera_fixes, detect_format
 from ..scene import summarise
@@ -43,6 +44,8 @@ def run(args: argparse.Namespace) -> int:
         print(_text(summary, rep))
     if rep is not None and rep.mistake is not None:
         raise InputError(rep.error_message(str(target), camera_fixes(fmt)))
+    if rep is not None and rep.hardly_seen(MIN_AREA_SEEN) and not args.allow_unseen:
+        raise InputError(rep.unseen_message(str(target), camera_fixes(fmt)))
     return 0
 
 
@@ -50,7 +53,8 @@ def _text(s: dict, rep) -> str:
     lines = [f"scene: {s['source']} ({s['format']})",
              f"views: {s['views']} ({', '.join(s['image_size'])}), {s['with_depth']} with depth maps, "
              f"{s['with_point_cloud']} with point clouds" + (f", {s['distorted']} with lens distortion (undistorted "
-                                                             "when read)" if s.get("distorted") else ""),
+                                                             "when read)" if s.get("distorted") else "")
+             + (f", {s['with_mask']} with masks" if s.get("with_mask") else ""),
              f"mesh: {s['mesh']}: {s['mesh_faces']} faces, {s['mesh_vertices']} vertices, bounds "
              f"{s['mesh_bounds'][0]} .. {s['mesh_bounds'][1]}",
              f"camera centres: {s['camera_centre_bounds'][0]} .. {s['camera_centre_bounds'][1]}"]

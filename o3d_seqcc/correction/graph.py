@@ -317,7 +317,7 @@ def mappings_summary(mappings: Mappings, *, t_npm: int | str) -> dict[str, Any]:
         "mappings_total": mappings.total,
         "mappings_per_pair_median": counts[len(counts) // 2] if counts else 0,
         "filters (face-view incidences)": {
-            k: st.get(k) for k in ("valid", "occluded", "depth_inconsistent", "oblique", "usable")
+            k: st.get(k) for k in ("valid", "occluded", "depth_inconsistent", "oblique", "masked", "usable")
         },
         "views_seeing_nothing": st.get("views_seeing_nothing", []),
         "seconds": {k: round(v, 3) for k, v in st.get("timings", {}).items()},

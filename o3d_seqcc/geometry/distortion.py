@@ -85,6 +85,10 @@ class Distortion:
     images, depth : bool, default True
         Whether the view's image / depth map are distorted (a view whose photo was replaced by
         an undistorted copy keeps ``images=False`` for its depth map).
+    masks : bool, optional
+        Whether the view's mask is distorted; default (None) as ``images`` (a mask is drawn on its
+        photo; a photo replaced by an undistorted copy keeps ``masks=True`` for the mask of the
+        original).
     """
 
     model: str
@@ -93,6 +97,7 @@ class Distortion:
     meshlab: dict | None = field(default=None, repr=False)
     images: bool = True
     depth: bool = True
+    masks: bool | None = None
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -147,17 +152,20 @@ class Distortion:
             d["images"] = False
         if not self.depth:
             d["depth"] = False
+        if self.masks is not None:
+            d["masks"] = bool(self.masks)
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "Distortion":
         if not isinstance(d, dict) or not {"model", "coefficients", "intrinsic"} <= set(d):
             raise InputError("a distortion is an object with 'model', 'coefficients' and 'intrinsic'")
-        unknown = set(d) - {"model", "coefficients", "intrinsic", "meshlab", "images", "depth"}
+        unknown = set(d) - {"model", "coefficients", "intrinsic", "meshlab", "images", "depth", "masks"}
         if unknown:
             raise InputError(f"distortion has unknown keys {sorted(map(str, unknown))}")
         return cls(model=d["model"], coefficients=d["coefficients"], intrinsic=d["intrinsic"],
-                   meshlab=d.get("meshlab"), images=bool(d.get("images", True)), depth=bool(d.get("depth", True)))
+                   meshlab=d.get("meshlab"), images=bool(d.get("images", True)), depth=bool(d.get("depth", True)),
+                   masks=None if d.get("masks") is None else bool(d["masks"]))
 
     # ---------------------------------------------------------------------------------- the model
 

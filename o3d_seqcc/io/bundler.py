@@ -49,7 +49,8 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
-from .files import check_image_file, join_path, open_regular
+from .files import join_path, open_regular
+from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["HEADER", "detect", "find_list", "load"]
 
@@ -193,13 +194,6 @@ def _read_list(path: Path) -> list[tuple[str, int]]:
     return out
 
 
-def _is_file(p: Path) -> bool:
-    try:
-        return p.is_file()
-    except (OSError, ValueError):  # a name too long for the file system
-        return False
-
-
 def _is_number(tok: str) -> bool:
     try:
         return math.isfinite(float(tok))
@@ -231,8 +225,9 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     Raises
     ------
     InputError
-        No mesh, no ``list.txt``, malformed files (file and line named), counts that differ, a
-        missing image, no reconstructed camera.
+        No mesh, no ``list.txt``, malformed files (file and line named), counts that differ,
+        missing or unreadable images (a :class:`~o3d_seqcc.errors.MissingImagesError` listing
+        them all, with their ``list.txt`` lines), no reconstructed camera.
     """
     if mesh is None:
         raise InputError(f"{path} is a Bundler file, which holds no mesh: pass the mesh explicitly (mesh=... / --mesh)")
@@ -248,23 +243,24 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     img_root = None if image_dir is None else Path(image_dir)
     if img_root is not None and not img_root.is_dir():
         raise InputError(f"image_dir {img_root} is not a folder")
-    views, names, skipped = [], set(), []
+    views, names, skipped, missing = [], set(), [], []
     for i, (cam, (name, line)) in enumerate(zip(cams, images)):
         if cam["f"] == 0:
             skipped.append(name)
             continue
         rel = Path(name)
         file = img_root / rel.name if img_root is not None else rel if rel.is_absolute() else join_path(lst.parent, name)
-        if not _is_file(file):
-            hint = "" if img_root is not None else "; pass image_dir= (--image-dir DIR) if the images are elsewhere"
-            raise InputError(f"{lst}: line {line}: image not found: {file}{hint}")
-        w, h, _mode = check_image_file(file)
+        view_name = file.stem if file.stem not in names else f"{file.stem}_{i}"
+        names.add(view_name)
+        size = check_photo(view_name, file, where=f"{lst}: line {line}")  # missing or unreadable: listed below
+        if isinstance(size, MissingImage):
+            missing.append(size)
+            continue
+        w, h = size
         where = f"{path}: line {cam['line']}: camera {i} ({name!r:.80})"
         ext = np.eye(4)
         ext[:3, :3] = _FLIP @ cam["R"]
         ext[:3, 3] = _FLIP @ cam["t"]
-        view_name = file.stem if file.stem not in names else f"{file.stem}_{i}"
-        names.add(view_name)
         try:
             K, dist = _intrinsic(cam["f"], cam["k"], w, h)
             views.append(View(name=view_name, image=file, intrinsic=K, extrinsic=ext, width=w, height=h,
@@ -274,11 +270,15 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     if skipped:
         logger.warning("%s: %d camera(s) have focal length 0 (not reconstructed) and are skipped: %s", path,
                        len(skipped), ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
-    if not views:
-        raise InputError(f"{path}: no reconstructed camera (every focal length is 0)")
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = path.parent / mesh_path
+    if missing:
+        hint = "" if img_root is not None else "pass image_dir= (--image-dir DIR) if the images are elsewhere"
+        raise missing_images(missing, total=len(views) + len(missing), where=str(path), hint=hint,
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
+    if not views:
+        raise InputError(f"{path}: no reconstructed camera (every focal length is 0)")
     logger.info("%s: Bundler v0.3, %d of %d cameras reconstructed, %d points (not read), images from %s", path,
                 len(views), len(cams), n_points, lst)
     return Scene(mesh=mesh_path, views=tuple(views))

@@ -15,12 +15,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..visibility.camera_checks import FLIP, check_cameras
-from ..errors import InputError, warn
+from ..visibility.camera_checks import FLIP, MIN_AREA_SEEN, check_cameras
+from ..errors import InputError, MissingImagesError, warn
 from .._shared.registry import Registry
 from ..scene import Scene, View
 from . import bundler, colmap, meshlab, meshroom, metashape, mve, nvm, openmvs, rgbd_folder, scene_json
 from .files import find_file
+from .masks import attach_masks
+from .missing import MissingImage, missing_images
 
 __all__ = ["AXES", "EXTRINSIC_CONVENTIONS", "SCENE_FORMATS", "SceneFormat", "detect_format", "load_scene",
            "save_scene"]
@@ -127,10 +129,14 @@ def load_scene(
     image_dir: str | os.PathLike | None = None,
     depth_dir: str | os.PathLike | None = None,
     depth_scale: float = View.depth_scale,
+    masks: str | os.PathLike | None = None,
+    mask_invert: bool = False,
     extrinsic: str | None = None,
     axes: str | None = None,
     check_cameras: bool = True,
     validate: bool = True,
+    skip_missing: bool = False,
+    allow_unseen: bool = False,
 ) -> Scene:
     """Load a scene, detecting its format, and check its cameras against its mesh.
 
@@ -162,6 +168,16 @@ def load_scene(
         file name with a depth extension (``.png``, ``.tif``, ``.tiff``, ``.exr``).
     depth_scale : float, default :attr:`View.depth_scale <o3d_seqcc.scene.View>` (1000.0)
         Units per metre of the depth maps of ``depth_dir`` (1000: millimetres).
+    masks : path-like, optional
+        Folder of per-photo masks (:mod:`o3d_seqcc.io.masks`): PNG / JPEG / TIFF named after the
+        image (``<stem>.png``, ...) or the view (Meshroom: its ``<viewId>.png`` too; OpenMVS:
+        ``<stem>.mask.png``), the photo's size, nonzero = kept, 0 = masked out: masked pixels
+        count nowhere (visibility, mappings, view selection, bake). They replace the masks the
+        scene names (``scene.json``'s ``"mask"``, OpenMVS's ``maskName``) for the views they
+        cover; views without one are used whole (a warning names them).
+    mask_invert : bool, default False
+        The masks' other convention, nonzero = masked out (``--mask-invert``): for the masks of
+        ``masks`` and those the scene names.
     extrinsic : {"world-to-camera", "camera-to-world"}, optional
         What the file's pose matrices map, when it is not the format's own convention
         (``scene.json`` and COLMAP: world-to-camera; an RGB-D folder's ``key.log``:
@@ -176,10 +192,25 @@ def load_scene(
     check_cameras : bool, default True
         Check the cameras against the mesh (:func:`o3d_seqcc.visibility.camera_checks.check_cameras`):
         an :class:`InputError` when they look camera-to-world, OpenGL or in other units than
-        the mesh (the message names the fix), warnings when most of the mesh faces no camera.
-        Needs ``validate``.
+        the mesh (the message names the fix), or when the photos do not show the mesh (see
+        ``allow_unseen``); warnings when most of the mesh faces no camera. Needs ``validate``.
     validate : bool, default True
         Check files, image headers (size, grey, alpha) and the mesh now rather than later.
+    skip_missing : bool, default False
+        Go on without the photos that are missing or unreadable (``--skip-missing-images``), with
+        one warning naming them; ``scene.options["skipped_images"]`` maps their view names to
+        their paths (``report.json`` shows it). Without it they are one
+        :class:`~o3d_seqcc.errors.MissingImagesError` listing them all; every photo missing is
+        that error either way. Photos that readers open as they load (for their size) are
+        skipped then, the others by ``validate``.
+    allow_unseen : bool, default False
+        Go on (with a warning) when the camera check finds less than
+        :data:`~o3d_seqcc.visibility.camera_checks.MIN_AREA_SEEN` (10 %) of the mesh seen by any
+        camera and the photos hardly showing it (under
+        :data:`~o3d_seqcc.visibility.camera_checks.MIN_FRONT_SEEN` of their pixels,
+        :meth:`~o3d_seqcc.visibility.camera_checks.CameraReport.hardly_seen`) (``--allow-unseen``);
+        by default that is an :class:`InputError` naming the camera check and the likely causes:
+        a mesh from another scene, other units, other camera conventions.
 
     Returns
     -------
@@ -191,7 +222,8 @@ def load_scene(
     InputError
         Unknown layout (the message lists the formats), an option the format does not take,
         missing files, malformed cameras, duplicate names, cameras that look like another
-        convention, ...
+        convention, a mesh the photos do not show, ...; missing or unreadable photos are one
+        :class:`~o3d_seqcc.errors.MissingImagesError` listing them all.
     """
     fmt, target = detect_format(path, format)
     p = Path(path)
@@ -206,22 +238,63 @@ def load_scene(
         if name not in accepted:
             raise InputError(f"{name}= does not apply to {fmt.description} ({p}); drop it")
         options[name] = value
-    scene = fmt.load(target, **options)
+    if masks is not None and "masks" in accepted:  # the format's own mask names (Meshroom's view ids) first
+        options["masks"] = masks
+    skipped: list[MissingImage] = []
+    try:
+        scene = fmt.load(target, **options)
+    except MissingImagesError as e:
+        scene = _without_missing(e, skip_missing, skipped)
     views = scene.views if depth_dir is None else _with_depth(scene.views, Path(depth_dir), depth_scale)
     if conv["invert"] or conv["flip"]:
         views = tuple(_restated(v, conv, target) for v in views)
+    views = attach_masks(views, None if "masks" in options else masks, invert=bool(mask_invert))
     given = {"format": None if format == "auto" else format, "image_dir": image_dir, "depth_dir": depth_dir,
              "depth_scale": None if depth_dir is None else float(depth_scale), "extrinsic": extrinsic, "axes": axes,
-             "intrinsic": intrinsic, "check_cameras": None if check_cameras else False}
-    recorded = {k: (str(Path(v).resolve()) if isinstance(v, (str, os.PathLike)) and k.endswith(("_dir", "intrinsic"))
+             "intrinsic": intrinsic, "check_cameras": None if check_cameras else False,
+             "skip_missing": True if skip_missing else None, "allow_unseen": True if allow_unseen else None,
+             "masks": masks, "mask_invert": True if mask_invert else None}
+    recorded = {k: (str(Path(v).resolve()) if isinstance(v, (str, os.PathLike)) and k.endswith(("_dir", "intrinsic",
+                                                                                                  "masks"))
                     else np.asarray(v, dtype=np.float64).tolist() if k == "intrinsic" else v)
                 for k, v in given.items() if v is not None}
     scene = Scene(scene.mesh, views, source=target, options=recorded)
     if validate:
-        scene.validate()
-        if check_cameras:
-            run_camera_check(scene, fmt, target, extrinsic=extrinsic, axes=axes)
+        try:
+            scene.validate()
+        except MissingImagesError as e:
+            hint = ("pass image_dir= (--image-dir DIR) if the images are elsewhere"
+                    if "image_dir" in accepted and image_dir is None else "")
+            scene = _without_missing(e, skip_missing, skipped, hint)
+            scene.validate()  # what is left: sizes, depth maps
+    if skipped:
+        scene = Scene(scene.mesh, scene.views, source=target,
+                      options={**recorded, "skipped_images": {m.view: str(m.path) for m in skipped}})
+        warn(f"{target}: going on without {len(skipped)} of {len(skipped) + len(scene.views)} photos, missing or "
+             "unreadable (skip_missing=True / --skip-missing-images): "
+             + "; ".join(f"view {m.view!r} ({m.path})" for m in skipped))
+    if validate and check_cameras:
+        run_camera_check(scene, fmt, target, extrinsic=extrinsic, axes=axes, allow_unseen=allow_unseen)
     return scene
+
+
+def _without_missing(e: MissingImagesError, skip: bool, skipped: list[MissingImage], hint: str = "") -> Scene:
+    """The scene of ``e`` without its missing photos (added to ``skipped``) when ``skip``, else ``e`` raised
+    (with the format's ``hint`` to find the photos, when given).
+
+    Every photo missing is an error either way, listing those skipped before too.
+    """
+    if not skip and hint:
+        raise missing_images(e.missing, total=e.total, where=e.where, hint=hint, scene=e.scene) from None
+    if not skip:
+        raise e
+    if e.scene is None:
+        if not skipped and not hint:
+            raise e
+        every = [*skipped, *e.missing]
+        raise missing_images(every, total=len(skipped) + e.total, where=e.where, hint=hint) from None
+    skipped.extend(e.missing)
+    return e.scene
 
 
 def _conventions(fmt: SceneFormat, p: Path, extrinsic: str | None, axes: str | None) -> dict[str, bool]:
@@ -269,13 +342,18 @@ def camera_fixes(fmt: SceneFormat) -> dict[str, str]:
 
 
 def run_camera_check(scene: Scene, fmt: SceneFormat, target: Path, *, extrinsic: str | None = None,
-                     axes: str | None = None, raise_on_mistake: bool = True, **options: Any):
+                     axes: str | None = None, raise_on_mistake: bool = True, allow_unseen: bool = False,
+                     **options: Any):
     """:func:`~o3d_seqcc.visibility.camera_checks.check_cameras` with the fixes of ``fmt``; warnings emitted.
 
-    The conventions stated (``extrinsic``, ``axes``) are not second-guessed.
+    The conventions stated (``extrinsic``, ``axes``) are not second-guessed. A mesh the photos do not
+    show (:meth:`~o3d_seqcc.visibility.camera_checks.CameraReport.hardly_seen`) raises (with
+    ``raise_on_mistake``) unless ``allow_unseen``.
     """
     skip = tuple(n for n, stated in (("inverse", extrinsic), ("opengl", axes)) if stated is not None)
-    rep = check_cameras(scene, skip=skip, fix=camera_fixes(fmt), where=str(target), raise_on_mistake=raise_on_mistake, **options)
+    least = 0.0 if allow_unseen or not raise_on_mistake else MIN_AREA_SEEN
+    rep = check_cameras(scene, skip=skip, fix=camera_fixes(fmt), where=str(target), raise_on_mistake=raise_on_mistake,
+                        min_area_seen=least, **options)
     for w in rep.warnings:
         warn(f"{target}: {w}")
     return rep

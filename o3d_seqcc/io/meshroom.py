@@ -40,6 +40,7 @@ from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import find_file
+from .masks import attach_masks
 
 __all__ = ["detect", "load"]
 
@@ -131,7 +132,8 @@ def _intrinsic(d: dict, where: str, version: tuple[int, ...]) -> tuple[int, int,
         raise InputError(f"{where}: {e}") from None
 
 
-def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | os.PathLike | None = None) -> Scene:
+def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | os.PathLike | None = None,
+         masks: str | os.PathLike | None = None) -> Scene:
     """Load a Meshroom / AliceVision SfM JSON file.
 
     Parameters
@@ -143,6 +145,10 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     image_dir : path-like, optional
         Folder to look the images up in by file name, instead of the paths in the file (e.g. the
         undistorted images of PrepareDenseScene, named ``<viewId>.exr``/``.png``: tried too).
+    masks : path-like, optional
+        AliceVision's masks folder (``--masksFolder``): ``<viewId>.png``, else the image's name
+        with the mask's suffix, as ``tryLoadMask`` (``aliceVision/image/io.cpp``) looks them up
+        (:func:`o3d_seqcc.io.masks.attach_masks`); 0 = masked out, of the original photos.
 
     Raises
     ------
@@ -177,7 +183,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
         R = _num(tr, "rotation", where, 9).reshape(3, 3).T  # column-major storage of world-to-camera R
         C = _num(tr, "center", where, 3)
         poses[pid] = (R, C, where)
-    views, skipped = [], []
+    views, skipped, ids = [], [], {}
     img_root = None if image_dir is None else Path(image_dir)
     for i, d in enumerate(data["views"]):
         where = f"{path}: views[{i}]"
@@ -201,6 +207,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             img = next((c for c in cands if c.is_file()), img_root / src.name)
         try:
             views.append(View(name=src.stem, image=img, intrinsic=K, extrinsic=ext, width=w, height=h, distortion=lens))
+            ids[src.stem] = [str(d["viewId"])] if "viewId" in d else []
         except InputError as e:
             raise InputError(f"{where} ({pwhere}): {e}") from None
     if skipped:
@@ -211,4 +218,4 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = path.parent / mesh_path
-    return Scene(mesh=mesh_path, views=tuple(views))
+    return Scene(mesh=mesh_path, views=attach_masks(views, masks, extra=ids) if masks is not None else tuple(views))

@@ -70,6 +70,7 @@ from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
 from .files import open_regular
+from .missing import MissingImage, missing_images
 
 __all__ = ["IMAGE_SUFFIXES", "MAX_XML_BYTES", "detect", "load"]
 
@@ -331,6 +332,15 @@ class _Images:
         return sorted({p for n in names for p in self.by_name.get(n, [])})
 
 
+def _view_name(label: str, i: int, taken: set[str]) -> str:
+    """The view name of a camera label: its file name without an image suffix, unique (``_i`` appended)."""
+    stem = PurePosixPath(label.replace("\\", "/")).name
+    stem = PurePosixPath(stem).stem if stem.lower().endswith(IMAGE_SUFFIXES) else stem
+    name = stem if stem not in taken else f"{stem}_{i}"
+    taken.add(name)
+    return name
+
+
 def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | os.PathLike | None = None) -> Scene:
     """Load the aligned cameras of an Agisoft Metashape ``cameras.xml``.
 
@@ -348,7 +358,8 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     ------
     InputError
         No mesh, hostile or malformed XML (the element and its line), unsupported sensors,
-        missing images (the labels listed), no aligned camera.
+        missing images (one :class:`~o3d_seqcc.errors.MissingImagesError` listing the labels and
+        their lines), no aligned camera.
     """
     if mesh is None:
         raise InputError(f"{path} is a Metashape cameras file, which holds no mesh: pass the mesh (exported from "
@@ -399,7 +410,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             raise InputError(f"{doc.where(cam)}: camera {label!r:.60} matches several images in {folder}: "
                              f"{', '.join(p.name for p in found[:4])}; keep one, or pass image_dir=")
         if not found:
-            missing.append(f"{label!r:.60} (line {doc.lines[cam]})")
+            missing.append((cam, label))
             continue
         posed.append((cam, label, sid, _world_pose(doc, cam, tr, to_world), found[0]))
     seen: dict[Path, str] = {}
@@ -408,14 +419,10 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             raise InputError(f"{doc.where(cam)}: cameras {seen[file]!r:.60} and {label!r:.60} both find {file} (Metashape "
                              "stores labels, not paths): relabel the cameras in Metashape so that each names its photo")
         seen[file] = label
-    if missing:
-        raise InputError(f"{path}: {len(missing)} camera image(s) not found in {folder} by label (Metashape stores no "
-                         f"path): {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}; pass image_dir= "
-                         "(--image-dir DIR) to the folder of the photos")
     if skipped:
         logger.warning("%s: %d camera(s) are not aligned (no transform) or disabled and are skipped: %s", path,
                        len(skipped), ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
-    if not posed:
+    if not posed and not missing:
         raise InputError(f"{path}: no aligned camera (none has a <transform>); align the photos in Metashape first")
     if any(read_sensors[sid].get("rolling_shutter") for _, _, sid, _, _ in posed):
         logger.warning("%s: a sensor has rolling-shutter compensation, which is not modelled (each photo is read as "
@@ -425,10 +432,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     for i, (cam, label, sid, ext, file) in enumerate(posed):
         K, lens = intrinsics[sid]
         w, h = read_sensors[sid]["size"]
-        stem = PurePosixPath(label.replace("\\", "/")).name
-        stem = PurePosixPath(stem).stem if stem.lower().endswith(IMAGE_SUFFIXES) else stem
-        name = stem if stem not in names else f"{stem}_{i}"
-        names.add(name)
+        name = _view_name(label, i, names)
         try:
             views.append(View(name=name, image=file, intrinsic=K, extrinsic=ext, width=w, height=h, distortion=lens))
         except InputError as e:
@@ -436,6 +440,15 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = path.parent / mesh_path
+    if missing:
+        gone = [MissingImage(_view_name(label, len(posed) + k, names),
+                             folder / PurePosixPath(label.replace("\\", "/")).name,
+                             f"no photo named after the label in {folder} (Metashape stores labels, not paths)",
+                             f"{path}: line {doc.lines.get(cam, '?')}")
+                for k, (cam, label) in enumerate(missing)]
+        raise missing_images(gone, total=len(posed) + len(missing), where=str(path),
+                             hint="pass image_dir= (--image-dir DIR) to the folder of the photos",
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
     logger.info("%s: Metashape cameras, %d aligned of %d, %d sensor(s), mesh %s", path, len(views),
                 len(views) + len(skipped), len(intrinsics), mesh_path)
     return Scene(mesh=mesh_path, views=tuple(views))

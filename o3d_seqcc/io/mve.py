@@ -25,8 +25,10 @@ has one (what MVE's ``sfmrecon`` and ``makescene`` write and texrecon is usually
 ``original``; :func:`load`'s ``embedding=`` names another (the scene path cannot carry
 texrecon's ``::EMBEDDING`` suffix: a path is checked to exist before its format is detected).
 Views without a camera (``focal_length`` 0 or absent) or without the embedding are skipped with
-one warning each, as texrecon skips the latter. MVE's raw ``.mvei`` images and the deprecated
-single-file views are refused with the way out.
+one warning each, as texrecon skips the latter (and a ``.cam`` without a photo beside it: nothing
+names the photo there); photos found but unreadable are listed together in one
+:class:`~o3d_seqcc.errors.MissingImagesError` (``skip_missing=True`` goes on without them).
+MVE's raw ``.mvei`` images and the deprecated single-file views are refused with the way out.
 
 Pixels (MVE ``CameraInfo::fill_calibration`` in ``libs/mve/camera.cc``, for an image of
 ``w x h`` read from its header): with ``a = (w / h) paspect``, ``fx = f w``, ``fy = f w paspect``
@@ -71,7 +73,8 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import MAX_NAME_LENGTH, Scene, View
-from .files import check_image_file, open_regular
+from .files import open_regular
+from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["CAM_IMAGE_SUFFIXES", "EMBEDDINGS", "calibration", "detect", "detect_cam_folder", "lens", "load",
            "load_cam_folder"]
@@ -158,8 +161,11 @@ def lens(f: float, d: tuple[float, float], K: np.ndarray, width: int, height: in
 
 
 def _view(name: str, image: Path, f: float, d: tuple[float, float], paspect: float, pp: tuple[float, float],
-          R: list[float], t: list[float], where: str, *, distorted: bool = True) -> View:
-    w, h, _mode = check_image_file(image)
+          R: list[float], t: list[float], where: str, *, distorted: bool = True) -> View | MissingImage:
+    size = check_photo(name, image, where=where)  # unreadable: listed by the caller
+    if isinstance(size, MissingImage):
+        return size
+    w, h = size
     try:
         K0 = calibration(f, paspect, pp, w, h)
         K, dist = lens(f, d, K0, w, h) if distorted else (K0, None)
@@ -270,12 +276,13 @@ def load_cam_folder(folder: Path, *, mesh: str | os.PathLike | None = None) -> S
     Raises
     ------
     InputError
-        No mesh, a malformed ``.cam`` (file and line named), no photo for any camera.
+        No mesh, a malformed ``.cam`` (file and line named), no photo for any camera, unreadable
+        photos (one :class:`~o3d_seqcc.errors.MissingImagesError` listing them).
     """
     mesh_path = _mesh_path(mesh, folder, "a texrecon camera folder (.cam files)")
     names = sorted(p.name for p in folder.iterdir())
     cams = [folder / n for n in names if n.lower().endswith(".cam") and len(n) > 4 and (folder / n).is_file()]
-    views, taken, no_image, no_camera, ambiguous = [], set(), [], [], []
+    views, taken, no_image, no_camera, ambiguous, unreadable = [], set(), [], [], [], []
     for cam in cams:
         f, d, paspect, pp, R, t = _read_cam(cam)
         image = _cam_image(cam, names, ambiguous)
@@ -285,12 +292,16 @@ def load_cam_folder(folder: Path, *, mesh: str | os.PathLike | None = None) -> S
         if f == 0:
             no_camera.append(cam.name)
             continue
-        views.append(_view(_unique(cam.name[:-4], "view", taken), image, f, d, paspect, pp, R, t, str(cam)))
+        v = _view(_unique(cam.name[:-4], "view", taken), image, f, d, paspect, pp, R, t, str(cam))
+        (unreadable if isinstance(v, MissingImage) else views).append(v)
     if ambiguous:
         logger.warning("%s: several photos share a camera's name; taken as texrecon takes them: %s", folder,
                        ", ".join(ambiguous[:5]) + (" ..." if len(ambiguous) > 5 else ""))
     _skipped(folder, "camera file(s) without a photo of the same name (.png, .jpg, .jpeg, .tif, .tiff)", no_image)
     _skipped(folder, "camera(s) with focal length 0 (not calibrated)", no_camera)
+    if unreadable:
+        raise missing_images(unreadable, total=len(views) + len(unreadable), where=str(folder),
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
     if not views:
         raise InputError(f"{folder}: no calibrated camera with a photo: every NAME.cam needs a NAME.png, .jpg, .jpeg, "
                          ".tif or .tiff beside it and a focal length > 0")
@@ -409,7 +420,8 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, embedding: str | 
     ------
     InputError
         No mesh, a malformed ``meta.ini`` (file and line named), deprecated views, ``.mvei``
-        images, no calibrated view with the embedding.
+        images, no calibrated view with the embedding, unreadable photos (one
+        :class:`~o3d_seqcc.errors.MissingImagesError` listing them).
     """
     mesh_path = _mesh_path(mesh, path, "an MVE scene")
     dirs = sorted(p for p in (path / "views").iterdir() if p.suffix == ".mve")
@@ -426,7 +438,7 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, embedding: str | 
         if embedding is None:
             raise InputError(f"{path}: the calibrated views have no 'undistorted' or 'original' image (found: "
                              f"{', '.join(sorted(found)[:8]) or 'none'}); name the embedding (embedding=...)")
-    views, taken, missing = [], set(), []
+    views, taken, missing, unreadable = [], set(), [], []
     for v in sorted(calibrated, key=lambda v: (v["id"], v["dir"].name)):
         image = _embedding_file(v["dir"], embedding)
         if image is None:
@@ -434,9 +446,13 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, embedding: str | 
             continue
         c = v["camera"]
         name = _unique(v["name"], v["dir"].stem, taken)
-        views.append(_view(name, image, c["f"], c["d"], c["paspect"], c["pp"], c["R"], c["t"], v["where"],
-                           distorted=embedding == "original"))
+        got = _view(name, image, c["f"], c["d"], c["paspect"], c["pp"], c["R"], c["t"], v["where"],
+                    distorted=embedding == "original")
+        (unreadable if isinstance(got, MissingImage) else views).append(got)
     _skipped(path / "views", f"view(s) without the {embedding!r} image", missing)
+    if unreadable:
+        raise missing_images(unreadable, total=len(views) + len(unreadable), where=str(path),
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
     if not views:
         raise InputError(f"{path}: no calibrated view has the {embedding!r} image ({embedding}.png / .jpg)")
     logger.info("%s: MVE scene, embedding %r, %d views, mesh %s", path, embedding, len(views), mesh_path)

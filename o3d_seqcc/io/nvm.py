@@ -59,7 +59,8 @@ from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
 from .colmap import qvec_to_rotmat
-from .files import check_image_file, join_path, open_regular
+from .files import join_path, open_regular
+from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["MAX_COUNT", "detect", "load"]
 
@@ -356,28 +357,24 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     if img_root is not None and not img_root.is_dir():
         raise InputError(f"image_dir {img_root} is not a folder")
     files = [_image_path(c.name, path.parent, img_root) for c in cams]
-    missing = [(c, f) for c, f in zip(cams, files) if not f.is_file()]
-    if missing:
-        shown = "; ".join(f"line {c.line}: {f}" for c, f in missing[:5]) + (" ..." if len(missing) > 5 else "")
-        hint = "" if img_root is not None else "; pass image_dir= (--image-dir DIR) if the images are elsewhere"
-        raise InputError(f"{path}: {len(missing)} of {len(cams)} images not found ({shown}){hint}")
-    views, names, off_focal = [], set(), []
+    views, names, off_focal, missing = [], set(), [], []
     for i, (cam, file) in enumerate(zip(cams, files)):
         where = f"{path}, line {cam.line}"
         if fixed is not None and min(abs(cam.focal - x) for x in (fixed[0], fixed[2], 0.5 * (fixed[0] + fixed[2]))) \
                 > 1e-6 * cam.focal:
             off_focal.append(cam.line)
-        try:
-            w, h, _mode = check_image_file(file)
-        except InputError as e:
-            raise InputError(f"{where}: {e}") from None
+        stem = PurePosixPath(cam.name.replace("\\", "/")).stem or f"view{i}"
+        name = stem if stem not in names else f"{stem}_{i}"
+        names.add(name)
+        size = check_photo(name, file, where=f"{path}: line {cam.line}")  # missing or unreadable: listed below
+        if isinstance(size, MissingImage):
+            missing.append(size)
+            continue
+        w, h = size
         K, lens = _intrinsic(cam, fixed, w, h, where)
         ext = np.eye(4)
         ext[:3, :3] = cam.rotation
         ext[:3, 3] = -cam.rotation @ cam.centre
-        stem = PurePosixPath(cam.name.replace("\\", "/")).stem or f"view{i}"
-        name = stem if stem not in names else f"{stem}_{i}"
-        names.add(name)
         try:
             views.append(View(name=name, image=file, intrinsic=K, extrinsic=ext, width=w, height=h, distortion=lens))
         except InputError as e:
@@ -388,6 +385,10 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = path.parent / mesh_path
+    if missing:
+        hint = "" if img_root is not None else "pass image_dir= (--image-dir DIR) if the images are elsewhere"
+        raise missing_images(missing, total=len(cams), where=str(path), hint=hint,
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
     logger.info("%s: VisualSFM NVM, %d cameras of the first of %d model(s)%s, mesh %s", path, len(views), len(models),
                 ", FixedK" if fixed else "", mesh_path)
     return Scene(mesh=mesh_path, views=tuple(views))

@@ -25,7 +25,12 @@ normalised by ``s = max(width, height)`` of the image (read from its header) the
 are skipped with a warning. Versions 0 to 7 are read.
 
 Image paths are relative to the ``.mvs`` file (absolute ones are kept; ``\\`` read as ``/``),
-or looked up by file name in ``image_dir``. The interface holds no mesh: ``mesh=`` or, as
+or looked up by file name in ``image_dir``. An image's ``maskName`` (version > 4; OpenMVS's
+segmentation mask, by default ``<image>.mask.png``) is found the same way and becomes the view's
+mask (:mod:`o3d_seqcc.io.masks`): pixels equal to 0 are masked out, as ``TextureMesh
+--ignore-mask-label 0`` reads it (``ImportIgnoreMask``, ``libs/MVS/DepthMap.cpp``: ``mask !=
+label`` is kept); a named mask that is not there is warned about and the photo used whole
+(OpenMVS's ``can not load the segmentation mask``). The interface holds no mesh: ``mesh=`` or, as
 OpenMVS's ``TextureMesh`` does, the ``.ply`` of the same name beside the file. OpenMVS's own
 project files (header ``MVS\\0``, written when a scene holds a mesh) are a different,
 undocumented archive and are refused with the way out.
@@ -43,6 +48,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import Scene, View
+from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["MAX_VERSION", "NO_ID", "detect", "load"]
 
@@ -156,8 +162,7 @@ def _read(path: Path) -> tuple[int, list, list]:
         images = []
         for _ in range(r.count("images")):
             img = {"name": r.string("image name")}
-            if version > 4:
-                r.string("mask name")
+            img["mask"] = r.string("mask name") if version > 4 else ""
             img["platform"], img["camera"], img["pose"] = r.take("<III")
             if version > 2:
                 r.take("<I")
@@ -170,24 +175,15 @@ def _read(path: Path) -> tuple[int, list, list]:
     return version, platforms, images
 
 
-def _image_size(path: Path) -> tuple[int, int]:
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        with Image.open(path) as im:
-            return im.size
-    except (UnidentifiedImageError, OSError) as e:
-        raise InputError(f"cannot read image {path}: {e}") from None
-
-
-def _intrinsic(cam: dict, image: Path, where: str) -> tuple[np.ndarray, int, int]:
-    """Our (3, 3) intrinsic and the image size of an interface camera (pixels, or normalised)."""
+def _intrinsic(cam: dict, size: tuple[int, int], where: str) -> tuple[np.ndarray, int, int]:
+    """Our (3, 3) intrinsic and the image size of an interface camera (pixels, or normalised: ``size``, the
+    image header's)."""
     K = cam["K"]
     if not np.all(np.isfinite(K)):
         raise InputError(f"{where}: camera K is not finite")
     if cam["width"] > 0 and cam["height"] > 0:
         return K.copy(), int(cam["width"]), int(cam["height"])
-    w, h = _image_size(image)  # normalised by max(width, height), as MVS::Camera::ScaleK
+    w, h = size  # normalised by max(width, height), as MVS::Camera::ScaleK
     s = float(max(w, h))
     out = np.array([[K[0, 0] * s, K[0, 1] * s, 0.0], [0.0, K[1, 1] * s, 0.0], [0.0, 0.0, 1.0]])
     if K[0, 2] == 0 and K[1, 2] == 0:  # OpenMVS: the image centre
@@ -221,14 +217,15 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
     ------
     InputError
         Truncated or corrupt file, an OpenMVS project archive, a newer version, ids out of
-        range, a missing image (named), no calibrated image, no mesh.
+        range, missing or unreadable images (one :class:`~o3d_seqcc.errors.MissingImagesError`
+        listing them all), no calibrated image, no mesh.
     """
     version, platforms, images = _read(path)
     root = path.parent
     img_root = None if image_dir is None else Path(image_dir)
     if img_root is not None and not img_root.is_dir():
         raise InputError(f"image_dir {img_root} is not a folder")
-    views, names, skipped = [], set(), []
+    views, names, skipped, missing = [], set(), [], []
     for i, img in enumerate(images):
         where = f"{path}: image {i} ({img['name']!r:.80})"
         if img["pose"] == NO_ID:
@@ -243,27 +240,32 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
             raise InputError(f"{where}: camera {img['camera']} or pose {img['pose']} does not exist on platform "
                              f"{img['platform']} ({len(plat['cameras'])} cameras, {len(plat['poses'])} poses)")
         file = _image_path(img["name"], root, img_root)
-        if not file.is_file():
-            hint = "" if img_root is not None else "; pass image_dir= (--image-dir DIR) if the images are elsewhere"
-            raise InputError(f"{where}: image not found: {file}{hint}")
+        name = file.stem if file.stem not in names else f"{file.stem}_{i}"
+        names.add(name)
+        size = check_photo(name, file, where=where)  # missing or unreadable: listed below
+        if isinstance(size, MissingImage):
+            missing.append(size)
+            continue
         cam = plat["cameras"][img["camera"]]
         Rp, Cp = plat["poses"][img["pose"]]
         R = cam["R"] @ Rp
         C = Rp.T @ cam["C"] + Cp
-        K, w, h = _intrinsic(cam, file, where)
+        K, w, h = _intrinsic(cam, size, where)
         ext = np.eye(4)
         ext[:3, :3] = R
         ext[:3, 3] = -R @ C
-        name = file.stem if file.stem not in names else f"{file.stem}_{i}"
-        names.add(name)
+        mask = _image_path(img["mask"], root, img_root) if img["mask"] else None
+        if mask is not None and not mask.is_file():
+            logger.warning("%s: the mask %s is not there: the photo is used whole", where, mask)
+            mask = None
         try:
-            views.append(View(name=name, image=file, intrinsic=K, extrinsic=ext, width=w, height=h))
+            views.append(View(name=name, image=file, intrinsic=K, extrinsic=ext, width=w, height=h, mask=mask))
         except InputError as e:
             raise InputError(f"{where}: {e}") from None
     if skipped:
         logger.warning("%s: %d image(s) have no pose (not calibrated) and are skipped: %s", path, len(skipped),
                        ", ".join(skipped[:5]) + (" ..." if len(skipped) > 5 else ""))
-    if not views:
+    if not views and not missing:
         raise InputError(f"{path}: no calibrated image (every image lacks a pose)")
     if mesh is None:
         own = path.with_suffix(".ply")
@@ -275,6 +277,10 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None, image_dir: str | 
         mesh_path = Path(mesh)
         if not mesh_path.is_absolute() and not mesh_path.exists():
             mesh_path = root / mesh_path
+    if missing:
+        hint = "" if img_root is not None else "pass image_dir= (--image-dir DIR) if the images are elsewhere"
+        raise missing_images(missing, total=len(views) + len(missing), where=str(path), hint=hint,
+                             scene=Scene(mesh=mesh_path, views=tuple(views)) if views else None)
     logger.info("%s: OpenMVS interface version %d, %d calibrated images, mesh %s", path, version, len(views),
                 mesh_path)
     return Scene(mesh=mesh_path, views=tuple(views))

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import PRIMESENSE_INTRINSIC, Scene, View
-from .files import check_image_file
+from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["IMAGE_EXTENSIONS", "detect", "load", "read_intrinsic", "read_log_trajectory"]
 
@@ -196,7 +196,7 @@ def load(
     mesh_path = Path(mesh)
     if not mesh_path.is_absolute() and not mesh_path.exists():
         mesh_path = root / mesh_path
-    w, h, _ = check_image_file(images[0])  # the file layer: regular files only, pixel budget, header only
+    w, h = _first_size(images, root)  # the file layer: regular files only, pixel budget, header only
     if np.shape(K) == (3, 3):
         _check_intrinsic_size(K, size, w, h, intrinsic, root)
     views = []
@@ -209,3 +209,15 @@ def load(
         except InputError as e:
             raise InputError(f"{log}: pose {i}: {e}") from None
     return Scene(mesh=mesh_path, views=tuple(views))
+
+
+def _first_size(images: list[Path], root: Path) -> tuple[int, int]:
+    """The size of the first readable image (every image is checked by ``Scene.validate``); none readable: one
+    error listing them all."""
+    unreadable = []
+    for img in images:
+        size = check_photo(img.stem, img)
+        if not isinstance(size, MissingImage):
+            return size
+        unreadable.append(size)
+    raise missing_images(unreadable, total=len(images), where=str(root))

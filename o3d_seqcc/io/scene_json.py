@@ -8,12 +8,14 @@
                 "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]],
                 "extrinsic": [[r,r,r,t],[r,r,r,t],[r,r,r,t],[0,0,0,1]],
                 "depth": "depth/v00.png", "depth_scale": 1000.0,
-                "point_cloud": "scans/s0.ply",
+                "point_cloud": "scans/s0.ply", "mask": "masks/v00.png", "mask_invert": false,
                 "distortion": {"model": "opencv", "coefficients": [k1, k2, p1, p2],
                                "intrinsic": [[fx,0,cx],[0,fy,cy],[0,0,1]]}}]}
 
 Paths are relative to the JSON file. ``depth``, ``depth_scale`` (units per metre, default
-1000), ``point_cloud`` and ``distortion`` are optional. ``extrinsic`` is world-to-camera in
+1000), ``point_cloud``, ``mask`` (the photo's mask, :mod:`o3d_seqcc.io.masks`: nonzero = kept, 0 =
+masked out), ``mask_invert`` (default false: true for the other convention) and ``distortion`` are
+optional. ``extrinsic`` is world-to-camera in
 OpenCV axes. ``distortion`` (:class:`~o3d_seqcc.geometry.distortion.Distortion`: model, coefficients,
 the photo's own intrinsic) says the image is a distorted photo, undistorted when read to the
 pinhole camera ``intrinsic``.
@@ -34,7 +36,7 @@ from .files import find_file, join_path, parse_json, write_json
 __all__ = ["FORMAT", "detect", "load", "save"]
 
 _VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
-_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion")
+_OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion", "mask", "mask_invert")
 
 
 def detect(path: Path) -> Path | None:
@@ -52,6 +54,13 @@ def _number(d: dict, key: str, where: str) -> float | int:
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise InputError(f"{where}: {key!r} must be a number, got {v!r} ({type(v).__name__})")
+    return v
+
+
+def _flag(d: dict, key: str, where: str) -> bool:
+    v = d.get(key, False)
+    if not isinstance(v, bool):
+        raise InputError(f"{where}: {key!r} must be true or false, got {v!r:.60}")
     return v
 
 
@@ -130,6 +139,8 @@ def load(path: Path, *, mesh: str | os.PathLike | None = None) -> Scene:
                     point_cloud=None if d.get("point_cloud") is None
                     else _join(root, d["point_cloud"], f"{where}: 'point_cloud'"),
                     distortion=None if d.get("distortion") is None else Distortion.from_dict(d["distortion"]),
+                    mask=None if d.get("mask") is None else _join(root, d["mask"], f"{where}: 'mask'"),
+                    mask_invert=_flag(d, "mask_invert", where),
                 )
             )
         except InputError as e:
@@ -187,5 +198,12 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
             d["point_cloud"] = _rel(v.point_cloud, root)
         if v.distortion is not None:
             d["distortion"] = v.distortion.to_dict()
+        if v.mask_map is not None:
+            raise InputError(f"cannot save view {v.name!r} as {path}: its mask is in memory; write it as an image "
+                             "(o3d_seqcc.io.files.write_image) and give its path (View.mask)")
+        if v.mask is not None:
+            d["mask"] = _rel(v.mask, root)
+            if v.mask_invert:
+                d["mask_invert"] = True
         views.append(d)
     return write_json(path, {"format": FORMAT, "mesh": _rel(scene.mesh, root), "views": views})

@@ -223,6 +223,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
                          "o3d-seqcc); pass --scene (and --mesh)")
     try:
         opts = dict(rep.get("scene_options") or {})  # as the run loaded it (a moved scene: its conventions only)
+        opts.pop("skipped_images", None)  # what skip_missing left out: found again, not an option
         if scene is not None:
             opts = {k: v for k, v in opts.items() if k not in ("image_dir", "depth_dir", "depth_scale")}
         if image_dir is not None:

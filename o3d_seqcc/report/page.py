@@ -24,6 +24,7 @@ from .comparison import correction_section
 from .figures import graph_svg, jih_panel, jpeg, png, thumbnail, view_layout
 from .parts import JIH_BITS, JIH_MAX_MAPPINGS, edge_jihs, jih_thumbnails, path_edges, view_thumbnails
 from .html import esc, img, num
+from .masks import masks_rows, masks_section
 from .viewer import model_section
 
 __all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "PageInputs", "facts",
@@ -425,6 +426,8 @@ def _settings(inp: PageInputs, f: dict) -> dict:
     where = rep.get("scene") or rep.get("scene_path") or "(a scene in memory)"
     s: dict[str, Any] = {"command": f["command"], "scene": where, "mesh": rep.get("mesh") or "(in memory)",
                          "views": len(inp.scene.views)}
+    if (rep.get("scene_options") or {}).get("skipped_images"):  # --skip-missing-images: the photos left out
+        s["skipped_images"] = rep["scene_options"]["skipped_images"]
     if f["method"]:
         s["correction"] = {"method": f["method"], "reference": rep["correction"].get("reference"),
                            "t_npm": f["t_npm"], "t_npm_effective": f["t_npm_effective"], "mappings": f["mappings"],
@@ -434,7 +437,7 @@ def _settings(inp: PageInputs, f: dict) -> dict:
             s[key] = {k: v for k, v in rep[key].items() if k not in ("faces_per_view", "leveling", "local_leveling")}
     vis = rep.get("visibility_stats")
     if vis:
-        keys = ("valid", "occluded", "depth_inconsistent", "oblique", "usable")
+        keys = ("valid", "occluded", "depth_inconsistent", "oblique", "masked", "usable")
         s["visibility"] = {k: vis[k] for k in keys if k in vis}
     return s
 
@@ -504,6 +507,8 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
     if before is not None:
         add("views", "Before / after, all views (Figure 10)" if after else "Views", _grid_section, inp,
             [jpeg(im, quality=80) for im in before], None if after is None else [jpeg(im, quality=80) for im in after])
+    if masks_rows(inp.rep):
+        add("masks", "Masks: the masked area per photo", masks_section, inp.rep)
     if c is not None:
         add("table2", "Image-based metrics (Table 2)", _table2_section, inp, f["metrics"])
     if c is not None and after is not None:

@@ -23,7 +23,13 @@ cameras see walls too, and then nothing is said.
 The share of the mesh some camera sees (``area_seen``) is measured on up to ``samples`` faces
 drawn at random (weights: their areas clipped at the 99th percentile, so a few huge junk
 triangles far away weigh no more than ordinary faces): a face counts as seen when its centroid
-projects inside a view, faces it and the ray to it is not blocked.
+projects inside a view, faces it and the ray to it is not blocked. Less than
+:data:`MIN_AREA_SEEN` of it seen is warned about; when the photos hardly show it either (median
+front fraction under :data:`MIN_FRONT_SEEN`) and no mistake is likely, the mesh is not the one
+photographed (another scene's, other units, other conventions): an
+:class:`~o3d_seqcc.errors.InputError` when ``min_area_seen`` asks for it (as
+:func:`~o3d_seqcc.load_scene` does unless ``allow_unseen=True``). A room with one photo sees 6 %
+of its mesh, all of the photo showing it: a warning only.
 
 All of it runs in a local frame (the mesh's bounding-box centre subtracted) in float32 with
 Open3D's ``RaycastingScene``; nothing is kept.
@@ -41,7 +47,8 @@ from ..errors import InputError
 from ..geometry.meshops import local_origin, oriented_face_normals
 from .occlusion import hand_over
 
-__all__ = ["CameraReport", "HYPOTHESES", "MIN_FRONT", "RATIO", "check_cameras", "hypothesis_extrinsic"]
+__all__ = ["CameraReport", "HYPOTHESES", "MIN_AREA_SEEN", "MIN_FRONT", "MIN_FRONT_SEEN", "RATIO", "check_cameras",
+           "hypothesis_extrinsic"]
 
 logger = logging.getLogger(__name__)
 
@@ -66,6 +73,11 @@ RATIO = 3.0
 #: ... and at least :data:`MIN_SHARE` of the checked views must each reach :data:`MIN_VIEW_FRONT` with it
 #: (a real registration is consistent over the views; random cameras are not)
 MIN_VIEW_FRONT, MIN_SHARE = 0.2, 0.8
+#: less of the mesh seen than this (share of its area) is warned about, and refused by
+#: :func:`~o3d_seqcc.load_scene` (unless ``allow_unseen``) when the photos show it less than :data:`MIN_FRONT_SEEN`
+MIN_AREA_SEEN = 0.1
+#: ... median front fraction under which the photos do not show the mesh
+MIN_FRONT_SEEN = 0.1
 
 
 def hypothesis_extrinsic(extrinsic: np.ndarray, name: str) -> np.ndarray:
@@ -167,6 +179,32 @@ class CameraReport:
         if family == "scale":
             how = how.replace("{s}", f"{float(self.mistake.split(':')[1]):g}")
         return f"{where + ': ' if where else ''}{self.describe_mistake()}; {how}"
+
+    def hardly_seen(self, least: float = MIN_AREA_SEEN) -> bool:
+        """No likely mistake, less than ``least`` of the mesh seen and the photos hardly showing it (median front
+        fraction under :data:`MIN_FRONT_SEEN`): the mesh is not the one photographed."""
+        return self.mistake is None and self.area_seen < least and self.front_fraction < MIN_FRONT_SEEN
+
+    def unseen_message(self, where: str = "", fix: dict[str, str] | None = None, least: float = MIN_AREA_SEEN) -> str:
+        """The :class:`~o3d_seqcc.errors.InputError` text for a mesh the cameras hardly see (less than ``least``):
+        the share seen, the likely causes and their fixes (``fix`` as :meth:`error_message`'s, each up to its
+        first ``"; "``)."""
+        fixes = fix or {}
+
+        def how(family: str) -> str:
+            text = (fixes.get(family) or _GENERIC_FIX[family]).split("; ")[0]
+            return text.replace(" by {s}", "").replace(" by the inverse", "")
+
+        conventions = how("inverse")
+        if how("opengl") != conventions:
+            conventions += f"; or {how('opengl')}"
+        return (f"{where + ': ' if where else ''}the camera check finds only {self.area_seen:.0%} of the mesh seen by "
+                f"the {self.views} cameras (less than {least:.0%}) and {self.front_fraction:.0%} of the pixels of the "
+                f"{self.views_checked} views checked showing it from the front (less than {MIN_FRONT_SEEN:.0%}): the "
+                "photos do not show this mesh. Likely: the mesh of another scene or another reconstruction (give "
+                f"the scene's own, --mesh), other units ({how('scale')}) or other camera conventions ({conventions}). "
+                "If only this little of the mesh was photographed, allow_unseen=True (--allow-unseen) textures what "
+                "is seen")
 
     def to_dict(self) -> dict:
         """JSON-friendly form (rounded)."""
@@ -334,6 +372,7 @@ def check_cameras(
     raise_on_mistake: bool = True,
     fix: dict[str, str] | None = None,
     where: str = "",
+    min_area_seen: float = 0.0,
 ) -> CameraReport:
     """Check a scene's cameras against its mesh; raise on a likely convention mistake.
 
@@ -358,6 +397,11 @@ def check_cameras(
         Alternative name -> the fix to name in the error (default: a generic one).
     where : str, default ""
         Prefix of the messages (the scene file).
+    min_area_seen : float, default 0.0
+        With ``raise_on_mistake``, raise :class:`~o3d_seqcc.errors.InputError` when no mistake is
+        likely, less than this share of the mesh is seen and the photos hardly show it
+        (:meth:`CameraReport.hardly_seen`; :func:`~o3d_seqcc.load_scene` gives
+        :data:`MIN_AREA_SEEN`); a warning below :data:`MIN_AREA_SEEN` either way.
 
     Returns
     -------
@@ -366,7 +410,8 @@ def check_cameras(
     Raises
     ------
     InputError
-        ``raise_on_mistake`` and a likely mistake: the message names it, the numbers and the fix.
+        ``raise_on_mistake`` and a likely mistake: the message names it, the numbers and the fix;
+        or a mesh the photos do not show (:meth:`CameraReport.unseen_message`).
     """
     t0 = time.perf_counter()
     views = scene.views
@@ -405,7 +450,7 @@ def check_cameras(
             warnings.append(f"view {v.name!r}: the principal point ({K[0, 2]:g}, {K[1, 2]:g}) lies outside its "
                             f"{v.width}x{v.height} image: is the intrinsic for another image size?")
             break
-    if mistake is None and area0 < 0.1:
+    if mistake is None and area0 < MIN_AREA_SEEN:
         warnings.append(f"only {area0:.0%} of the mesh faces a camera (the rest is behind, outside or hidden from "
                         f"every view): check that the poses are world-to-camera in OpenCV axes and that mesh and "
                         f"cameras share one frame and unit")
@@ -416,6 +461,8 @@ def check_cameras(
                 len(checked), front0, 100 * area0, rep.seconds, f"; likely {mistake}" if mistake else "")
     if mistake is not None and raise_on_mistake:
         raise InputError(rep.error_message(where, fix))
+    if raise_on_mistake and rep.hardly_seen(min_area_seen):
+        raise InputError(rep.unseen_message(where, fix, min_area_seen))
     hand_over(geo.X, geo.F, geo.origin, geo.rc)  # the visibility's ray casting needs the same scene
     return rep
 

@@ -26,6 +26,9 @@ For every view ``v`` and mesh face ``f``:
   the camera centre (``oblique_reference="ray"``, default) or the reversed focal axis
   (``"axis"``, the paper's choice). Faces seen from behind (normal pointing away from the
   camera centre) are always oblique unless ``two_sided=True``.
+* **masked** (a photo's mask, :mod:`o3d_seqcc.visibility.masks`): the face's projection comes
+  within 4 px of a pixel the mask leaves out; such a face is not ray-tested. Views without a
+  mask skip it; it is always on (give no mask to turn it off).
 
 Face normals come from the winding and are flipped where they disagree with the mesh's vertex
 normals (which :func:`~o3d_seqcc.scene.load_mesh` computes when the file has none).
@@ -87,7 +90,9 @@ _DENSE = ("valid", "occluded", "depth_inconsistent", "oblique", "usable", "area"
 #: :meth:`Visibility.face_uv` rounds pixel coordinates to 1 / this (1/8 px moved texture coordinates off the
 #: photo by up to 1/16 px: a rendered-back photo kept 0.93 of its sharpness, 0.99 at 1/256)
 FACE_UV_STEPS = 256
-#: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections
+#: byte budget of a visibility's cache of per-view usable face ids and whole-mesh projections (past it, a view's
+#: projection is computed for the vertices asked for; 128 MB held 60 MB of Fountain 300k's projections through the
+#: whole bake, which recomputes them in milliseconds)
 CACHE_BYTES = 32 * 2**20
 
 
@@ -329,8 +334,10 @@ def compute_visibility(
     Visibility
         One sparse record per view (``settings``: the options used). ``stats`` has ``n_views``, ``n_faces``, ``degenerate_faces``,
         ``normals_flipped``, ``split`` (:class:`~o3d_seqcc.visibility.refine.Refinement` stats), the totals (face-view incidences) ``valid``, ``occluded``,
-        ``depth_inconsistent``, ``oblique``, ``usable``, the cumulative counts of Figure 3 (``cumulative``),
-        ``per_view`` (a list of dicts with the same counts plus ``depth_source``),
+        ``depth_inconsistent``, ``oblique``, ``masked``, ``usable``, the cumulative counts of Figure 3 (``cumulative``;
+        ``+mask`` last when a view has a mask), ``masked_share`` (view name -> the share of its pixels its mask
+        leaves out, for the views with one), ``per_view`` (a list of dicts with the same counts plus
+        ``depth_source`` and ``masked_share``),
         ``views_seeing_nothing`` (names), ``rays`` and ``timings`` (seconds per stage).
 
     Raises

@@ -6,8 +6,9 @@ and, built on first use in each process, Open3D's ``RaycastingScene`` of the mes
 scattered once to every Dask worker (or shared by the local threads); :func:`view_record` then
 computes view ``i``'s :class:`ViewRecord`: the ids of the faces *valid* in the view (all three
 vertices inside the image, in front of the camera, not degenerate), a bit per filter that
-removed them (:data:`OCCLUDED`, :data:`DEPTH`, :data:`OBLIQUE`; usable = no bit set), their
-projected areas and the cosines of their viewing angles.
+removed them (:data:`OCCLUDED`, :data:`DEPTH`, :data:`OBLIQUE`, :data:`MASKED`: seen through the
+photo's mask, :mod:`o3d_seqcc.visibility.masks`; usable = no bit set), their projected areas and
+the cosines of their viewing angles.
 
 Only faces whose spatial chunk intersects the view's frustum are looked at: faces are grouped
 into chunks of :data:`CHUNK_FACES` consecutive faces along a Morton curve of their centroids,
@@ -33,15 +34,16 @@ from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud, in_metre
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
 from ..io.files import read_depth
+from .masks import mask_image, masked_faces
 from .occlusion import occluded_view, same_positions, take_over
 
-__all__ = ["CHUNK_FACES", "DEPTH", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
+__all__ = ["CHUNK_FACES", "DEPTH", "MASKED", "OBLIQUE", "OCCLUDED", "ViewRecord", "VisibilityJob", "summarize_records",
            "view_record"]
 
 logger = logging.getLogger("o3d_seqcc.visibility")  # the visibility's log (its warnings name views)
 
 #: filter bits of :attr:`ViewRecord.flags`
-OCCLUDED, DEPTH, OBLIQUE = 1, 2, 4
+OCCLUDED, DEPTH, OBLIQUE, MASKED = 1, 2, 4, 8
 #: faces per spatial chunk of the frustum culling
 CHUNK_FACES = 1024
 #: bytes of depth images a job keeps for the later passes over the views (the split faces' parts): at least
@@ -61,8 +63,8 @@ class ViewRecord:
     faces : (k,) int32
         Ids of the faces valid in the view, ascending.
     flags : (k,) uint8
-        Bits :data:`OCCLUDED`, :data:`DEPTH`, :data:`OBLIQUE` of the filters that removed each
-        face; 0 = usable.
+        Bits :data:`OCCLUDED`, :data:`DEPTH`, :data:`OBLIQUE`, :data:`MASKED` of the filters that
+        removed each face; 0 = usable (a masked face is not ray-tested: never also occluded).
     area : (k,) float32
         Projected area in px^2.
     cos_angle : (k,) float32
@@ -214,6 +216,16 @@ class VisibilityJob:
         self._lock = threading.Lock()
         need = sum(_depth_bytes(v) for v in self.views)
         self._depths = LRUCache(max(DEPTH_CACHE_BYTES, need if need <= DEPTH_CACHE_MAX_BYTES else 0))
+        self._masks = LRUCache(DEPTH_CACHE_BYTES // 2)  # one bit a pixel: 100 views of 20 MP
+
+    def mask(self, i: int):
+        """View ``i``'s :class:`~o3d_seqcc.visibility.masks.MaskImage` or None, read once per process while the
+        masks fit (:attr:`occluder`'s cache, when given)."""
+        if self.occluder is not None:
+            return self.occluder.mask(i)
+        if not self.views[i].has_mask:
+            return None
+        return self._masks.get(i, lambda: mask_image(self.views[i]))
 
     def depth(self, i: int):
         """View ``i``'s (depth image or None, source name or None), read once per process while it fits
@@ -362,6 +374,10 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     if "oblique" not in filters:
         oblique = np.zeros(len(idx), dtype=bool)
     info: dict = {"name": view.name, "depth_source": None}
+    M = job.mask(i)
+    masked = np.zeros(len(idx), dtype=bool) if M is None else masked_faces(M, u, v, i0, i1, i2)
+    if M is not None:
+        info["masked_share"] = round(M.share, 6)
     bad_v = known_v = near_v = None
     if "depth" in filters:
         D, info["depth_source"] = job.depth(i)
@@ -383,7 +399,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     occluded = np.zeros(len(idx), dtype=bool)
     n_rays = 0
     if "occlusion" in filters:
-        front = np.flatnonzero(~back)
+        front = np.flatnonzero(~back & ~masked)  # masked faces: no rays
         ids = idx[front] if cand is None else cand[idx[front]]
         occluded[front], n_rays = occluded_view(job.raycaster, job.X, job.faces, C, ids, area[front], opts,
                                                 origin=job.origin, same=job.same)
@@ -393,7 +409,7 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
     if bad_v is not None:
         bad_any = bad_v if near_v is None else (bad_v | near_v)
         depth_bad = bad_any[i0] | bad_any[i1] | bad_any[i2]
-        ok = ~occluded & ~back
+        ok = ~occluded & ~back & ~masked
         vert = np.zeros(len(u), dtype=bool)
         for ii in (i0, i1, i2):
             vert[ii[ok]] = True
@@ -401,10 +417,10 @@ def view_record(i: int, job: VisibilityJob) -> ViewRecord:
         n_known = int(vert.sum())
         info["depth_disagreement"] = float(bad_v[vert].mean()) if n_known else 0.0
     flags = occluded.view(np.uint8) * np.uint8(OCCLUDED) | depth_bad.view(np.uint8) * np.uint8(DEPTH) | (
-        oblique.view(np.uint8) * np.uint8(OBLIQUE))  # the filter bits, as uint8 throughout
+        oblique.view(np.uint8) * np.uint8(OBLIQUE)) | masked.view(np.uint8) * np.uint8(MASKED)  # as uint8 throughout
     faces = (idx if cand is None else cand[idx]).astype(np.int32)
     info.update(valid=int(len(idx)), occluded=int(occluded.sum()), depth_inconsistent=int(depth_bad.sum()),
-                oblique=int(oblique.sum()), usable=int(np.count_nonzero(flags == 0)))
+                oblique=int(oblique.sum()), masked=int(masked.sum()), usable=int(np.count_nonzero(flags == 0)))
     return ViewRecord(faces=faces, flags=flags, area=area, cos_angle=cos.astype(np.float32), info=info,
                       n_rays=int(n_rays), n_known=n_known,
                       seconds={"project+depth": t1 - t0, "occlusion": t2 - t1, "compare": time.perf_counter() - t2})
@@ -438,6 +454,13 @@ def summarize_records(views, records: list, opts: dict, *, scene_mesh: object = 
         warn("no view has a depth map or a point cloud: the depth-consistency filter is off, so surfaces hidden "
              "from a camera by geometry the mesh lacks may be mapped wrongly; give depth maps (--depth-dir, "
              "load_scene(..., depth_dir=)) when you have them")
+    blind = [views[v] for v in range(V) if per_view[v].get("masked_share") == 1.0]
+    for view in blind:
+        warn(f"view {view.name!r}: its mask {view.mask or '(in memory)'} masks every pixel: the view contributes "
+             "nothing (if 0 marks what to keep there, state the other convention: mask_invert / --mask-invert)")
+    if V and len(blind) == V:
+        raise InputError(f"every photo's mask masks every pixel ({V} views): nothing is left to colour the mesh; if the "
+                         "masks mark what to keep with nonzero values, drop mask_invert (--mask-invert), else add it")
     nothing = [views[v].name for v in range(V) if not len(records[v].faces)]
     for name in nothing:
         warn(f"view {name!r} sees no face of the mesh (wrong pose, or looking away?); it gets no mappings")
@@ -451,10 +474,12 @@ def summarize_records(views, records: list, opts: dict, *, scene_mesh: object = 
             logger.warning("view %r: all %d visible faces were removed by the filters", view.name, entry["valid"])
 
     def total(key: str) -> int:
-        return int(sum(e[key] for e in per_view))
+        return int(sum(e.get(key, 0) for e in per_view))
 
     m1 = int(sum(np.count_nonzero((r.flags & OCCLUDED) == 0) for r in records))
     m2 = int(sum(np.count_nonzero((r.flags & (OCCLUDED | DEPTH)) == 0) for r in records))
+    masks = any("masked_share" in e for e in per_view)
+    m3 = int(sum(np.count_nonzero((r.flags & (OCCLUDED | DEPTH | OBLIQUE)) == 0) for r in records)) if masks else None
     return {
         "n_views": V,
         "n_faces": None,
@@ -462,8 +487,11 @@ def summarize_records(views, records: list, opts: dict, *, scene_mesh: object = 
         "occluded": total("occluded"),
         "depth_inconsistent": total("depth_inconsistent"),
         "oblique": total("oblique"),
+        "masked": total("masked"),
         "usable": total("usable"),
-        "cumulative": {"valid": total("valid"), "+occlusion": m1, "+depth": m2, "+oblique": total("usable")},
+        "cumulative": {"valid": total("valid"), "+occlusion": m1, "+depth": m2,
+                       **({"+oblique": m3, "+mask": total("usable")} if masks else {"+oblique": total("usable")})},
+        "masked_share": {e["name"]: e["masked_share"] for e in per_view if "masked_share" in e},
         "views_seeing_nothing": nothing,
         "views_without_depth": [e["name"] for e in per_view if e["depth_source"] is None],
         "rays": int(sum(r.n_rays for r in records)),

@@ -10,8 +10,8 @@ split (:func:`refine_visibility`, called by :func:`o3d_seqcc.visibility.compute_
 2. *probe*, one task per view: a candidate is *partly seen* in a view when it meets the view's
    frustum, faces the camera, is larger than ``min_px`` there (its longest edge in pixels, or any
    corner behind the camera), and one of its test points (a barycentric grid about 16 px apart,
-   at most 153 points) projects into the image, passes the oblique angle and the depth map, and is
-   not hidden by the mesh (the z-buffer rays of :mod:`o3d_seqcc.visibility.occlusion`);
+   at most 153 points) projects into the image, on a pixel the photo's mask keeps, passes the oblique
+   angle and the depth map, and is not hidden by the mesh (the z-buffer rays of :mod:`o3d_seqcc.visibility.occlusion`);
 3. the partly seen faces are bisected twice (:func:`o3d_seqcc.geometry.meshsplit.bisect`: conforming
    longest-edge bisection, so the mesh stays welded and free of T-junctions; neighbours split
    where an edge of theirs is split), the visibility of every new face is computed by the same
@@ -36,7 +36,8 @@ from ..geometry.camera import project_columns
 from ..geometry.meshops import corner_mean, face_normals, row_norms, weld_vertices
 from ..geometry.meshsplit import bisect, coarsen
 from .occlusion import _hidden, _rays_to, bary_grid
-from .per_view import (DEPTH, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, chunk_members, frustum_chunks,
+from .masks import masked_points
+from .per_view import (DEPTH, MASKED, OBLIQUE, OCCLUDED, ViewRecord, VisibilityJob, chunk_members, frustum_chunks,
                        morton_chunks, view_record)
 
 __all__ = ["PROBE_SPACING", "Refinement", "coverage", "distortion", "refine_visibility"]
@@ -200,6 +201,7 @@ def probe_view(i: int, job: ProbeJob) -> np.ndarray:
         cos = np.abs(cos) if opts["two_sided"] else cos
         ok &= cos >= math.cos(math.radians(opts["max_angle"]))
     idx = np.flatnonzero(ok)
+    idx = idx[~masked_points(base.mask(i), pu[idx], pv[idx])]  # on a masked pixel: not seen
     if len(idx) and "depth" in opts["filters"]:
         D, _ = base.depth(i)
         if D is not None:
@@ -328,7 +330,8 @@ class _Records:
         info = dict(base.info)
         info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
                     depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
-                    oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
+                    oblique=int(np.count_nonzero(flags & OBLIQUE)), masked=int(np.count_nonzero(flags & MASKED)),
+                    usable=int(np.count_nonzero(flags == 0)))
         secs: dict = {}
         for r, _ in parts:
             for k, t in r.seconds.items():

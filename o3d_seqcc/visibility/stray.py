@@ -99,7 +99,7 @@ def drop_faces(mesh, records, drop: np.ndarray):
     from dataclasses import replace
 
     from ..scene import Mesh
-    from .per_view import DEPTH, OBLIQUE, OCCLUDED
+    from .per_view import DEPTH, MASKED, OBLIQUE, OCCLUDED
 
     keep = ~np.asarray(drop, dtype=bool)
     faces = np.asarray(mesh.faces)
@@ -122,7 +122,8 @@ def drop_faces(mesh, records, drop: np.ndarray):
         flags = r.flags[k]
         info = {**r.info, "valid": int(k.sum()), "occluded": int(np.count_nonzero(flags & OCCLUDED)),
                 "depth_inconsistent": int(np.count_nonzero(flags & DEPTH)),
-                "oblique": int(np.count_nonzero(flags & OBLIQUE)), "usable": int(np.count_nonzero(flags == 0))}
+                "oblique": int(np.count_nonzero(flags & OBLIQUE)), "masked": int(np.count_nonzero(flags & MASKED)),
+                "usable": int(np.count_nonzero(flags == 0))}
         out.append(replace(r, faces=fnew[r.faces[k]].astype(np.int32), flags=flags, area=r.area[k],
                            cos_angle=r.cos_angle[k], info=info))
     return Mesh(vertices=arrays[0], faces=arrays[1].astype(np.int64), vertex_normals=arrays[2]), tuple(out), dist

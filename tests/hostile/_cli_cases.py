@@ -713,6 +713,10 @@ case(GF, "scene given as a .mlp that is not XML", lambda c: ["info", c.d / "p.ml
      prep=lambda c: (c.d / "p.mlp").write_text("<MeshLabProject><broken"))
 case(GF, "--mesh nope.ply", lambda c: ["info", c.S, "--mesh", c.d / "nope.ply"], ["nope.ply"])
 case(GF, "--depth-dir nope", lambda c: ["info", c.S, "--depth-dir", c.d / "nope"], ["nope", "depth"], kind="either")
+case(GF, "--masks nope", lambda c: ["info", c.S, "--masks", c.d / "nope"], ["nope", "masks"])
+case(GF, "--masks with a mask of the wrong size", lambda c: ["info", c.S, "--masks", c.d / "m"], ["v02", "m/v02.png"],
+     prep=lambda c: ((c.d / "m").mkdir(), shutil.copy(c.S / "images" / "v02.png", c.d / "m"),
+                     resize_image(c.d / "m" / "v02.png", 20, 10)))
 case(GF, "texture --images nope", lambda c: ["texture", c.S, "--images", c.d / "nope", "--out", c.out, *TEX], ["nope"])
 case(GF, "texture --images with a missing image", lambda c: ["texture", c.S, "--images", c.d / "imgs", "--out", c.out, *TEX],
      ["v05", "imgs"], prep=lambda c: (shutil.copytree(c.S / "images", c.d / "imgs"), (c.d / "imgs" / "v05.png").unlink()))

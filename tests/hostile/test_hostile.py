@@ -182,10 +182,12 @@ def test_non_utf8_folder_names_work(S, tmp_path):
 
 
 def _rgbd(root: Path, n: int = 2) -> Path:
+    """An RGB-D folder of ``n`` 640x480 photos (the size of the default intrinsic: every photo is checked, the
+    others give the size)."""
     (root / "image").mkdir(parents=True)
     (root / "scene").mkdir()
     for i in range(n):
-        cv2.imwrite(str(root / "image" / f"{i:06d}.png"), np.full((48, 64, 3), 100, np.uint8))
+        cv2.imwrite(str(root / "image" / f"{i:06d}.png"), np.full((480, 640, 3), 100, np.uint8))
     (root / "scene" / "key.log").write_text("".join(f"{i} {i} {i + 1}\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"
                                                     for i in range(n)))
     return root

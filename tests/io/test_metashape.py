@@ -237,8 +237,8 @@ def test_errors_name_the_element_and_line(room, tmp_path):
     with pytest.raises(InputError, match=rf"nan\.xml, line {line_of(nan, '<cx>nan')}: <cx>: <cx> must be 1 finite number,"):
         load_scene(variant("nan.xml", nan), mesh=mesh, image_dir=images)
     # images found by label: the missing ones listed, with their lines
-    with pytest.raises(InputError, match=r"good\.xml: 6 camera image\(s\) not found in .* by label .*'v00' \(line "
-                                         r"\d+\), 'v01.png' .*--image-dir"):
+    with pytest.raises(InputError, match=r"(?s)good\.xml: none of the 6 photos can be read:\n  view 'v00': \S*good\.xml: "
+                                         r"line \d+: no photo named after the label in .*\n  view 'v01': .*--image-dir"):
         load_scene(tmp_path / "good.xml", mesh=mesh)
     same = write_xml(tmp_path / "same.xml", room.scene, labels=["v00", "v01", "v02", "v00.png", "v04", "v05"])
     with pytest.raises(InputError, match=rf"same\.xml, line {line_of(same.read_text(), 'label=' + chr(34) + 'v00.png')}: "

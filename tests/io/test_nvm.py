@@ -238,7 +238,8 @@ def test_errors_name_the_file_and_line(room, tmp_path):
     folder = tmp_path / "elsewhere"
     folder.mkdir()
     moved = write_nvm(folder / "moved.nvm", room.scene)
-    with pytest.raises(InputError, match=r"moved\.nvm: 6 of 6 images not found \(line 4: .*images/v00\.png.*--image-dir"):
+    with pytest.raises(InputError, match=r"(?s)moved\.nvm: none of the 6 photos can be read:\n  view 'v00': "
+                                         r"\S*moved\.nvm: line 4: image not found: .*images/v00\.png.*--image-dir"):
         load_scene(moved, mesh=mesh)
     _assert_same_cameras(load_scene(moved, mesh=mesh, image_dir=room.root / "images"), room.scene)
 

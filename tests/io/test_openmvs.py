@@ -181,7 +181,7 @@ def test_mesh_images_and_errors(room, tmp_path):
     folder.mkdir()
     path = write_interface(folder / "scene.mvs", 7, plats, images)
     # images relative to the file: not there -> an error naming the image and --image-dir
-    with pytest.raises(InputError, match=r"scene\.mvs: image 0 \('images/v00\.png'\).*not found.*--image-dir"):
+    with pytest.raises(InputError, match=r"(?s)scene\.mvs: image 0 \('images/v00\.png'\).*not found.*--image-dir"):
         load_scene(path, mesh=room.scene.mesh)
     scene = load_scene(path, mesh=room.scene.mesh, image_dir=room.root / "images")
     _assert_same_cameras(scene, room.scene)

@@ -201,15 +201,50 @@ def test_rgbd_intrinsic_of_another_image_size(room, tmp_path):
     _same_cameras(load_scene(root, mesh=mesh, intrinsic=good, extrinsic="world-to-camera"), room.scene)
 
 
-def test_most_of_the_mesh_outside_every_camera_warns(statue, tmp_path):
+def test_most_of_the_mesh_outside_every_camera_is_refused_unless_allowed(statue, tmp_path):
     def aside(E):  # every camera 10 m to its left, looking past the object
         E = E.copy()
         E[0, 3] += 10.0
         return E
 
     away = _copy_with(statue, tmp_path / "away", aside)
-    with pytest.warns(sc.errors.O3dSeqccWarning, match=r"only 0% of the mesh faces a camera"):
+    with pytest.raises(InputError, match=r"the camera check finds only 0% of the mesh seen .*--allow-unseen"):
         load_scene(away)
+    with pytest.warns(sc.errors.O3dSeqccWarning, match=r"only 0% of the mesh faces a camera"):
+        load_scene(away, allow_unseen=True)
+
+
+def test_a_mesh_from_another_scene_is_refused_unless_allow_unseen(room, tmp_path, capsys):
+    """The room's mesh 100 m below its cameras (another scene's frame) is an error naming the camera check and
+    --allow-unseen, before any work; a mesh of which the photos show a sliver runs with --allow-unseen."""
+    m = o3d.io.read_triangle_mesh(str(room.scene.mesh))
+    far = o3d.geometry.TriangleMesh(m).translate((0.0, 0.0, -100.0))
+    o3d.io.write_triangle_mesh(str(tmp_path / "far.ply"), far)
+    with pytest.raises(InputError, match=r"the camera check finds only 0% of the mesh seen by the 8 cameras .*"
+                                         r"mesh of another scene.*--mesh.*--extrinsic camera-to-world.*--allow-unseen"):
+        load_scene(room.root, mesh=tmp_path / "far.ply")
+    out = tmp_path / "out"
+    assert main(["-q", "run", str(room.root), "--mesh", str(tmp_path / "far.ply"), "--out", str(out)]) == 2
+    assert "camera check finds only 0%" in capsys.readouterr().err and not out.exists()
+    assert main(["-q", "info", str(room.root), "--mesh", str(tmp_path / "far.ply")]) == 2
+    assert "--allow-unseen" in capsys.readouterr().err
+    assert main(["-q", "info", str(room.root), "--mesh", str(tmp_path / "far.ply"), "--allow-unseen"]) == 0
+    # a 2 m x 1.6 m piece of one wall where the photos are, the rest 100 m below: 3 % seen
+    V, F = np.asarray(m.vertices), np.asarray(m.triangles)
+    c = V[F].mean(axis=1)
+    piece = o3d.geometry.TriangleMesh(m.vertices, o3d.utility.Vector3iVector(F[np.all((c > [4.9, 1.0, 0.5]) & (
+        c < [5.1, 3.0, 2.1]), axis=1)]))
+    sliver = far + piece.remove_unreferenced_vertices()
+    o3d.io.write_triangle_mesh(str(tmp_path / "sliver.ply"), sliver.compute_vertex_normals())
+    with pytest.raises(InputError, match=r"finds only [1-9]% of the mesh seen.*--allow-unseen"):
+        load_scene(room.root, mesh=tmp_path / "sliver.ply")
+    with pytest.warns(sc.errors.O3dSeqccWarning, match=r"only [1-9]% of the mesh faces a camera"):
+        assert load_scene(room.root, mesh=tmp_path / "sliver.ply", allow_unseen=True).options == {"allow_unseen": True}
+    assert main(["-q", "run", str(room.root), "--mesh", str(tmp_path / "sliver.ply"), "--allow-unseen", "--out",
+                 str(out), "--t-npm", "10", "--format", "glb", "--no-seams", "--atlas-size", "256"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["scene_options"] == {"allow_unseen": True}
+    assert 0 < rep["selection"]["unseen_faces"] < rep["selection"]["faces"]
 
 
 def test_convention_options_are_checked(room, statue, tmp_path):
@@ -222,9 +257,12 @@ def test_convention_options_are_checked(room, statue, tmp_path):
         load_scene(mlp, extrinsic="camera-to-world")
     with pytest.raises(InputError, match=r"intrinsic= does not apply"):
         load_scene(statue, intrinsic=tmp_path / "x.json")
-    # a stated convention is not second-guessed: the wrong one loads (and only warns)
-    with pytest.warns(sc.errors.O3dSeqccWarning, match="faces a camera"):
+    # a stated convention is not second-guessed: the wrong one sees nothing (refused as such), and loads with
+    # allow_unseen (and only warns)
+    with pytest.raises(InputError, match="the photos do not show this mesh.*--allow-unseen"):
         load_scene(statue, extrinsic="camera-to-world")
+    with pytest.warns(sc.errors.O3dSeqccWarning, match="faces a camera"):
+        load_scene(statue, extrinsic="camera-to-world", allow_unseen=True)
 
 
 def test_info_prints_text_then_json(room, tmp_path, capsys):

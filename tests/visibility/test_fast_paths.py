@@ -10,7 +10,7 @@ from o3d_seqcc.geometry.meshops import weld_vertices
 from o3d_seqcc.geometry.meshsplit import bisect, coarsen
 from o3d_seqcc.visibility import refine
 from o3d_seqcc.visibility.compute import compute_visibility
-from o3d_seqcc.visibility.per_view import DEPTH, OBLIQUE, OCCLUDED, ViewRecord
+from o3d_seqcc.visibility.per_view import DEPTH, MASKED, OBLIQUE, OCCLUDED, ViewRecord
 
 
 def _reference_coarsen(faces, welded, ends, unseen):
@@ -154,7 +154,8 @@ def _merge(old, new, old_to_new, new_ids):
     info = dict(old.info)
     info.update(valid=int(len(faces)), occluded=int(np.count_nonzero(flags & OCCLUDED)),
                 depth_inconsistent=int(np.count_nonzero(flags & DEPTH)),
-                oblique=int(np.count_nonzero(flags & OBLIQUE)), usable=int(np.count_nonzero(flags == 0)))
+                oblique=int(np.count_nonzero(flags & OBLIQUE)), masked=int(np.count_nonzero(flags & MASKED)),
+                usable=int(np.count_nonzero(flags == 0)))
     return ViewRecord(faces=faces[order].astype(np.int32), flags=flags,
                       area=np.concatenate([old.area[keep], new.area])[order],
                       cos_angle=np.concatenate([old.cos_angle[keep], new.cos_angle])[order], info=info,
