@@ -52,7 +52,25 @@ def room(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("plugin_room")
     scene = sc.make_synthetic_scene(root / "room", n_views=6, width=128, height=96, seed=3, seen_only=True,
                                     cell_size=0.2)
-    return save_mlp(sc.load_scene(scene.root), root / "room" / "project.mlp")
+    return _float_cameras(save_mlp(sc.load_scene(scene.root), root / "room" / "project.mlp"))
+
+
+def _float_cameras(project: Path) -> Path:
+    """Round the project's camera numbers to float32, in place.
+
+    Debian's MeshLab holds a raster's shot in single precision, so the plugin hands o3d-seqcc the cameras rounded
+    to float32 (written with 9 digits: exactly). A project whose numbers are floats already is the same project in
+    MeshLab and in `o3d-seqcc`, so their outputs can be compared byte for byte.
+    """
+    import xml.etree.ElementTree as ET
+
+    tree = ET.parse(project)
+    for cam in tree.getroot().iter("VCGCamera"):
+        for key, value in cam.attrib.items():
+            if key not in ("CameraType", "ViewportPx"):
+                cam.set(key, " ".join(f"{np.float32(float(x)):.9g}" for x in value.split()))
+    tree.write(project, encoding="utf-8")
+    return project
 
 
 def _sections(dump: str) -> dict[str, str]:
