@@ -39,7 +39,7 @@ from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
 from .io.files import write_json
-from .io.load import load_scene, save_scene
+from .io.load import as_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder
 from .mappings.compute import Mappings, compute_mappings
@@ -53,7 +53,7 @@ from .run_folder import write_run_folder
 from .report import REPORT_FILE, write_report
 from .report.background import BackgroundReport, table2_metrics
 from .report.schema import correction_section, document
-from .scene import Scene, check_scene_argument, resolve_view
+from .scene import Scene, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
 from .evaluation.seams import SeamReport, seam_metric, selection_seams_of
 from .texturing import TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
@@ -62,13 +62,6 @@ from .visibility.compute import Visibility, compute_visibility
 __all__ = ["CorrectionRun", "RunResult", "check_export_options", "correct_scene", "parse_formats", "run", "texture"]
 
 logger = logging.getLogger(__name__)
-
-def _as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None) -> Scene:
-    check_scene_argument(scene, mesh)
-    if isinstance(scene, Scene):
-        return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
-    return load_scene(scene, mesh=mesh)
-
 
 def _import_in_background(*modules: str) -> None:
     """Import slow third-party modules in a daemon thread while this one works (scikit-learn: ~1 s)."""
@@ -341,6 +334,7 @@ def texture(
     *,
     images: Sequence[np.ndarray] | None = None,
     mesh: str | os.PathLike | None = None,
+    scene_options: dict[str, Any] | None = None,
     settings: RunSettings | TextureSettings | None = None,
     client: Any = None,
     **options: Any,
@@ -355,6 +349,10 @@ def texture(
         One per view, instead of the scene's files (e.g. corrected images).
     mesh : path-like, optional
         Mesh to use instead of the scene's.
+    scene_options : dict, optional
+        When ``scene`` is a path: keyword options of :func:`~o3d_seqcc.load_scene`, as the
+        command line's scene flags (``{"skip_missing": True}`` for ``--skip-missing-images``,
+        ``allow_unseen``, ``masks``, ``image_dir``, ...).
     settings : RunSettings or TextureSettings, optional
         Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults); a
         TextureSettings replaces its ``texture``. The correction's settings are not used.
@@ -376,7 +374,7 @@ def texture(
     t_all = time.perf_counter()
     rs = RunSettings.resolve(settings, options, where="texture", exclude=CORRECTION_ONLY)
     s = rs.texture
-    sc = _as_scene(scene, mesh)
+    sc = as_scene(scene, mesh, scene_options)
     if images is None:
         imgs = scene_photos(sc.views)  # read when the bake needs them, kept while they fit
     else:
@@ -396,6 +394,7 @@ def run(
     scene: Scene | str | os.PathLike,
     *,
     mesh: str | os.PathLike | None = None,
+    scene_options: dict[str, Any] | None = None,
     settings: RunSettings | TextureSettings | None = None,
     client: Any = None,
     **options: Any,
@@ -408,6 +407,10 @@ def run(
         A scene, or any path :func:`~o3d_seqcc.load_scene` reads.
     mesh : path-like, optional
         Mesh to use instead of the scene's.
+    scene_options : dict, optional
+        When ``scene`` is a path: keyword options of :func:`~o3d_seqcc.load_scene`, as the
+        command line's scene flags (``{"skip_missing": True}`` for ``--skip-missing-images``,
+        ``allow_unseen``, ``masks``, ``image_dir``, ...).
     settings : RunSettings, optional
         Every option of the run; default :class:`~o3d_seqcc.settings.RunSettings` (the command
         line's defaults, documented there and in its stage classes). A
@@ -443,7 +446,7 @@ def run(
     t_all = time.perf_counter()
     rs = RunSettings.resolve(settings, options, where="run", exclude=("metrics",))
     s, cs = rs.texture, rs.correction
-    sc = _as_scene(scene, mesh)
+    sc = as_scene(scene, mesh, scene_options)
     if cs.reference != "auto":
         resolve_view(sc.names, cs.reference)
     own = own_uv_layout(sc, s)
@@ -536,6 +539,7 @@ def correct_scene(
     scene: Scene | str | os.PathLike,
     *,
     mesh: str | os.PathLike | None = None,
+    scene_options: dict[str, Any] | None = None,
     settings: RunSettings | CorrectionSettings | None = None,
     client: Any = None,
     **options: Any,
@@ -546,6 +550,10 @@ def correct_scene(
     ----------
     scene : Scene or path
     mesh : path-like, optional
+    scene_options : dict, optional
+        When ``scene`` is a path: keyword options of :func:`~o3d_seqcc.load_scene`, as the
+        command line's scene flags (``{"skip_missing": True}`` for ``--skip-missing-images``,
+        ``allow_unseen``, ``masks``, ``image_dir``, ...).
     settings : RunSettings or CorrectionSettings, optional
         Default :class:`~o3d_seqcc.settings.RunSettings` (the command line's defaults); a
         CorrectionSettings replaces its ``correction``. The texture's settings are not used.
@@ -567,7 +575,7 @@ def correct_scene(
     cs = rs.correction
     reference, mappings = cs.reference, cs.mappings
     metrics = rs.metrics
-    sc = _as_scene(scene, mesh)
+    sc = as_scene(scene, mesh, scene_options)
     if reference != "auto":
         resolve_view(sc.names, reference)
     t = time.perf_counter()

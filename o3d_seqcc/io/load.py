@@ -11,14 +11,14 @@ import inspect
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from ..visibility.camera_checks import FLIP, MIN_AREA_SEEN, check_cameras
 from ..errors import InputError, MissingImagesError, warn
 from .._shared.registry import Registry
-from ..scene import Scene, View
+from ..scene import Scene, View, check_scene_argument
 from . import bundler, colmap, meshlab, meshroom, metashape, mve, nvm, openmvs, rgbd_folder, scene_json
 from .files import find_file
 from .masks import attach_masks
@@ -276,6 +276,40 @@ def load_scene(
     if validate and check_cameras:
         run_camera_check(scene, fmt, target, extrinsic=extrinsic, axes=axes, allow_unseen=allow_unseen)
     return scene
+
+
+def as_scene(scene: Scene | str | os.PathLike, mesh: str | os.PathLike | None = None,
+             scene_options: Mapping[str, Any] | None = None) -> Scene:
+    """The scene a pipeline function was given: ``scene`` itself, or :func:`load_scene` of the path.
+
+    Parameters
+    ----------
+    scene : Scene or path-like
+    mesh : path-like, optional
+        Mesh to use instead of the scene's.
+    scene_options : mapping, optional
+        Keyword options of :func:`load_scene` (``skip_missing``, ``allow_unseen``, ``masks``,
+        ``image_dir``, ...), for a path only: a loaded Scene was loaded with its own.
+
+    Raises
+    ------
+    InputError
+        ``scene_options`` with a Scene, or a name :func:`load_scene` does not take (the message
+        lists those it takes).
+    """
+    check_scene_argument(scene, mesh)
+    opts = dict(scene_options or {})
+    if isinstance(scene, Scene):
+        if opts:
+            raise InputError(f"scene_options ({', '.join(sorted(opts))}) apply when scene is a path; the Scene given "
+                             "was loaded already: pass them to load_scene instead")
+        return scene if mesh is None else Scene(Path(mesh), scene.views, source=scene.source)
+    valid = sorted(n for n in inspect.signature(load_scene).parameters if n not in ("path", "mesh"))
+    unknown = sorted(set(opts) - set(valid))
+    if unknown:
+        raise InputError(f"scene_options: load_scene takes no {', '.join(map(repr, unknown))}; "
+                         f"valid: {', '.join(valid)}")
+    return load_scene(scene, mesh=mesh, **opts)
 
 
 def _without_missing(e: MissingImagesError, skip: bool, skipped: list[MissingImage], hint: str = "") -> Scene:

@@ -26,6 +26,8 @@ SUBPIXEL_AREA = 1.0
 SUBPIXEL_SHARE = 0.5
 #: the decimation suggested: a face count giving the median seen face this largest projection (px^2)
 SUGGESTED_AREA = 4.0
+#: below this suggested face count the mesh is a few pixels in the photos, and no decimation is suggested
+MIN_SUGGESTED_FACES = 100
 
 
 def subpixel_faces(records: Sequence, n_faces: int) -> dict:
@@ -66,8 +68,12 @@ def warn_subpixel(summary: dict, where: str = "") -> bool:
         return False
     msg = (f"{100 * summary['share']:.0f}% of the {summary['seen_faces']} faces the photos see{where} are smaller than "
            f"a pixel in every photo (the median face covers {summary['median_px2']:.2g} px^2 at most): the photos "
-           "cannot give them detail, and every stage pays per face; decimate the mesh to about "
-           f"{summary['suggested_faces']} faces (Open3D: simplify_quadric_decimation; MeshLab: Filters > Remeshing > "
-           "Quadric Edge Collapse Decimation) or use larger photos")
+           "cannot give them detail, and every stage pays per face; ")
+    if summary["suggested_faces"] < MIN_SUGGESTED_FACES:  # no mesh is worth decimating to a handful of faces
+        msg += ("the whole mesh is only a few pixels in the photos: check that they show it (cameras, units), or use "
+                "photos taken closer")
+    else:
+        msg += (f"decimate the mesh to about {summary['suggested_faces']} faces (Open3D: simplify_quadric_decimation; "
+                "MeshLab: Filters > Remeshing > Quadric Edge Collapse Decimation) or use larger photos")
     warn(msg)
     return True

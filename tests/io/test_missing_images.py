@@ -117,6 +117,26 @@ def test_run_stops_naming_both_and_skip_missing_images_finishes_without_them(roo
     assert main(["-q", "report", str(out)]) == 0 and (out / "report.html").is_file()
 
 
+def test_library_functions_take_the_scene_flags_for_a_path(room, tmp_path):
+    """`o3d-seqcc run --skip-missing-images --allow-unseen` in the library: scene_options= of run / texture /
+    correct_scene, load_scene's keywords for a path."""
+    d = _copy(room, tmp_path / "S")
+    (d / "images" / "v03.png").unlink()
+    with pytest.raises(MissingImagesError, match="v03.png"):
+        sc.pipeline.texture(d, selection="largest-area")
+    with pytest.warns(O3dSeqccWarning, match="going on without 1 of 6 photos"):
+        res = sc.pipeline.texture(d, scene_options={"skip_missing": True}, selection="largest-area")
+    assert res.scene.names == ["v00", "v01", "v02", "v04", "v05"]
+    assert res.scene.options["skipped_images"] == {"v03": str(d / "images" / "v03.png")}
+    with pytest.warns(O3dSeqccWarning, match="going on without"):
+        cr = sc.pipeline.correct_scene(d, scene_options={"skip_missing": True}, method="reinhard")
+    assert cr.scene.names == res.scene.names and len(cr.result.images) == 5
+    with pytest.raises(sc.InputError, match=r"load_scene takes no 'skip_missing_images'; valid: .*skip_missing"):
+        sc.pipeline.run(d, scene_options={"skip_missing_images": True})
+    with pytest.raises(sc.InputError, match="scene_options .* apply when scene is a path"):
+        sc.pipeline.run(load_scene(room.root), scene_options={"allow_unseen": True})
+
+
 # ------------------------------------------------------------------------------ the readers
 
 

@@ -40,3 +40,16 @@ def test_a_mesh_finer_than_its_photos_is_warned_about_once(tmp_path):
         vis = compute_visibility(fine.scene, split_faces=False)
     assert not [w for w in caught if "smaller than a pixel" in str(w.message)]
     assert vis.stats["subpixel"]["share"] < 0.5
+
+
+def test_a_mesh_that_is_a_few_pixels_is_not_told_to_decimate_to_a_handful_of_faces():
+    # 40 seen faces of 0.05 px^2: all of it is 2 px^2; "decimate to about 1 faces" is no advice
+    s = subpixel_faces([SimpleNamespace(faces=np.arange(40), area=np.full(40, 0.05, np.float32))], 40)
+    assert s["suggested_faces"] == 1
+    with pytest.warns(O3dSeqccWarning, match="only a few pixels in the photos") as rec:
+        assert warn_subpixel(s)
+    assert "decimate" not in str(rec[0].message)
+    # a big mesh of sub-pixel faces still gets its decimation target
+    s = subpixel_faces([SimpleNamespace(faces=np.arange(40_000), area=np.full(40_000, 0.5, np.float32))], 40_000)
+    with pytest.warns(O3dSeqccWarning, match="decimate the mesh to about 5000 faces"):
+        assert warn_subpixel(s)
