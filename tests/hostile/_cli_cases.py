@@ -81,9 +81,19 @@ def cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
                           text=True, errors="replace", timeout=timeout, cwd=CWD[0])
 
 
+def default_signals() -> None:
+    """A child's SIGTERM and SIGHUP at their default action, as in a terminal.
+
+    Under ``nohup`` (or another parent that ignores SIGHUP) a child inherits the ignored disposition, and
+    o3d-seqcc rightly keeps a SIGHUP its caller ignores; the signal cases test the terminal's case.
+    """
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def popen(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "o3d_seqcc", *map(str, args)], env=ENV, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, errors="replace", cwd=CWD[0])
+                            stderr=subprocess.PIPE, text=True, errors="replace", cwd=CWD[0], preexec_fn=default_signals)
 
 
 def message(err: str) -> str:

@@ -31,6 +31,7 @@ import pytest
 import o3d_seqcc as sc
 from o3d_seqcc import InputError
 from o3d_seqcc.cli import main
+from _cli_cases import default_signals
 from o3d_seqcc.io.output import output_folder
 
 pytestmark = pytest.mark.hostile
@@ -371,7 +372,7 @@ def test_termination_while_staging_cleans_up(tmp_path, sig):
             (st / "half.txt").write_text("x")
             print("staging", flush=True)
             time.sleep(30)
-    """)], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    """)], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     assert p.stdout.readline().strip() == "staging"
     assert any(n.endswith(".staging") for n in os.listdir(tmp_path))
     p.send_signal(getattr(signal, sig))
