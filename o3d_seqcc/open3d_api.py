@@ -49,7 +49,7 @@ from .visibility.camera_checks import check_cameras
 from .errors import InputError, warn
 from .imaging.arrays import img_as_dtype
 from .geometry.meshops import vertex_normals
-from .scene import Mesh, Scene, View
+from .scene import DEPTH_SCALE_RANGE, Mesh, Scene, View
 from .settings import CORRECTION_ONLY, RunSettings
 
 __all__ = ["correct_images", "scene_from_open3d", "texture_mesh"]
@@ -201,8 +201,9 @@ def _mask(m: Any, i: int, size: tuple[int, int], invert: bool) -> dict[str, Any]
 def _check_options(*, depth_scale: Any, **flags: Any) -> None:
     """The front door's own options: ``depth_scale`` a positive number, the flags booleans (named when not)."""
     if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float, np.integer, np.floating)) \
-            or not 0 < float(depth_scale) < float("inf"):
-        raise InputError(f"depth_scale must be a positive number of depth units per metre, got {depth_scale!r:.60}")
+            or not DEPTH_SCALE_RANGE[0] <= float(depth_scale) <= DEPTH_SCALE_RANGE[1]:
+        raise InputError(f"depth_scale must be a positive number of depth units per metre, between "
+                         f"{DEPTH_SCALE_RANGE[0]:g} and {DEPTH_SCALE_RANGE[1]:g} (1000: millimetres), got {depth_scale!r:.60}")
     for name, value in flags.items():
         if not isinstance(value, (bool, np.bool_)):
             raise InputError(f"{name} must be True or False, got {value!r:.60} ({type(value).__name__})")

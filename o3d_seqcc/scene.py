@@ -26,6 +26,7 @@ from .io.masks import check_mask_file, mask_array, mask_distorted, view_mask
 from .io.mesh_files import read_mesh, read_point_cloud
 from .geometry.meshops import face_normals
 from ._shared.arguments import shown
+from ._shared.numbers import check_numbers
 from .errors import InputError
 
 __all__ = [
@@ -47,6 +48,8 @@ FORMAT = "o3d_seqcc.scene/1"
 PRIMESENSE_INTRINSIC = np.array([[525.0, 0.0, 319.5], [0.0, 525.0, 239.5], [0.0, 0.0, 1.0]])
 
 _RIGID_TOL = 1e-4
+#: the depth scales accepted (depth units per metre): 1e-6 is a unit of 1000 km, 1e9 a nanometre
+DEPTH_SCALE_RANGE = (1e-6, 1e9)
 #: longest view name (names become output file names)
 MAX_NAME_LENGTH = 120
 
@@ -63,8 +66,7 @@ def _frozen_array(a: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarra
 
 
 def _check_intrinsic(K: np.ndarray, where: str) -> None:
-    if not np.all(np.isfinite(K)):
-        raise InputError(f"{where}: intrinsic contains NaN/inf; give finite fx, fy, cx, cy")
+    check_numbers(K, f"{where}: intrinsic", fix="give finite fx, fy, cx, cy")
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(
             f"{where}: intrinsic has non-positive focal length (fx={K[0, 0]}, fy={K[1, 1]}); "
@@ -75,8 +77,7 @@ def _check_intrinsic(K: np.ndarray, where: str) -> None:
 
 
 def _check_extrinsic(T: np.ndarray, where: str) -> None:
-    if not np.all(np.isfinite(T)):
-        raise InputError(f"{where}: extrinsic contains NaN/inf; fix the camera pose")
+    check_numbers(T, f"{where}: extrinsic", fix="fix the camera pose")
     if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
         raise InputError(f"{where}: extrinsic's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
     R = T[:3, :3]
@@ -207,9 +208,15 @@ class View:
             raise InputError(f"{where}: width/height must be positive integers, got {self.width}x{self.height}")
         object.__setattr__(self, "width", w)
         object.__setattr__(self, "height", h)
-        ds = float(self.depth_scale)
-        if not np.isfinite(ds) or ds <= 0:
-            raise InputError(f"{where}: depth_scale must be > 0 (units per metre), got {self.depth_scale}")
+        try:
+            ds = float(self.depth_scale)
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: depth_scale must be a number (depth units per metre), got "
+                             f"{self.depth_scale!r:.40}") from None
+        lo, hi = DEPTH_SCALE_RANGE
+        if not lo <= ds <= hi:  # NaN, inf, denormals and a 0 or negative scale too
+            raise InputError(f"{where}: depth_scale must be between {lo:g} and {hi:g} depth units per metre (1000: "
+                             f"millimetres, 1: metres), got {self.depth_scale!r:.40}")
         object.__setattr__(self, "depth_scale", ds)
         if self.distortion is not None and not isinstance(self.distortion, Distortion):
             raise InputError(f"{where}: distortion must be an o3d_seqcc.geometry.distortion.Distortion, got "

@@ -14,6 +14,7 @@ from ..io.export import EXPORT_UP_AXES, FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
 from ..mappings.compute import MODES
+from ..scene import DEPTH_SCALE_RANGE
 from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
@@ -87,8 +88,10 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
 
 def scene_options_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The keyword options of :func:`~o3d_seqcc.load_scene` given on the command line (validated)."""
-    if not 0 < args.depth_scale < float("inf"):
-        raise InputError(f"--depth-scale must be a positive number of depth units per metre, got {args.depth_scale}")
+    lo, hi = DEPTH_SCALE_RANGE
+    if not lo <= args.depth_scale <= hi:  # NaN, inf and denormals too
+        raise InputError(f"--depth-scale must be between {lo:g} and {hi:g} depth units per metre (1000: millimetres, "
+                         f"1: metres), got {args.depth_scale!r}")
     return {"mesh": args.mesh, "image_dir": args.image_dir, "depth_dir": args.depth_dir,
             "depth_scale": args.depth_scale, "extrinsic": args.extrinsic, "axes": args.axes,
             "intrinsic": args.intrinsic, "check_cameras": args.camera_check, "masks": args.masks,

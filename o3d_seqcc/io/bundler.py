@@ -40,12 +40,12 @@ from __future__ import annotations
 import logging
 import math
 import os
-import sys
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
 import numpy as np
 
+from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
@@ -62,7 +62,6 @@ _FLIP = np.diag([1.0, -1.0, -1.0])
 _MAX_LINE = 1 << 16
 _MAX_CAMERAS = 1_000_000
 _MAX_POINTS = 2_000_000_000
-_TINY = sys.float_info.min
 
 
 def _first_line(path: Path) -> str:
@@ -116,16 +115,7 @@ def _numbers(item: tuple[int, list[str]] | None, path: Path, what: str, count: i
     where = f"{path}: line {line}"
     if len(toks) != count:
         raise InputError(f"{where}: {what} needs {count} numbers, got {len(toks)} ({' '.join(toks)[:60]!r})")
-    out = []
-    for t in toks:
-        try:
-            x = float(t)
-        except ValueError:
-            raise InputError(f"{where}: {what}: {t[:40]!r} is not a number") from None
-        if not math.isfinite(x) or 0 < abs(x) < _TINY:
-            raise InputError(f"{where}: {what}: {t[:40]!r} is not a finite normal number; write the file again")
-        out.append(x)
-    return out, line
+    return [parse_number(t, f"{where}: {what}") for t in toks], line
 
 
 def _read_bundle(path: Path) -> tuple[list[dict], int]:

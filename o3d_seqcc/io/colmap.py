@@ -26,6 +26,7 @@ from typing import Iterable
 import numpy as np
 
 from ..geometry.distortion import Distortion
+from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..scene import Scene, View
 
@@ -134,9 +135,9 @@ def _text_cameras(path: Path) -> dict[int, tuple[int, int, np.ndarray, Distortio
             raise InputError(f"{where}: expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS...")
         try:
             cid, w, h = int(tok[0]), int(tok[2]), int(tok[3])
-            params = [float(x) for x in tok[4:]]
         except ValueError:
-            raise InputError(f"{where}: id, width and height must be integers and the parameters numbers") from None
+            raise InputError(f"{where}: id, width and height must be integers") from None
+        params = [parse_number(x, f"{where}: parameter {i}") for i, x in enumerate(tok[4:])]
         cams[cid] = (w, h, *_intrinsic(tok[1], params, where, w, h))
     return cams
 
@@ -151,10 +152,13 @@ def _text_images(path: Path) -> list[tuple[list[float], list[float], int, str]]:
         if len(tok) < 10:
             raise InputError(f"{path}: malformed image line {lines[k][:80]!r} "
                              "(expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME)")
+        where = f"{path}: image line {lines[k][:80]!r}"
         try:
-            q, t, cid = [float(x) for x in tok[1:5]], [float(x) for x in tok[5:8]], int(tok[8])
+            cid = int(tok[8])
         except ValueError:
-            raise InputError(f"{path}: image line {lines[k][:80]!r} has non-numeric pose or camera id") from None
+            raise InputError(f"{where}: CAMERA_ID {tok[8][:40]!r} is not an integer") from None
+        q = [parse_number(x, f"{where}: {n}") for x, n in zip(tok[1:5], ("QW", "QX", "QY", "QZ"))]
+        t = [parse_number(x, f"{where}: {n}") for x, n in zip(tok[5:8], ("TX", "TY", "TZ"))]
         out.append((q, t, cid, " ".join(tok[9:])))
     return out
 

@@ -42,6 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from ..geometry.distortion import Distortion
+from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import atomic_write_bytes, join_path
@@ -167,9 +168,7 @@ def _floats(attrs: dict[str, str], key: str, n: int, where: str) -> np.ndarray:
         raise InputError(f"{where}: VCGCamera {key}={attrs[key]!r} is not numeric") from None
     if len(vals) < n:
         raise InputError(f"{where}: VCGCamera {key} needs {n} numbers, got {attrs[key]!r}")
-    if not np.all(np.isfinite(vals[:n])):
-        raise InputError(f"{where}: VCGCamera {key}={attrs[key]!r} holds NaN or infinite values")
-    return vals[:n]
+    return check_numbers(vals[:n], f"{where}: VCGCamera {key}", fix="fix or re-export the project")
 
 
 def view_from_vcg_camera(
@@ -374,6 +373,7 @@ def load_mlp(
                 placement = np.array([float(x) for x in mat.text.split()], dtype=np.float64).reshape(4, 4)
             except ValueError:
                 raise InputError(f"{path}: MLMatrix44 of the mesh is not a 4x4 numeric matrix") from None
+            check_numbers(placement, f"{path}: MLMatrix44 of the mesh", fix="fix or re-export the project")
     if not np.allclose(placement, np.eye(4), atol=1e-12):
         R = placement[:3, :3]
         if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.allclose(placement[3], [0, 0, 0, 1])):

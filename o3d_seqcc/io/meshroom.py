@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry.distortion import Distortion
+from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..scene import Scene, View
 from .files import find_file
@@ -61,13 +62,14 @@ def _num(d: dict, key: str, where: str, n: int | None = None) -> Any:
         if n is None:
             if isinstance(v, (list, dict, bool)) or v is None:
                 raise ValueError
-            return float(v)
+            return float(check_numbers(float(v), f"{where}: {key!r}", fix="fix or re-export cameras.sfm"))
         if not isinstance(v, list) or len(v) != n:
             raise ValueError
-        return np.array([float(x) for x in v], dtype=np.float64)
+        vals = np.array([float(x) for x in v], dtype=np.float64)
     except (TypeError, ValueError):
         shape = "a number" if n is None else f"a list of {n} numbers"
         raise InputError(f"{where}: {key!r} must be {shape}, got {v!r:.80}") from None
+    return check_numbers(vals, f"{where}: {key!r}", fix="fix or re-export cameras.sfm")
 
 
 def _version(data: dict) -> tuple[int, ...]:

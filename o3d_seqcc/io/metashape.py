@@ -66,6 +66,7 @@ from xml.parsers import expat
 
 import numpy as np
 
+from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
@@ -173,10 +174,11 @@ class _Doc:
             vals = np.array([float(x) for x in (el.text or "").split()], dtype=np.float64)
         except ValueError:
             vals = np.zeros(0)
-        if len(vals) != n or not np.all(np.isfinite(vals)) or np.any(np.abs(vals) > 1e15):
+        if len(vals) != n or np.any(np.abs(vals) > 1e15):
             raise InputError(f"{self.where(el)}: {what} must be {n} finite number{'s' if n > 1 else ''}, got "
                              f"{(el.text or '').strip()!r:.80}")
-        return vals
+        named = self.where(el) + ("" if what == f"<{el.tag}>" else f": {what}")
+        return check_numbers(vals, named, fix="fix or re-export the cameras")
 
     def number(self, parent: ET.Element, tag: str, default: float | None = None) -> float:
         el = parent.find(tag)

@@ -63,13 +63,12 @@ gives a pinhole view. Neither format holds a mesh: ``mesh=`` is required.
 from __future__ import annotations
 
 import logging
-import math
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import MAX_NAME_LENGTH, Scene, View
@@ -87,20 +86,13 @@ CAM_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
 EMBEDDINGS = ("undistorted", "original")
 _VIEW_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 _MAX_TEXT = 1 << 20
-_TINY = sys.float_info.min
 
 
 # ------------------------------------------------------------------------------------------ the camera
 
 
 def _number(tok: str, where: str, what: str) -> float:
-    try:
-        x = float(tok)
-    except ValueError:
-        raise InputError(f"{where}: {what} {tok[:40]!r} is not a number") from None
-    if not math.isfinite(x) or 0 < abs(x) < _TINY:
-        raise InputError(f"{where}: {what} {tok[:40]!r} is not a finite normal number; write the camera again")
-    return x
+    return parse_number(tok, f"{where}: {what}", fix="write the camera again")
 
 
 def _intrinsics(f: float, d: tuple[float, float], paspect: float, pp: tuple[float, float], where: str) -> None:

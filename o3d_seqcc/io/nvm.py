@@ -55,6 +55,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
@@ -161,11 +162,8 @@ def _header(lines: _Lines) -> tuple[float, float, float, float] | None:
     if opts[0] != "FixedK" or len(opts) not in (5, 6):
         raise InputError(f"{lines.where(0)}: unknown header options {' '.join(opts)!r:.80} after NVM_V3; this reader "
                          "knows 'FixedK fx cx fy cy' (one calibration for every camera); remove the others")
-    try:
-        vals = [float(x) for x in opts[1:]]
-    except ValueError:
-        raise InputError(f"{lines.where(0)}: FixedK takes four numbers fx cx fy cy, got {' '.join(opts[1:])!r:.80}") \
-            from None
+    vals = [parse_number(x, f"{lines.where(0)}: FixedK ({name})", fix="FixedK takes four numbers fx cx fy cy")
+            for x, name in zip(opts[1:], ("fx", "cx", "fy", "cy", "fifth number"))]
     fx, cx, fy, cy = vals[:4]
     if not all(np.isfinite(vals)) or not (_FOCAL_RANGE[0] <= min(fx, fy) and max(fx, fy) <= _FOCAL_RANGE[1]):
         raise InputError(f"{lines.where(0)}: FixedK {vals} must be finite with focal lengths fx, fy in "
@@ -186,13 +184,9 @@ def _camera(lines: _Lines, k: int) -> _Camera:
     name = parts[0].strip()
     if len(name) >= 2 and name[0] == name[-1] == '"':
         name = name[1:-1]
-    try:
-        f, qw, qx, qy, qz, cx, cy, cz, r, _zero = (float(x) for x in parts[1:])
-    except ValueError:
-        raise InputError(f"{where}: the ten fields after the file name must be numbers, got "
-                         f"{' '.join(parts[1:])!r:.100}") from None
-    if not np.all(np.isfinite([f, qw, qx, qy, qz, cx, cy, cz, r])):
-        raise InputError(f"{where}: camera {name!r:.60} has a NaN or infinite value; fix or re-export the model")
+    f, qw, qx, qy, qz, cx, cy, cz, r, _zero = (
+        parse_number(x, f"{where}: camera {name!r:.60}: {field}", fix="fix or re-export the model")
+        for x, field in zip(parts[1:], ("focal length", "qw", "qx", "qy", "qz", "cx", "cy", "cz", "radial", "last 0")))
     if not _FOCAL_RANGE[0] <= f <= _FOCAL_RANGE[1]:
         raise InputError(f"{where}: camera {name!r:.60} has focal length {f} px; it must be in "
                          f"[{_FOCAL_RANGE[0]:g}, {_FOCAL_RANGE[1]:g}]")

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..scene import PRIMESENSE_INTRINSIC, Scene, View
 from .missing import MissingImage, check_photo, missing_images
@@ -59,8 +60,7 @@ def read_log_trajectory(path: str | os.PathLike) -> list[np.ndarray]:
             pose = np.array([[float(x) for x in r] for r in block], dtype=np.float64)
         except ValueError:
             raise InputError(f"{path}: block {b // 5} does not hold a 4x4 numeric matrix") from None
-        if not np.all(np.isfinite(pose)):
-            raise InputError(f"{path}: pose {b // 5} contains NaN/inf")
+        check_numbers(pose, f"{path}: pose {b // 5}", fix="fix the trajectory")
         if abs(np.linalg.det(pose[:3, :3])) < 1e-9:
             raise InputError(f"{path}: pose {b // 5} is singular (its rotation has determinant 0); fix the trajectory")
         poses.append(pose)

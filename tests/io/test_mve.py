@@ -294,8 +294,8 @@ def test_errors_name_the_file_and_the_line(room, tmp_path):
     good = cam.read_text()
     for text, pattern in [("1 2 3\n0.8\n", r"v01\.cam: line 1: expected 12 numbers"),
                           ("0 0 0 5 0 0 0 1 0 0 0 1\n0.8\n", r"v01\.cam: line 1: the rotation's entries must lie"),
-                          (good.splitlines()[0] + "\n0.8 x\n", r"v01\.cam: line 2: distortion d0 'x' is not a number"),
-                          (good.splitlines()[0] + "\nnan\n", r"v01\.cam: line 2: focal length 'nan' is not a finite"),
+                          (good.splitlines()[0] + "\n0.8 x\n", r"v01\.cam: line 2: distortion d0: 'x' is not a number"),
+                          (good.splitlines()[0] + "\nnan\n", r"v01\.cam: line 2: focal length: 'nan' is not a finite"),
                           (good.splitlines()[0] + "\n-0.8\n", r"v01\.cam: line 2: negative focal length"),
                           (good.splitlines()[0] + "\n0.8 0 0 0 0.5 0.5\n", r"v01\.cam: line 2: pixel aspect 0"),
                           (good.splitlines()[0] + "\n0.8 0 0 1 0.5\n", r"v01\.cam: line 2: expected 'f \[d0"),
@@ -318,7 +318,7 @@ def test_errors_name_the_file_and_the_line(room, tmp_path):
     lines = good.splitlines()
     for i, bad, pattern in [(4, "focal_length", r"view_0001\.mve/meta\.ini: line 5: expected 'key = value'"),
                             (6, "principal_point = 0.5", r"meta\.ini: line 7: principal_point needs 2 number"),
-                            (8, "rotation = 1 0 0 0 1 0 0 0 inf", r"meta\.ini: line 9: rotation 'inf' is not a finite"),
+                            (8, "rotation = 1 0 0 0 1 0 0 0 inf", r"meta\.ini: line 9: rotation: 'inf' is not a finite"),
                             (4, "focal_length = -1", r"meta\.ini: line 5: negative focal length")]:
         meta.write_text("\n".join(lines[:i] + [bad] + lines[i + 1:]) + "\n")
         assert lines[i].split("=")[0].strip() == bad.split("=")[0].strip() or "=" not in bad

@@ -298,7 +298,7 @@ def test_singular_pose_and_malformed_colmap(tmp_path):
         load_colmap(tmp_path, mesh=log)
     (tmp_path / "cameras.txt").write_text("1 PINHOLE 64 48 1 1 1 1\n")
     (tmp_path / "images.txt").write_text("1 one 0 0 0 0 0 0 1 a.png\n\n")
-    with pytest.raises(InputError, match="non-numeric pose"):
+    with pytest.raises(InputError, match="image line '1 one .*': QW: 'one' is not a number"):
         load_colmap(tmp_path, mesh=log)
 
 
