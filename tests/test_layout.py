@@ -20,7 +20,8 @@ ARCHITECTURE = PKG.parent / "docs" / "ARCHITECTURE.md"
 TREE: dict[str, set[str]] = {
     "": {"__init__", "__main__", "errors", "scene", "settings", "pipeline", "run_folder", "open3d_api", "demo",
          "datasets"},
-    "_shared": {"__init__", "arguments", "interrupts", "lazy", "options", "parallel", "progress", "registry", "sets"},
+    "_shared": {"__init__", "arguments", "interrupts", "lazy", "numbers", "options", "parallel", "progress", "registry",
+                "sets"},
     "imaging": {"__init__", "arrays", "sequences"},
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
     "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
