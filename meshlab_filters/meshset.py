@@ -29,9 +29,10 @@ from typing import Any
 import numpy as np
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.io.files import write_image, write_json
-from o3d_seqcc.io.meshlab import MeshLayer, load_mlp, save_mlp
-from o3d_seqcc.io.output import check_output, output_folder
+from o3d_seqcc.io.meshlab import MeshLayer, load_mlp
+from o3d_seqcc.io.output import check_output
+from o3d_seqcc.run_folder.layout import IMAGES_DIR
+from o3d_seqcc.run_folder.write import save_rasters
 from o3d_seqcc.scene import Scene
 
 __all__ = ["color_correct_rasters", "mesh_ids", "meshset_scene", "texture_from_rasters"]
@@ -183,19 +184,15 @@ def color_correct_rasters(
         job = correct_scene(scene, reference=reference, method=method, t_npm=t_npm, mappings=mappings,
                             graph_weight=graph_weight, seed=seed, metrics=metrics)
         current_index = mesh_ids(ms).index(ms.current_mesh_id())
-        with output_folder(out, overwrite=overwrite, inputs=scene.input_paths(),
-                           command="seqcc_color_correct_rasters") as stage:
-            paths = [write_image(stage / "images" / f"{v.name}.png", img)
-                     for v, img in zip(scene.views, job.result.images)]
-            save_mlp(scene, stage / "project.mlp", images=paths, layers=_save_layers(ms, stage))
-            write_json(stage / "report.json", job.report)
-    _reopen(ms, out / "project.mlp", current_index)
+        project = save_rasters(out, scene, job.result.images, job.report, overwrite=overwrite,
+                               command="seqcc_color_correct_rasters", layers=lambda stage: _save_layers(ms, stage))
+    _reopen(ms, project, current_index)
     names = scene.names
     logger.info("corrected %d rasters toward %s -> %s", len(names), names[job.result.reference], out)
     return {
         "savedir": str(out),
-        "project": str(out / "project.mlp"),
-        "images": {v.name: str(out / "images" / f"{v.name}.png") for v in scene.views},
+        "project": str(project),
+        "images": {v.name: str(out / IMAGES_DIR / f"{v.name}.png") for v in scene.views},
         "reference": names[job.result.reference],
         "unreachable": [names[i] for i in job.result.unreachable],
     }

@@ -78,7 +78,8 @@ _LAZY: dict[str, str] = {
     # export: OBJ / GLB / PLY
     **dict.fromkeys(("export_obj", "export_glb", "export_ply", "export_textured_mesh"), "io.export"),
     # the report
-    **dict.fromkeys(("html_report", "regenerate_report"), "report"),
+    "html_report": "report",
+    "regenerate_report": "run_folder.read",
     # the whole job, its front doors
     "RunResult": "pipeline",
     **dict.fromkeys(("correct_images", "texture_mesh"), "open3d_api"),

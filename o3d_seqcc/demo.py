@@ -26,6 +26,7 @@ from .errors import InputError
 from .io.output import check_output, check_output_file, write_output_file, write_output_json
 from .evaluation.metrics import image_delta_e
 from .pipeline import RunResult, run
+from .run_folder.layout import DEMO_SUMMARY, REPORT_HTML, REPORT_JSON
 from .datasets import DatasetUnavailable, fountain
 from .synthetic import SyntheticScene, load_synthetic, make_synthetic_scene
 from .texturing import TextureSettings
@@ -129,7 +130,7 @@ def run_demo(
         raise InputError(f"--out {out} is a file; give a folder")
     if dataset not in DATASETS:
         raise InputError(f"unknown demo dataset {dataset!r}; valid: {', '.join(DATASETS)}")
-    if (out / "report.html").exists() and not (out / "demo_summary.json").is_file():
+    if (out / REPORT_HTML).exists() and not (out / DEMO_SUMMARY).is_file():
         # the demo replaces its own page only (a folder it wrote has its summary beside the page)
         raise InputError(f"--out {out} holds a report.html that no demo wrote (no demo_summary.json beside it); "
                          "choose another folder")
@@ -137,7 +138,7 @@ def run_demo(
     if unknown:
         raise TypeError(f"run_demo got unknown option(s) {unknown}; valid: {sorted(_SCENE_KEYS)}")
     check_output(out / "run", overwrite=True)  # what the demo writes, checked before any work
-    for name in ("report.html", "demo_summary.json"):
+    for name in (REPORT_HTML, DEMO_SUMMARY):
         check_output_file(out / name, option="--out")
     if dataset == "fountain" and scene_options:
         raise TypeError(f"scene options {sorted(scene_options)} apply to the synthetic dataset only")
@@ -181,7 +182,7 @@ def run_demo(
         "seams": None if res.seams is None else res.seams.to_dict(),
         # what the correction bought at the seams: the colour steps in the photos as taken and corrected (the
         # report measured them; the seam metric of the levelled texture is about the same either way)
-        "selection_seams": json.loads((run_dir / "report.json").read_text(encoding="utf-8")).get("selection_seams"),
+        "selection_seams": json.loads((run_dir / REPORT_JSON).read_text(encoding="utf-8")).get("selection_seams"),
         "timings": {k: round(v, 4) for k, v in res.timings.items()},
         "outputs": sorted(p.name for p in run_dir.iterdir() if not p.name.startswith(".")),
     }
@@ -189,11 +190,11 @@ def run_demo(
         t = time.perf_counter()
         summary.update(_ground_truth(syn, res))
         timings["ground_truth"] = time.perf_counter() - t
-    page = run_dir / "report.html"
+    page = run_dir / REPORT_HTML
     if page.is_file():  # one offline file (figures and model inline): the result to open, at the top of OUT
-        write_output_file(out / "report.html", page.read_bytes(), option="--out", inputs=scene.input_paths())
+        write_output_file(out / REPORT_HTML, page.read_bytes(), option="--out", inputs=scene.input_paths())
     timings["total"] = time.perf_counter() - t0
-    write_output_json(out / "demo_summary.json", {"summary": summary, "timings": timings}, option="--out",
+    write_output_json(out / DEMO_SUMMARY, {"summary": summary, "timings": timings}, option="--out",
                       inputs=scene.input_paths())
     return DemoResult(out=out, synthetic=syn, result=res, summary=summary, timings=timings)
 

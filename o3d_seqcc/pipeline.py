@@ -38,24 +38,21 @@ from .correction import CorrectionResult, correct
 from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
-from .io.files import write_json
-from .io.load import as_scene, save_scene
-from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
-from .io.output import output_folder
+from .io.load import as_scene
 from .mappings.compute import Mappings, compute_mappings
 from .geometry.meshops import face_adjacency
 from .evaluation.metrics import before_after
-from .geometry.orientation import up_axis_transform
 from ._shared.parallel import LocalExecutor, carried, current as current_executor, use as use_executor
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
-from .run_folder import write_run_folder
-from .report import REPORT_FILE, write_report
-from .report.background import BackgroundReport, table2_metrics
+from .run_folder.parts import scene_paths
+from .run_folder.write import correction_page_inputs, run_page_inputs, save_correction, save_run
+from .report.page import PageInputs
+from .report.background import BackgroundReport
 from .report.schema import correction_section, document
 from .scene import Scene, resolve_view
 from .settings import CORRECTION_ONLY, TEXTURE_ONLY, CorrectionSettings, RunSettings
-from .evaluation.seams import SeamReport, seam_metric, selection_seams_of
+from .evaluation.seams import SeamReport, seam_metric
 from .texturing import TexturedMesh, TextureSettings, bake_texture, select_views, selection_stats
 from .visibility.compute import Visibility, compute_visibility
 
@@ -232,36 +229,14 @@ class RunResult:
             Unknown format, up axis or texture format, a quality outside 1..100 (before anything
             is written).
         """
-        fmts = parse_formats(formats)
-        tfmt = check_export_options(up_axis=up_axis, texture_format=texture_format, jpeg_quality=jpeg_quality)
-        if str(up_axis).lower() == "auto":
-            up_axis = "none" if self.textured.stats.get("uv") == "keep" else "y"
-        rotation, orientation = up_axis_transform(self.scene, up_axis)
-        view = None if selection_view is None or str(selection_view).lower() == "none" else selection_view
-        if view is not None:
-            self.scene.index(view)
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command=self.command) as stage, \
-                _stage("export"):
-            return write_run_folder(self, stage, Path(out), fmts=fmts, tfmt=tfmt, quality=int(jpeg_quality), unlit=unlit,
-                                    rotation=None if up_axis == "none" else rotation, orientation=orientation,
-                                    picture=selection_view is None or view is not None, view=view,
-                                    save_images=save_images, report=report)
+        return save_run(self, out, overwrite=overwrite, formats=formats, save_images=save_images,
+                        selection_view=selection_view, unlit=unlit, up_axis=up_axis, texture_format=texture_format,
+                        jpeg_quality=jpeg_quality, report=report)
 
-    def _report_prelude(self, table2: bool, images: tuple) -> tuple[dict | None, dict | None, Any]:
-        """What the report needs beside the files: Table 2, the selection seams' steps, the correction's figures
-        (:class:`~o3d_seqcc.report.parts.CorrectionParts`, None: the page draws them); from :func:`run`'s
-        background thread when it computed them for this result."""
-        if not table2:
-            return None, None, None
-        bg = self._background if self._background is not None and self._background.matches(self) else None
-        metrics = bg.result() if bg is not None else table2_metrics(images, self.mappings, self.correction.paths)
-        steps = bg.seams(self.selection) if bg is not None else None
-        if steps is None:
-            photos, corrected = images
-            mesh = self.visibility.mesh
-            steps = selection_seams_of(mesh.vertices, mesh.faces, self.selection, self.scene.views,
-                                       {"photos": photos, "corrected": corrected})
-        return metrics, steps, None if bg is None else bg.parts()
+    def page_inputs(self, *, report: dict | None = None) -> PageInputs:
+        """What this result's report page is drawn from (:func:`o3d_seqcc.report.html_report`); ``report``: the
+        report.json content to show, default :meth:`report`'s."""
+        return run_page_inputs(self, report)
 
 
 def own_uv_layout(scene: Scene, s: TextureSettings) -> tuple[Any, np.ndarray] | None:
@@ -514,25 +489,11 @@ class CorrectionRun:
         swapped in; it may not hold any input of the scene); ``overwrite`` replaces an earlier
         output of o3d_seqcc there. Returns ``out``.
         """
-        t = time.perf_counter()
-        with output_folder(out, overwrite=overwrite, inputs=self.scene.input_paths(), command="correct") as stage, \
-                _stage("export"):
-            paths = write_images(stage / "images", self.scene.views, self.result.images)
-            rep = dict(self.report)
-            rep["timings_s"] = {**rep["timings_s"], "write_images": round(time.perf_counter() - t, 4)}
-            rep["files"] = {"images": str(Path(out) / "images"), "scene_json": str(Path(out) / "scene.json")}
-            scene = with_mesh_file(self.scene, stage / "mesh.ply")  # a mesh in memory is written beside them
-            # paths relative to the manifest: the staging folder sits beside OUT, so they stay right after the swap
-            save_scene(scene.replace_images(paths), stage / "scene.json")
-            if meshlab_project(scene, stage, mesh=None, images=paths) is not None:
-                rep["files"]["meshlab_project"] = str(Path(out) / "project.mlp")
-            if report:
-                t = time.perf_counter()
-                rep["files"]["report_html"] = str(Path(out) / REPORT_FILE)
-                write_report(self, stage / REPORT_FILE, report=rep)
-                rep["timings_s"]["report"] = round(time.perf_counter() - t, 4)
-            write_json(stage / "report.json", rep)
-        return Path(out)
+        return save_correction(self, out, overwrite=overwrite, report=report)
+
+    def page_inputs(self, *, report: dict | None = None) -> PageInputs:
+        """What this correction's report page is drawn from; ``report``: default :attr:`report`."""
+        return correction_page_inputs(self, report)
 
 
 def correct_scene(

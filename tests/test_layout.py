@@ -18,8 +18,7 @@ ARCHITECTURE = PKG.parent / "docs" / "ARCHITECTURE.md"
 #: the tree: package -> its modules ("" is the top level). A new module goes here and into
 #: docs/ARCHITECTURE.md's drawing, in the stage it belongs to.
 TREE: dict[str, set[str]] = {
-    "": {"__init__", "__main__", "errors", "scene", "settings", "pipeline", "run_folder", "open3d_api", "demo",
-         "datasets"},
+    "": {"__init__", "__main__", "errors", "scene", "settings", "pipeline", "open3d_api", "demo", "datasets"},
     "_shared": {"__init__", "arguments", "interrupts", "lazy", "numbers", "options", "parallel", "progress", "registry",
                 "sets"},
     "imaging": {"__init__", "arrays", "sequences"},
@@ -34,9 +33,11 @@ TREE: dict[str, set[str]] = {
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
     "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
-           "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest", "result_files",
+           "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest",
            "export", "obj_text", "gltf_validator", "masks"},
-    "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks"},
+    "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks",
+               "style"},
+    "run_folder": {"__init__", "layout", "write", "parts", "read"},
     "synthetic": {"__init__", "room", "generate", "occluder"},
     "cli": {"__init__", "common", "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info",
             "demo", "synthetic"},
@@ -58,7 +59,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("correction",),
     ("texturing",),
     ("evaluation",),
-    ("io",),
+    ("io", "run_folder.layout"),
     ("report",),
     ("synthetic", "datasets", "settings"),
     ("pipeline", "run_folder"),
@@ -281,6 +282,57 @@ def test_library_code_does_not_print_or_exit():
             if isinstance(node, ast.ExceptHandler) and isinstance(node.type, ast.Name) and node.type.id == "ImportError":
                 bad.append(f"{p.name}:{node.lineno} except ImportError")
     assert not bad, bad
+
+
+# ------------------------------------------------------------------------------------- the run folder
+#: the packages whose code may name a run folder's files (the library and its MeshLab filters)
+CODE = (PKG, PKG.parent / "meshlab_filters")
+#: layout.py's names that are the run folder's alone ("scene.json", "mesh.ply" and "images" also name a scene's
+#: own files, written by the scene formats and the synthetic scenes, not by a run)
+RUN_NAMES = ("REPORT_JSON", "REPORT_HTML", "SELECTION_NPY", "SELECTION_PNG", "MESHLAB_LAYER", "MESHLAB_PROJECT",
+             "DEMO_SUMMARY")
+
+
+def _string_constants(tree: ast.AST) -> list[ast.Constant]:
+    """The string literals of a module that are not docstrings (text for readers, not names the code uses)."""
+    docs = {id(b.body[0].value) for b in ast.walk(tree)
+            if isinstance(b, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and b.body
+            and isinstance(b.body[0], ast.Expr) and isinstance(b.body[0].value, ast.Constant)}
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs]
+
+
+def test_every_run_folder_name_is_spelled_in_layout_only():
+    """A file name of the run folder is a string of its own in run_folder/layout.py only (messages and help texts
+    that mention one are prose, not the name the code opens)."""
+    from o3d_seqcc.run_folder import layout
+
+    names = {getattr(layout, n) for n in RUN_NAMES} | {layout.mesh_file(f) for f in ("glb", "obj")}
+    assert layout.REPORT_JSON == "report.json" and "mesh.glb" in names  # the names users' tools read
+    where = []
+    for root in CODE:
+        for p in root.rglob("*.py"):
+            if p == Path(layout.__file__):
+                continue
+            for c in _string_constants(ast.parse(p.read_text(encoding="utf-8"))):
+                if c.value in names or c.value.lstrip("/") in names:  # a name the code uses, not prose naming it
+                    where.append(f"{p.relative_to(PKG.parent)}:{c.lineno} {c.value!r}")
+    assert not where, where
+
+
+def test_only_run_folder_writes_a_run_folder():
+    """A folder is written as a whole by io.output's output_folder, a file into one by add_output_file: outside
+    run_folder/ only the synthetic scenes (scene folders, not runs) stage a folder, and nobody adds to one."""
+    calls = []
+    for root in CODE:
+        for p in root.rglob("*.py"):
+            rel = p.relative_to(PKG.parent)
+            if rel.parts[:2] in (("o3d_seqcc", "run_folder"), ("o3d_seqcc", "synthetic")) or rel.parts[-2:] == ("io", "output.py"):
+                continue
+            for n in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+                if isinstance(n, ast.Call) and getattr(n.func, "id", getattr(n.func, "attr", "")) in (
+                        "output_folder", "add_output_file"):
+                    calls.append(f"{rel}:{n.lineno}")
+    assert not calls, calls
 
 
 if __name__ == "__main__":  # pragma: no cover - prints the graph for docs/ARCHITECTURE.md

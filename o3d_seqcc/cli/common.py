@@ -14,6 +14,7 @@ from ..io.export import EXPORT_UP_AXES, FORMATS, TEXTURE_FORMATS
 from ..io.load import load_scene
 from ..io.output import check_output, check_output_file
 from ..mappings.compute import MODES
+from ..run_folder.layout import REPORT_HTML
 from ..scene import DEPTH_SCALE_RANGE
 from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
 from ..texturing import SELECTION_METHODS, TextureSettings
@@ -374,6 +375,6 @@ def print_run_summary(res, out: Path) -> None:
 
 def print_report_path(out: Path) -> None:
     """Print the path of the HTML report of an output folder (the last line of run, texture, correct)."""
-    report = Path(out) / "report.html"
+    report = Path(out) / REPORT_HTML
     if report.is_file():
         print(f"report: {report}")

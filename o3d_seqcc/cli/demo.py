@@ -13,6 +13,7 @@ import argparse
 from ..datasets import DatasetUnavailable
 from ..demo import DATASETS, DEMO_SCENE, run_demo
 from ..errors import InputError
+from ..run_folder.layout import DEMO_SUMMARY, REPORT_HTML, REPORT_JSON
 from .common import (
     add_atlas_arguments,
     add_export_arguments,
@@ -55,9 +56,9 @@ def _print_summary(res) -> None:
             print(f"textured mesh rendered from every view vs the ground truth: CIEDE2000 {t['mean']:.2f}, "
                   f"{100 * t['holes']:.2f}% of the covered pixels untextured")
     print("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
-    print(f"summary written to {res.out / 'demo_summary.json'}")
-    report = res.out / "report.html"
-    print(f"report: {report if report.is_file() else res.out / 'run' / 'report.json'}")
+    print(f"summary written to {res.out / DEMO_SUMMARY}")
+    report = res.out / REPORT_HTML
+    print(f"report: {report if report.is_file() else res.out / 'run' / REPORT_JSON}")
 
 
 def _print_photometric(summ: dict) -> None:

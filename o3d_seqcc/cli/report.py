@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..report import regenerate_report
+from ..run_folder.read import regenerate_report
 
 
 def run(args: argparse.Namespace) -> int:

@@ -55,7 +55,7 @@ from ..geometry.orientation import UP_AXES
 __all__ = [
     "DEFAULT_FORMATS", "EXPORT_UP_AXES", "FORMATS", "TEXTURE_FORMATS", "check_export_options", "encode_png", "encode_texture",
     "export_glb", "export_meshlab_ply", "export_obj", "export_ply", "export_textured_mesh", "float32_offset",
-    "parse_formats", "texture_file_names",
+    "parse_formats", "texture_file_names", "FILE_SUFFIXES",
 ]
 
 logger = logging.getLogger(__name__)
@@ -554,7 +554,9 @@ def export_meshlab_ply(
     return path
 
 
-_WRITERS = {"glb": ("mesh.glb", export_glb), "obj": ("mesh.obj", export_obj), "ply": ("mesh_colors.ply", export_ply)}
+_WRITERS = {"glb": (".glb", export_glb), "obj": (".obj", export_obj), "ply": ("_colors.ply", export_ply)}
+#: format -> what follows the stem in the name of the file :func:`export_textured_mesh` writes
+FILE_SUFFIXES = {f: suffix for f, (suffix, _) in _WRITERS.items()}
 
 
 def export_textured_mesh(
@@ -604,13 +606,13 @@ def export_textured_mesh(
     try:
         encoded = None if pool is None else pool.submit(_encoded_pages, textured, fmt, quality, 1, None).result
         for f in sorted(out, key=lambda f: f != "obj"):
-            name, fn = _WRITERS[f]
+            suffix, fn = _WRITERS[f]
             kw: dict[str, Any] = {"transform": transform}
             if f in ("glb", "obj"):
                 kw.update(encoded=encoded, texture_format=fmt, quality=quality)
             if f == "glb" and unlit:
                 kw["unlit"] = True
-            out[f] = fn(textured, out_dir / name.replace("mesh", stem, 1), **kw)
+            out[f] = fn(textured, out_dir / f"{stem}{suffix}", **kw)
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)

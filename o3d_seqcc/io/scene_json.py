@@ -33,7 +33,10 @@ from ..errors import InputError
 from ..scene import FORMAT, Scene, View
 from .files import find_file, join_path, parse_json, write_json
 
-__all__ = ["FORMAT", "detect", "load", "save"]
+__all__ = ["FILE_NAME", "FORMAT", "detect", "load", "save"]
+
+#: the manifest's file name in a scene's folder (and in the folder ``o3d-seqcc correct`` writes)
+FILE_NAME = "scene.json"
 
 _VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
 _OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion", "mask", "mask_invert")
@@ -41,7 +44,7 @@ _OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion", "mask", "
 
 def detect(path: Path) -> Path | None:
     """The manifest to read for ``path`` (a ``.json`` file, or a folder holding ``scene.json``), or None."""
-    return find_file(path, name="scene.json", suffix=".json")
+    return find_file(path, name=FILE_NAME, suffix=".json")
 
 
 def _join(root: Path, rel: object, where: str) -> Path:

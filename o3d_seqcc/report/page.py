@@ -24,11 +24,12 @@ from .comparison import correction_section
 from .figures import graph_svg, jih_panel, jpeg, png, thumbnail, view_layout
 from .parts import JIH_BITS, JIH_MAX_MAPPINGS, edge_jihs, jih_thumbnails, path_edges, view_thumbnails
 from .html import esc, img, num
+from .style import CSS as _CSS
 from .masks import masks_rows, masks_section
 from .viewer import model_section
 
-__all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "PageInputs", "facts",
-           "render_page"]
+__all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "Page", "PageInputs", "build_page",
+           "facts", "render_page"]
 
 logger = logging.getLogger(__name__)
 
@@ -443,37 +444,6 @@ def _settings(inp: PageInputs, f: dict) -> dict:
 
 
 # ------------------------------------------------------------------------------------- page
-_CSS = """
-body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#222;background:#fafafa}
-main{max-width:1240px;margin:0 auto;padding:12px 20px 40px}h1{font-size:22px;margin:8px 0 2px}
-h2{font-size:17px;border-bottom:1px solid #ddd;padding-bottom:3px;margin-top:28px}.sub{color:#555;margin:0 0 10px}
-nav a{margin-right:12px;color:#2a5db0;text-decoration:none;font-size:13px}
-.cards{display:flex;flex-wrap:wrap;gap:10px;margin:10px 0}.card{background:#fff;border:1px solid #ddd;
-border-radius:6px;padding:6px 12px}.card b{display:block;font-size:18px}.card span{color:#666;font-size:12px}
-figure{margin:6px 0}figcaption{font-size:12.5px;color:#444;max-width:1100px}img{display:block;max-width:100%}svg.graph{display:block;max-width:100%;height:auto}
-.grid{display:grid;gap:8px}.grid.views{grid-template-columns:repeat(auto-fill,minmax(118px,1fr))}
-.grid.jih{grid-template-columns:repeat(auto-fill,minmax(120px,1fr))}
-.grid.panels{grid-template-columns:repeat(3,226px)}.grid figure,.row figure{margin:0;background:#fff;
-border:2px solid #e4e4e4;padding:3px}.grid figure img{width:100%}.grid figure img+img{margin-top:3px}
-.grid figcaption,.row figcaption{font-size:11px;word-break:break-all}figure.ref{border-color:#d62728}
-.row{display:flex;flex-wrap:wrap;gap:8px;margin-bottom:8px}.row figure{max-width:330px}
-.grid figure img.cmf{width:50%;margin-top:3px}.badge{background:#d62728;color:#fff;border-radius:3px;
-padding:0 4px;font-size:10px}.badge.grey{background:#888}table{border-collapse:collapse;background:#fff;margin:6px 0}
-td,th{border:1px solid #ddd;padding:3px 8px;font-size:12.5px;text-align:right}th{background:#f0f0f0}
-table.kv th{text-align:left;font-weight:normal;color:#444}.note{font-size:12.5px;color:#555;max-width:1100px}
-.side{display:flex;flex-wrap:wrap;gap:14px;align-items:flex-start}.side img{max-width:640px}.side figcaption{width:100%}
-.legend{list-style:none;padding:0;margin:0;font-size:12px;columns:2}.sw{display:inline-block;width:12px;height:12px;
-margin-right:5px;vertical-align:middle;border:1px solid #999}details{margin:6px 0}code{font-size:12px}
-.tables{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}th.group{text-align:left;font-weight:bold}
-.viewer{position:relative}.viewer canvas{display:block;width:100%;height:520px;background:#f2f2f2;
-border:1px solid #ddd;border-radius:4px;touch-action:none}.viewer-loading{position:absolute;left:0;right:0;top:0;
-height:520px;display:flex;align-items:center;justify-content:center;font-size:15px;color:#555;pointer-events:none}
-.viewer:not([data-state="loading"]) .viewer-loading{display:none}.viewer-modes{display:flex;flex-wrap:wrap;gap:14px;margin:6px 0;font-size:13px}
-.callout{background:#fff8e1;border:1px solid #e8c65a;border-radius:4px;padding:6px 10px;max-width:1100px;
-font-size:13px}.closeup .row figure{max-width:330px}.scale{display:flex;align-items:flex-start;gap:10px;font-size:12px;
-margin:6px 0}.scale .bar{display:block;width:240px;height:12px;border:1px solid #999}.scale .ticks{display:flex;
-justify-content:space-between;width:242px}
-"""
 
 
 def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str, str]]:
@@ -535,9 +505,9 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
         add("selection", "Per-face image selection (Figure 9)", _selection_section, inp, a)
         add("renders", "Textured mesh and photos (Figures 12-13)", _renders_section, inp, (a, b), 2 * width)
         add("seams", "Seam metric", _seams_section, inp.rep, inp.selection_seams)
-    out.append(("timings", "Timings (s)", timings_block(inp.rep)))
+    out.append(("timings", "Timings (s)", None))  # drawn by Page.html, from the report it is given
     out.append(("settings", "Settings", _kv_tables(_settings(inp, f))))
-    return [(sid, title, body if isinstance(body, str) else body.result()) for sid, title, body in out]
+    return [(sid, title, body if body is None or isinstance(body, str) else body.result()) for sid, title, body in out]
 
 
 def timings_block(rep: dict) -> str:
@@ -585,9 +555,37 @@ def _cards(inp: PageInputs, f: dict) -> list[tuple[str, str]]:
     return cards
 
 
-def render_page(inp: PageInputs, *, width: int = 160) -> str:
+@dataclass(frozen=True)
+class Page:
+    """A report page with its sections drawn; :meth:`html` writes it with the timings of the report it is given.
+
+    The timings are the one part a run knows last (its export's and its report's seconds): the run's
+    writer draws the page while the files are written (:func:`build_page`) and writes it once they are.
+    """
+
+    command: str
+    sub: str
+    cards: str
+    sections: tuple  # (id, title, body); the timings section's body is None
+
+    def html(self, rep: dict) -> str:
+        """The page as one HTML document, the timings section drawn from ``rep`` (report.json's content)."""
+        from .. import __version__
+
+        sections = [(sid, t, timings_block(rep) if sid == "timings" else b) for sid, t, b in self.sections]
+        nav = "".join(f'<a href="#{sid}">{_esc(t.split(" (")[0])}</a>' for sid, t, _ in sections)
+        body = "".join(f'<section id="{sid}"><h2>{_esc(t)}</h2>{b}</section>' for sid, t, b in sections)
+        return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
+                f'content="width=device-width,initial-scale=1"><title>o3d-seqcc report: {_esc(self.command)}</title>'
+                f"<style>{_CSS}</style></head><body><main><h1>o3d-seqcc report: {_esc(self.command)}</h1>"
+                f'<p class="sub">{self.sub}</p><div class="cards">{self.cards}</div><nav>{nav}</nav>{body}'
+                f'<p class="note">Figures and table numbered as in L. Dal\'Col et al., "A Sequential Color Correction '
+                f'Approach for Texture Mapping of 3D Meshes", Sensors 2023, 23(2), 607. Written by o3d_seqcc '
+                f"{_esc(__version__)}.</p></main></body></html>\n")
+
+
+def build_page(inp: PageInputs, *, width: int = 160) -> Page:
     """The report page of ``inp`` (sections only for the data present), thumbnails ``width`` pixels wide."""
-    from .. import __version__
     from . import cached_images
 
     f = facts(inp.rep)
@@ -606,13 +604,10 @@ def render_page(inp: PageInputs, *, width: int = 160) -> str:
     where = inp.rep.get("scene") or inp.rep.get("scene_path") or "a scene in memory"
     sub = (f"{_esc(f['command'])} of {_esc(where)}: {len(inp.scene.views)} views{faces}"
            + (f", method {_esc(c.method)}" if c is not None else ""))
-    nav = "".join(f'<a href="#{sid}">{_esc(t.split(" (")[0])}</a>' for sid, t, _ in sections)
-    body = "".join(f'<section id="{sid}"><h2>{_esc(t)}</h2>{b}</section>' for sid, t, b in sections)
     cards = "".join(f'<div class="card"><span>{_esc(k)}</span><b>{_esc(v)}</b></div>' for k, v in _cards(inp, f))
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
-            f'content="width=device-width,initial-scale=1"><title>o3d-seqcc report: {_esc(f["command"])}</title>'
-            f"<style>{_CSS}</style></head><body><main><h1>o3d-seqcc report: {_esc(f['command'])}</h1>"
-            f'<p class="sub">{sub}</p><div class="cards">{cards}</div><nav>{nav}</nav>{body}'
-            f'<p class="note">Figures and table numbered as in L. Dal\'Col et al., "A Sequential Color Correction '
-            f'Approach for Texture Mapping of 3D Meshes", Sensors 2023, 23(2), 607. Written by o3d_seqcc '
-            f"{_esc(__version__)}.</p></main></body></html>\n")
+    return Page(command=f["command"], sub=sub, cards=cards, sections=tuple(sections))
+
+
+def render_page(inp: PageInputs, *, width: int = 160) -> str:
+    """The report page of ``inp`` as one HTML document (:func:`build_page`, with ``inp.rep``'s timings)."""
+    return build_page(inp, width=width).html(inp.rep)

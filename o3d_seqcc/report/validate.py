@@ -15,16 +15,13 @@ from __future__ import annotations
 
 import inspect
 import os
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import InputError, warn
-from ..io.files import open_regular, read_json
-from .schema import upgrade
+from ..errors import InputError
 
-__all__ = ["page_bytes", "read_report_json", "read_selection", "validate_report"]
+__all__ = ["page_bytes", "validate_report"]
 
 
 def _is_num(x: Any) -> bool:
@@ -121,7 +118,7 @@ def _find(d: Any, parts: list[str], prefix: str = "") -> list[tuple[str, Any]]:
     return out
 
 
-def validate_report(rep: Any, where: str | os.PathLike = "report.json") -> dict:
+def validate_report(rep: Any, where: str | os.PathLike = "the report document") -> dict:
     """Check a ``report.json`` document against :data:`RULES` and :data:`REQUIRED`; returns it.
 
     Raises
@@ -162,72 +159,6 @@ def validate_report(rep: Any, where: str | os.PathLike = "report.json") -> dict:
 def _shown(value: Any) -> str:
     text = repr(value)
     return (text[:60] + "...") if len(text) > 60 else text
-
-
-def read_report_json(run_dir: str | os.PathLike) -> dict:
-    """``run_dir/report.json``, read (regular file, UTF-8, no duplicate keys), validated and in the current schema.
-
-    A report of an older o3d_seqcc is checked as written (the messages name its fields) and returned
-    through :func:`~o3d_seqcc.report.schema.upgrade` (its keys moved where the schema has them).
-
-    Raises
-    ------
-    InputError
-        ``run_dir`` is not a folder or holds no report.json; the file is not valid JSON (cut
-        short, edited) or does not pass :func:`validate_report`.
-    """
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise InputError(f"{run_dir} is not a folder; give the output folder (--out) of o3d-seqcc run, correct or "
-                         "texture")
-    rj = run_dir / "report.json"
-    if not os.path.lexists(rj):
-        raise InputError(f"{run_dir} is not an o3d-seqcc output folder (no report.json); give the --out folder of "
-                         "o3d-seqcc run, correct or texture")
-    try:
-        rep = read_json(rj, "report.json")
-    except InputError as e:
-        raise InputError(f"{e}; run the command again to rewrite the folder") from None
-    return upgrade(validate_report(rep, rj))
-
-
-def read_selection(path: str | os.PathLike, n_faces: int, n_views: int) -> np.ndarray | None:
-    """``selection.npy``: one view index per face (-1 = seen by no view), checked from its header first.
-
-    Returns None, with a warning, when it holds another number of faces than the mesh (the
-    report then leaves the selection out).
-
-    Raises
-    ------
-    InputError
-        Not a regular file, not a ``.npy`` array, not a 1-D integer array, cut short, or indices
-        outside -1..``n_views`` - 1.
-    """
-    path = Path(path)
-    with open_regular(path, "selection.npy") as f:
-        size = os.fstat(f.fileno()).st_size
-        try:
-            fmt = np.lib.format
-            version = fmt.read_magic(f)
-            header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
-            shape, fortran, dtype = header(f)
-            offset = f.tell()
-        except (ValueError, OSError, EOFError, SyntaxError, TypeError) as e:
-            raise InputError(f"{path} is not a numpy .npy array ({e}); run the command again") from None
-        if dtype.kind not in "iu" or len(shape) != 1:
-            raise InputError(f"{path} holds a {dtype} array of shape {shape}; expected one integer view index per "
-                             f"face ({n_faces},); run the command again")
-        if shape[0] != n_faces:
-            warn(f"{path} has {shape[0]} entries for the {n_faces} faces of the mesh (another mesh?): the selection "
-                 "is left out of the report; pass the run's --mesh, or run the command again")
-            return None
-        if size - offset < shape[0] * dtype.itemsize:
-            raise InputError(f"{path} is truncated ({size} bytes for {shape[0]} entries); run the command again")
-        sel = np.fromfile(f, dtype=dtype, count=shape[0]).astype(np.int64)
-    if len(sel) and (sel.min() < -1 or sel.max() >= n_views):
-        raise InputError(f"{path} holds view indices {int(sel.min())}..{int(sel.max())} for {n_views} views "
-                         f"(-1..{n_views - 1}); run the command again")
-    return sel
 
 
 def page_bytes(page: str) -> bytes:

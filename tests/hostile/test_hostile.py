@@ -153,12 +153,12 @@ def test_json_outputs_never_replace_a_file_of_an_output_folder(run_dir, tmp_path
 
 
 def test_a_failed_run_removes_the_folders_it_created(S, tmp_path, monkeypatch):
-    import o3d_seqcc.pipeline as pl
+    import o3d_seqcc.run_folder.write as rw
 
     def boom(*a, **k):
         raise RuntimeError("disk exploded")
 
-    monkeypatch.setattr(pl, "write_report", boom)
+    monkeypatch.setattr(rw, "html_report", boom)  # correct's page
     with pytest.raises(RuntimeError):
         main(["-q", "correct", str(S), "--out", str(tmp_path / "new" / "deep" / "o"), "--t-npm", "10",
               "--no-metrics"])
@@ -581,7 +581,7 @@ def test_report_json_fields_are_validated(run_dir, tmp_path, name, field, value,
     (out / "report.json").write_text(json.dumps(rep))
     html = (out / "report.html").read_bytes()
     with pytest.raises(InputError, match=match):
-        sc.report.regenerate_report(out)
+        sc.regenerate_report(out)
     assert (out / "report.html").read_bytes() == html and b"<script>alert" not in html
 
 
@@ -608,7 +608,7 @@ def test_damaged_run_files_are_messages(run_dir, tmp_path, damage):
         (out / "report.json").write_text(text.replace('"command":', '"command": "run", "command":', 1))
         match = r"the key 'command' appears twice"
     with pytest.raises(InputError, match=match):
-        sc.report.regenerate_report(out)
+        sc.regenerate_report(out)
 
 
 def test_report_escapes_every_string_it_writes(run_dir, tmp_path, tiny):
@@ -620,7 +620,7 @@ def test_report_escapes_every_string_it_writes(run_dir, tmp_path, tiny):
     rep["timings_s"][evil] = 1.0
     rep["atlas"]["packer"] = evil
     (out / "report.json").write_text(json.dumps(rep))
-    page = sc.report.regenerate_report(out, scene=tiny).read_text()
+    page = sc.regenerate_report(out, scene=tiny).read_text()
     assert evil not in page and "&lt;img src=x onerror=alert(1)&gt;" in page
 
 

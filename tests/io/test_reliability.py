@@ -129,7 +129,7 @@ def test_max_image_pixels_option(S, capsys):
 
 def test_failure_after_loading_leaves_nothing_and_rerun_works(S, tmp_path, monkeypatch):
     out = tmp_path / "g"
-    import o3d_seqcc.run_folder as rf  # RunResult.save's writer
+    import o3d_seqcc.run_folder.write as rf  # RunResult.save's writer
 
     def boom(*a, **k):
         raise RuntimeError("disk exploded")

@@ -18,7 +18,7 @@ import o3d_seqcc as sc
 from o3d_seqcc.cli import main
 from o3d_seqcc.io.output import MANIFEST
 from o3d_seqcc.correction.luts import compose_luts
-from o3d_seqcc.report import regenerate_report
+from o3d_seqcc.run_folder.read import regenerate_report
 from o3d_seqcc.report.page import MAX_DETAIL_EDGES
 from o3d_seqcc.report.viewer import viewer_bundle
 

@@ -86,7 +86,7 @@ def _schema_1(rep: dict) -> dict:
 
 
 def test_older_report_json_folders_still_regenerate(room, tmp_path):
-    from o3d_seqcc.report.validate import read_report_json
+    from o3d_seqcc.run_folder.read import read_report_json
 
     sc.pipeline.correct_scene(room, t_npm=50).save(tmp_path / "correct")
     sc.pipeline.run(room, t_npm=50).save(tmp_path / "run")
@@ -99,6 +99,6 @@ def test_older_report_json_folders_still_regenerate(room, tmp_path):
         assert back["correction"]["reference"] == new["correction"]["reference"]
         assert back["correction"]["paths"] == new["correction"]["paths"]
         assert back["timings_s"] == new["timings_s"]
-        page = sc.report.regenerate_report(folder).read_text(encoding="utf-8")
+        page = sc.regenerate_report(folder).read_text(encoding="utf-8")
         assert f"toward {new['correction']['reference']}" in page or new["correction"]["reference"] in page
         assert "Timings (s)" in page

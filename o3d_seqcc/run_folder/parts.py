@@ -1,7 +1,7 @@
-"""The files of a result beside its mesh: the photos, written in parallel, and the MeshLab project.
+"""The parts of a run's folder beside its mesh: the photos, written in parallel, and the MeshLab project.
 
-Used by :meth:`o3d_seqcc.pipeline.RunResult.save` and :meth:`o3d_seqcc.pipeline.CorrectionRun.save`
-inside their output folder transaction (:func:`o3d_seqcc.io.output.output_folder`).
+Used by :mod:`o3d_seqcc.run_folder.write` (and the MeshLab filters' folder) inside the output folder
+transaction (:func:`o3d_seqcc.io.output.output_folder`).
 """
 
 from __future__ import annotations
@@ -15,8 +15,9 @@ import numpy as np
 from ..errors import InputError, warn
 from .._shared.parallel import current as current_executor
 from ..scene import Scene
-from .files import atomic_path, atomic_write_bytes, encode_image
-from .meshlab import MeshLayer, save_mlp
+from ..io.files import atomic_path, atomic_write_bytes, encode_image
+from ..io.meshlab import MeshLayer, save_mlp
+from .layout import MESHLAB_PROJECT
 
 __all__ = ["meshlab_project", "scene_paths", "with_mesh_file", "write_images"]
 
@@ -77,8 +78,8 @@ def meshlab_project(scene: Scene, folder: Path, *, mesh: Path | None, images: li
         if offset is not None and np.any(offset) and mesh is not None:
             T = np.eye(4)
             T[:3, 3] = offset
-            return save_mlp(scene, folder / "project.mlp", layers=[MeshLayer(Path(mesh), matrix=T)], images=images)
-        return save_mlp(scene, folder / "project.mlp", mesh=mesh, images=images)
+            return save_mlp(scene, folder / MESHLAB_PROJECT, layers=[MeshLayer(Path(mesh), matrix=T)], images=images)
+        return save_mlp(scene, folder / MESHLAB_PROJECT, mesh=mesh, images=images)
     except InputError as e:
         warn(f"no MeshLab project written: {e}")
     except UnicodeEncodeError:
