@@ -26,7 +26,7 @@ TREE: dict[str, set[str]] = {
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
     "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
                    "compute", "subpixel", "masks"},
-    "mappings": {"__init__", "pairs", "sampling", "compute"},
+    "mappings": {"__init__", "pairs", "counting", "sampling", "compute"},
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "value_space",
                            "pairwise", "global_methods"},
