@@ -32,7 +32,7 @@ TREE: dict[str, set[str]] = {
                            "pairwise", "global_methods"},
     "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
-    "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
+    "evaluation": {"__init__", "metrics", "table2", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest", "result_files",
            "export", "obj_text", "gltf_validator", "masks"},
