@@ -220,9 +220,8 @@ def _output_parameters(default_dir: str, save_defaults: dict, save_docs: dict, w
 @functools.cache
 def _registry() -> Registry[MeshLabFilter]:
     from o3d_seqcc import pipeline
-    from o3d_seqcc.cli.common import library_default as _defaults  # the defaults the command line shows
     from o3d_seqcc.correction.graph import WEIGHTS
-    from o3d_seqcc.settings import CorrectionSettings, RunSettings
+    from o3d_seqcc.settings import CorrectionSettings, RunSettings, keyword_defaults  # the command line's defaults too
     from o3d_seqcc.texturing import SELECTION_METHODS, TextureSettings
     from o3d_seqcc.texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
 
@@ -231,7 +230,7 @@ def _registry() -> Registry[MeshLabFilter]:
     # every default from the settings objects (the command line's), every description from their docstrings
     run_defaults, run_docs = RunSettings.defaults(), _doc_entries(RunSettings, "Attributes")
     cc_defaults, cc_docs = CorrectionSettings.defaults(), _doc_entries(CorrectionSettings, "Attributes")
-    save_defaults = {**_defaults(pipeline.CorrectionRun.save), **_defaults(pipeline.RunResult.save)}
+    save_defaults = {**keyword_defaults(pipeline.CorrectionRun.save), **keyword_defaults(pipeline.RunResult.save)}
     save_docs = _doc_entries(pipeline.RunResult.save, "Parameters")
     ts_defaults = TextureSettings.defaults()
     ts_docs = _doc_entries(TextureSettings, "Attributes")

@@ -41,7 +41,7 @@ from .imaging.sequences import scene_photos
 from .io.load import as_scene
 from .mappings.compute import Mappings, compute_mappings
 from .geometry.meshops import face_adjacency
-from .evaluation.metrics import before_after
+from .evaluation.table2 import before_after
 from ._shared.parallel import LocalExecutor, carried, current as current_executor, use as use_executor
 from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
@@ -151,7 +151,7 @@ class RunResult:
                selection_seams: dict | None = None) -> dict[str, Any]:
         """The ``report.json`` content (JSON types; the keys of :mod:`o3d_seqcc.report.schema`, as every command's).
 
-        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.evaluation.metrics.before_after`);
+        ``export``: the export options :meth:`save` used; ``metrics``: Table 2 (:func:`~o3d_seqcc.evaluation.table2.before_after`);
         ``selection_seams``: ``{"photos", "corrected"}`` -> :class:`~o3d_seqcc.evaluation.seams.SelectionSeams`.
         """
         s = self.settings

@@ -18,8 +18,9 @@ correction and the view selection) or as whole stage objects (``visibility=Visib
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from ._shared.options import SettingsBase, UnknownSettingError, check_names, check_types
 from .correction.settings import CorrectionSettings
@@ -29,7 +30,7 @@ from .texturing.settings import TextureSettings
 from .visibility.settings import VisibilitySettings
 
 __all__ = ["CORRECTION_ONLY", "CorrectionSettings", "RunSettings", "TEXTURE_ONLY", "TextureSettings",
-           "VisibilitySettings"]
+           "VisibilitySettings", "keyword_defaults"]
 
 #: the stage fields of :class:`RunSettings` and their classes
 STAGES: dict[str, type] = {"visibility": VisibilitySettings, "correction": CorrectionSettings,
@@ -155,3 +156,20 @@ def _only(stage: str, *own: str) -> tuple[str, ...]:
 CORRECTION_ONLY = _only("correction", "compare_original", "metrics")
 #: options a correction without texturing (:func:`o3d_seqcc.pipeline.correct_scene`) does not take
 TEXTURE_ONLY = _only("texture", "seams", "compare_original")
+
+
+def keyword_defaults(fn: Callable) -> dict[str, Any]:
+    """The keyword defaults of a library function, so that a front door's defaults are the library's.
+
+    Parameters
+    ----------
+    fn : callable
+        A function or method (``o3d_seqcc.pipeline.RunResult.save``, ``make_synthetic_scene``, ...).
+
+    Returns
+    -------
+    dict
+        Parameter name -> its default, for every parameter of ``fn`` that has one (the command
+        line's and the MeshLab filters' defaults of the options that are not settings fields).
+    """
+    return {n: p.default for n, p in inspect.signature(fn).parameters.items() if p.default is not inspect.Parameter.empty}

@@ -7,9 +7,12 @@ with the package modules it imports (at module level or inside functions).
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import sys
 from pathlib import Path
+
+import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "o3d_seqcc"
 MAX_LINES = 620
@@ -25,13 +28,13 @@ TREE: dict[str, set[str]] = {
     "geometry": {"__init__", "camera", "distortion", "meshops", "meshsplit", "orientation"},
     "visibility": {"__init__", "settings", "dense", "camera_checks", "depthmaps", "occlusion", "per_view", "refine", "stray",
                    "compute", "subpixel", "masks"},
-    "mappings": {"__init__", "pairs", "sampling", "compute"},
+    "mappings": {"__init__", "pairs", "counting", "sampling", "compute"},
     "correction": {"__init__", "settings", "base", "graph", "jih", "cmf", "luts"},
     "correction.methods": {"__init__", "seqcc", "seqcc_global", "edge_summaries", "joint_curves", "value_space",
                            "pairwise", "global_methods"},
     "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
-    "evaluation": {"__init__", "metrics", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
+    "evaluation": {"__init__", "metrics", "table2", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
     "io": {"__init__", "files", "headers", "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest",
            "export", "obj_text", "gltf_validator", "masks"},
@@ -260,6 +263,86 @@ def test_no_private_names_across_packages():
             bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names
                     if a.name.startswith("_") and not a.name.startswith("__") and stage(root) != stage(name)]
     assert not bad, bad
+
+
+#: the stage packages: a name another part of the package imports from one of their modules is in the
+#: package's public list (its ``__init__``'s ``__all__`` or lazy export table)
+STAGE_PACKAGES = ("visibility", "mappings", "correction", "texturing", "evaluation", "io", "report", "imaging",
+                  "geometry", "synthetic", "cli")
+MESHLAB_FILTERS = PKG.parent / "meshlab_filters"
+
+
+def public_names(package: str) -> set[str]:
+    """The public list of a stage package: its ``__init__``'s ``__all__`` and the names of its
+    :func:`~o3d_seqcc._shared.lazy.lazy_exports` table, read from the source (nothing imported)."""
+    names: set[str] = set()
+    for node in ast.parse((PKG / package / "__init__.py").read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            names |= set(ast.literal_eval(node.value))
+        call = getattr(node, "value", None)
+        if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "lazy_exports":
+            table = call.args[1]
+            for key, value in zip(table.keys, table.values):  # "name": "module" or **dict.fromkeys((names), "module")
+                names |= {ast.literal_eval(key)} if key is not None else set(ast.literal_eval(value.args[0]))
+    return names
+
+
+@functools.cache
+def _from_imports() -> tuple:
+    """(module, its package, node) of every ``from ... import`` in the package (parsed once for all stages)."""
+    return tuple(item for item in _import_nodes() if isinstance(item[2], ast.ImportFrom))
+
+
+def internal_imports(package: str, imports=None) -> list[str]:
+    """``module:line name`` of every ``from o3d_seqcc.<package>.<module> import name`` (or its relative
+    equivalent) made outside ``package`` whose name is not in the package's :func:`public_names`
+    (``imports``: the (module, package, node) triples to check, default the whole package's)."""
+    public, prefix, bad = public_names(package), f"o3d_seqcc.{package}", []
+    for name, base, node in _from_imports() if imports is None else imports:
+        if name == prefix or name.startswith(prefix + "."):
+            continue
+        root = _import_root(node, base)
+        if root.startswith(prefix + "."):
+            bad += [f"{name}:{node.lineno} {root}.{a.name}" for a in node.names if a.name not in public]
+    return bad
+
+
+@pytest.mark.parametrize("package", STAGE_PACKAGES)
+def test_stages_import_each_other_by_public_names(package):
+    """One stage uses another's names only when that package lists them (its ``__init__``'s exports)."""
+    bad = internal_imports(package)
+    assert not bad, f"{len(bad)} names imported from {package}'s modules that {package} does not export: {bad}"
+
+
+def test_an_internal_name_across_stages_is_caught():
+    assert {"PairSource", "shared_counts", "before_after"} <= public_names("mappings") | public_names("evaluation")
+    planted = [("o3d_seqcc.texturing.atlas", ["o3d_seqcc", "texturing"], ast.parse(src).body[0]) for src in (
+        "from ..mappings.pairs import norm_key, thinned", "from o3d_seqcc.mappings.counting import shared_area",
+        "from .charts import norm_key")]
+    assert internal_imports("mappings", planted) == ["o3d_seqcc.texturing.atlas:1 o3d_seqcc.mappings.pairs.norm_key"]
+
+
+def test_meshlab_filters_use_the_library_not_the_cli():
+    """The MeshLab filters are a front door of the library: they import nothing from ``o3d_seqcc.cli``, except
+    the native plugin's header builder, which describes the ``o3d-seqcc`` commands the plugin runs and reads
+    their options from the command line's public parser (``o3d_seqcc.cli.build_parser``)."""
+    bad = []
+    for path in sorted(MESHLAB_FILTERS.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                base = ["meshlab_filters", *path.relative_to(MESHLAB_FILTERS).parent.parts]
+                mods = [_import_root(node, base)]
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.Import):
+                mods, names = [a.name for a in node.names], []
+            else:
+                continue
+            for mod in mods:
+                if mod == "o3d_seqcc.cli" and path.name == "native.py" and names == ["build_parser"]:
+                    continue
+                if mod == "o3d_seqcc.cli" or mod.startswith("o3d_seqcc.cli."):
+                    bad.append(f"{path.relative_to(PKG.parent)}:{node.lineno} {mod} {names}")
+    assert MESHLAB_FILTERS.is_dir() and not bad, bad
 
 
 def test_library_does_not_import_the_cli():

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from ..correction import available_methods
 from ..errors import InputError
@@ -16,7 +15,7 @@ from ..io.output import check_output, check_output_file
 from ..mappings.compute import MODES
 from ..run_folder.layout import REPORT_HTML
 from ..scene import DEPTH_SCALE_RANGE
-from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
+from ..settings import CorrectionSettings, RunSettings, VisibilitySettings, keyword_defaults
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
 
@@ -29,7 +28,6 @@ __all__ = [
     "add_split_argument",
     "add_t_npm_argument",
     "add_texture_arguments",
-    "library_default",
     "prepare_out_dir",
     "print_report_path",
     "print_run_summary",
@@ -58,7 +56,7 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
                    "file says")
     p.add_argument("--depth-dir", help="folder of depth maps named after the views, for scenes without depth (MeshLab "
                    "projects, COLMAP, Meshroom): turns the depth-consistency filter on")
-    depth_scale = library_default(load_scene)["depth_scale"]
+    depth_scale = keyword_defaults(load_scene)["depth_scale"]
     p.add_argument("--depth-scale", type=float, default=depth_scale,
                    help=f"depth units per metre of the --depth-dir maps (default {depth_scale:g}: millimetres)")
     p.add_argument("--extrinsic", choices=EXTRINSIC_CONVENTIONS, default=None,
@@ -160,7 +158,7 @@ def add_texture_arguments(p: argparse.ArgumentParser, *, outputs: bool = True) -
         p.add_argument("--overwrite", action="store_true", help="write into an existing output folder")
         from ..pipeline import RunResult
 
-        formats = ",".join(library_default(RunResult.save)["formats"])
+        formats = ",".join(keyword_defaults(RunResult.save)["formats"])
         p.add_argument("--format", default=formats, help=f"comma-separated export formats among {', '.join(FORMATS)} "
                        f"(default {formats})")
     p.add_argument("--selection", default=d.selection, choices=sorted(SELECTION_METHODS),
@@ -244,7 +242,7 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
     """Up axis, texture format and quality, unlit material (defaults: :meth:`o3d_seqcc.pipeline.RunResult.save`'s)."""
     from ..pipeline import RunResult
 
-    d = library_default(RunResult.save)
+    d = keyword_defaults(RunResult.save)
     p.add_argument("--up-axis", choices=EXPORT_UP_AXES, default=d["up_axis"],
                    help=f"up axis of the GLB/OBJ/PLY (default {d['up_axis']}: y, as glTF is Y-up, for a new atlas; "
                    "none with --uv keep): the scene's up direction, estimated from the cameras, is rotated onto it "
@@ -337,11 +335,6 @@ def progress_from_args(args: argparse.Namespace):
 
     on = getattr(args, "progress_lines", False)
     return progress_lines(sys.stderr if on else None, PLANS.get(getattr(args, "command", ""), ()))
-
-
-def library_default(fn: Callable) -> dict[str, Any]:
-    """The keyword defaults of a library function (so a command's defaults are the library's)."""
-    return {n: p.default for n, p in inspect.signature(fn).parameters.items() if p.default is not inspect.Parameter.empty}
 
 
 def print_run_summary(res, out: Path) -> None:

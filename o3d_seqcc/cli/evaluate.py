@@ -21,7 +21,8 @@ from ..errors import InputError
 from ..evaluation.fit import evaluate_scene
 from ..io.output import write_output_json
 from ..mappings.compute import MODES
-from .common import add_scene_arguments, add_t_npm_argument, library_default, refuse_input_overwrite, scene_from_args
+from ..settings import keyword_defaults
+from .common import add_scene_arguments, add_t_npm_argument, refuse_input_overwrite, scene_from_args
 
 
 def _row(label: str, ev) -> str:
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    d = library_default(evaluate_scene)
+    d = keyword_defaults(evaluate_scene)
     p.add_argument("--mappings", choices=MODES, default=d["mappings"],
                    help=f"mapping mode (default {d['mappings']}: the paper's Table 2 scores at the face vertices)")
     p.add_argument("--holdout", type=float, default=0.0, metavar="F",

@@ -10,12 +10,12 @@ import argparse
 
 from ..synthetic import PHOTOMETRIC_MODES, make_synthetic_scene
 from ..synthetic.room import LAYOUTS
-from .common import library_default
+from ..settings import keyword_defaults
 
 
 def add_synthetic_arguments(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
     """Generator options shared by ``synthetic`` and ``demo`` (defaults: the generator's, updated by ``defaults``)."""
-    d = {**library_default(make_synthetic_scene), **(defaults or {})}
+    d = {**keyword_defaults(make_synthetic_scene), **(defaults or {})}
     p.add_argument("--views", type=int, default=d["n_views"], help=f"number of views (default {d['n_views']})")
     p.add_argument("--width", type=int, default=d["width"], help=f"image width in pixels (default {d['width']})")
     p.add_argument("--height", type=int, default=d["height"], help=f"image height in pixels (default {d['height']})")
@@ -63,5 +63,5 @@ def run(args: argparse.Namespace) -> int:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", help="output folder (must be empty or absent unless --overwrite)")
     add_synthetic_arguments(p)
-    p.add_argument("--origin", type=_origin, default=library_default(make_synthetic_scene)["origin"], metavar="X,Y,Z",
+    p.add_argument("--origin", type=_origin, default=keyword_defaults(make_synthetic_scene)["origin"], metavar="X,Y,Z",
                    help="world coordinates of the room's corner, e.g. 500000,4000000,100 (UTM-like; default the origin)")

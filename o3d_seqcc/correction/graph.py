@@ -13,7 +13,7 @@ of mappings (lowest total cost).
 ``t_npm`` and its units
 -----------------------
 In the default ``"surface"`` mappings a pair's count is the area of the surface both views see,
-in pixels of the view where it is smaller (:func:`o3d_seqcc.mappings.pairs.shared_area`): the same on a
+in pixels of the view where it is smaller (:func:`o3d_seqcc.mappings.counting.shared_area`): the same on a
 300-face and a 3M-face mesh of one scene. ``t_npm`` is then a number of pixels, and its default
 ``"auto"`` is :data:`AUTO_T_NPM_FRACTION` (1 %) of the median photo's pixels (3,072 px for
 640 x 480 photos; on Fountain's 16k-face mesh the paper's 400 vertex mappings are 2,600-4,400 px

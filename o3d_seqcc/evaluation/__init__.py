@@ -1,6 +1,7 @@
 """Evaluation (paper 4.2, Table 2) and ground truth: scores of a correction and of a texture.
 
 - :mod:`~o3d_seqcc.evaluation.metrics`: PSNR / CIEDE2000 over the mappings (:func:`evaluate`);
+- :mod:`~o3d_seqcc.evaluation.table2`: the paper's Table 2 of a correction, before and after (:func:`before_after`);
 - :mod:`~o3d_seqcc.evaluation.fit`: fit a method and score it, in-sample and held out (:func:`evaluate_method`);
 - :mod:`~o3d_seqcc.evaluation.photometric`: camera-like photometric changes (the synthetic and semi-real truth);
 - :mod:`~o3d_seqcc.evaluation.semireal`: semi-real ground truth on real photos (:func:`make_semireal`,
@@ -15,7 +16,8 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    **dict.fromkeys(("Evaluation", "evaluate", "before_after", "psnr"), "metrics"),
+    **dict.fromkeys(("Evaluation", "evaluate", "psnr"), "metrics"),
+    "before_after": "table2",
     **dict.fromkeys(("MethodEvaluation", "evaluate_method", "evaluate_scene"), "fit"),
     **dict.fromkeys(("make_semireal", "evaluate_semireal"), "semireal"),
     **dict.fromkeys(("SeamReport", "seam_metric", "selection_seams"), "seams"),

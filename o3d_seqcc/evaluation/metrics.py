@@ -20,7 +20,8 @@ in full, 0.2 s with 250 per pair.
 
 :func:`contrast_ratios` is the column that keeps the scores honest: a correction that washes
 the images out (shrinks colours toward the mean) scores well at misregistered mappings, and
-shows a contrast ratio below 1. :func:`before_after` gives both, before and after a correction.
+shows a contrast ratio below 1. :func:`o3d_seqcc.evaluation.table2.before_after` gives both, before
+and after a correction.
 
 This module only scores; :mod:`o3d_seqcc.evaluation` fits a correction method and scores it
 (the paper's in-sample protocol and a held-out one).
@@ -45,7 +46,6 @@ __all__ = [
     "Evaluation",
     "MetricSummary",
     "PairScore",
-    "before_after",
     "blur_images",
     "contrast_ratios",
     "evaluate",
@@ -551,70 +551,3 @@ def contrast_ratios(
     hops = {int(v): len(p) - 1 for v, p in paths.items()}
     keys = [(a, b) for a, b in sorted(mappings.pairs) if a in hops and b in hops and hops[a] != hops[b]]
     return _contrast(images, _pair_items(mappings, keys, min_n=min_n, max_per_pair=max_per_pair, skipped=[]), hops)
-
-
-def _contrast_summary(ratios: np.ndarray) -> dict[str, Any]:
-    return {"mean": _json_float(ratios.mean()) if ratios.size else None,
-            "min": _json_float(ratios.min()) if ratios.size else None, "n_pairs": int(ratios.size)}
-
-
-def before_after(
-    originals: Sequence[np.ndarray],
-    corrected: Sequence[np.ndarray],
-    mappings,
-    paths: dict[int, list[int]],
-    *,
-    max_per_pair: int | None = None,
-    per_pair: bool = False,
-    min_n_contrast: int = 50,
-) -> dict[str, Any]:
-    """Table 2 of a correction: PSNR / CIEDE2000 summaries and contrast ratios, before and after.
-
-    Every pair is built (and thinned) once for the four scorings; per image set each view is read and
-    sampled once (lazy sequences: one image held at a time), the contrast ratios from the same samples.
-
-    Parameters
-    ----------
-    originals, corrected : sequences of (H, W, 3) arrays
-        The images before and after the correction, one per view.
-    mappings : o3d_seqcc.mappings.Mappings
-    paths : dict[int, list[int]]
-        The correction paths (for :func:`contrast_ratios`).
-    max_per_pair : int, optional
-        At most this many evenly spaced mappings scored per pair (default all).
-    per_pair : bool, default False
-        Also list every pair's scores.
-    min_n_contrast : int, default 50
-
-    Returns
-    -------
-    dict
-        JSON-ready: ``before`` and ``after`` (:meth:`Evaluation.to_dict`), ``contrast``
-        (``before`` / ``after``: mean, min and number of pairs of :func:`contrast_ratios`).
-    """
-    originals = _check_images(originals, int(mappings.n_views))
-    corrected = _check_images(corrected, int(mappings.n_views))
-    names = tuple(getattr(mappings, "view_names", ()) or ())
-    hops = {int(v): len(p) - 1 for v, p in paths.items()}
-    keys = sorted(mappings.pairs)
-    skipped: list[tuple[int, int]] = []
-    # thinned pairs are small: build them once for the four scorings; all mappings are streamed each time
-    items = list(_pair_items(mappings, keys, min_n=1, max_per_pair=max_per_pair, skipped=skipped)) \
-        if max_per_pair is not None else None
-    out: dict[str, Any] = {}
-    contrast: dict[str, Any] = {}  # ("contrast" after "before" and "after", as report.json holds them)
-    for key, images in (("before", originals), ("after", corrected)):
-        ratios: list[float] = []
-
-        def keep(item, ca: np.ndarray, cb: np.ndarray) -> None:  # the contrast ratios from the same samples
-            r = _ratio(item, ca, cb, hops) if item[2] >= min_n_contrast else None
-            if r is not None:
-                ratios.append(r)
-
-        it = items if items is not None else _pair_items(mappings, keys, min_n=1, max_per_pair=None, skipped=[])
-        ev = _score(images, it, interpolation="bilinear", psnr_cap=PSNR_CAP_DB, names=names,
-                    skipped=skipped if items is not None else [], max_per_pair=max_per_pair, colours=keep)
-        out[key] = ev.to_dict(per_pair=per_pair)
-        contrast[key] = _contrast_summary(np.array(ratios))
-    out["contrast"] = contrast
-    return out

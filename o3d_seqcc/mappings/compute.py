@@ -12,13 +12,13 @@ resolution: the vertices of every shared face (as the paper) and, inside faces l
 ``sample_spacing``^2 px in the smaller of the two projections, about one point per
 ``sample_spacing``^2 px (sub-triangle centroids), and counts a pair by the area of that surface
 in pixels
-(:func:`~o3d_seqcc.mappings.pairs.shared_area`), so the counts, the graph and ``t_npm`` (pixels) mean
+(:func:`~o3d_seqcc.mappings.counting.shared_area`), so the counts, the graph and ``t_npm`` (pixels) mean
 the same on a 300-face and a 3M-face mesh of one scene.
 
 Storage is lazy: :func:`compute_mappings` keeps the per-view sparse visibility records and builds
 a pair's arrays when ``mappings.pairs[(a, b)]`` is read (a few milliseconds; the last
 ``cache_size`` pairs are cached). Counts are computed up front
-(:func:`~o3d_seqcc.mappings.pairs.shared_counts`: bit-packed AND + popcount, or a sparse product for
+(:func:`~o3d_seqcc.mappings.counting.shared_counts`: bit-packed AND + popcount, or a sparse product for
 many views).
 Mappings are written to and read from ``.npz`` files by :mod:`o3d_seqcc.io.mappings_npz`.
 

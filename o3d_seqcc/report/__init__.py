@@ -18,7 +18,7 @@ from an output folder. Sections, each only when the command produced its data:
 - the sequential steps of that path (Figure 8): the source view corrected step by step;
 - a before / after grid of all views, reference marked (Figure 10);
 - Table 2: PSNR / CIEDE2000 mean, weighted mean and std over the view pairs, before and after,
-  with the contrast ratio (:func:`o3d_seqcc.evaluation.metrics.before_after`);
+  with the contrast ratio (:func:`o3d_seqcc.evaluation.table2.before_after`);
 - the per-face image selection with a legend (Figure 9);
 - renders of the textured mesh from two views beside the photos (Figures 12-13);
 - seam metric, timings and the run's settings.
@@ -137,7 +137,7 @@ def html_report(source: Any, *, report: dict | None = None, thumb_width: int = 1
     report : dict, optional
         The ``report.json`` content to show (numbers, settings, timings, Table 2 under
         ``"metrics"``); default the result's own report (without Table 2 for ``run``: see
-        :func:`o3d_seqcc.evaluation.metrics.before_after`).
+        :func:`o3d_seqcc.evaluation.table2.before_after`).
     thumb_width : int, default 160
         Width in pixels of the views' thumbnails (photos beside renders: twice that).
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from .._shared.parallel import carried
 from ..correction import CorrectionResult
-from ..evaluation.metrics import before_after
+from ..evaluation.table2 import before_after
 from ..evaluation.seams import selection_seams_of
 from ..mappings.compute import Mappings
 from . import metrics_sample
@@ -24,7 +24,7 @@ __all__ = ["BackgroundReport", "table2_metrics"]
 
 
 def table2_metrics(images: tuple, maps: Mappings, paths: dict) -> dict:
-    """Table 2 of a run's report (:func:`~o3d_seqcc.evaluation.metrics.before_after`) on ``(photos, corrected)``."""
+    """Table 2 of a run's report (:func:`~o3d_seqcc.evaluation.table2.before_after`) on ``(photos, corrected)``."""
     photos, corrected = images
     return before_after(photos, corrected, maps, paths, max_per_pair=metrics_sample(maps))
 

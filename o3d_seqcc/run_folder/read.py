@@ -117,7 +117,7 @@ def _inputs_from_folder(run_dir: Path, rep: dict, *, scene, mesh, image_dir=None
     from ..correction import correct
     from ..io.load import load_scene
     from ..mappings.compute import compute_mappings
-    from ..evaluation.metrics import before_after
+    from ..evaluation.table2 import before_after
     from ..texturing import load_textured_mesh
     from ..visibility.compute import compute_visibility
 

@@ -297,7 +297,8 @@ def test_thin_indices_are_evenly_spaced_and_strictly_increasing():
 
 
 def test_before_after_thinned_scores_weight_pairs_by_their_full_counts():
-    from o3d_seqcc.evaluation.metrics import before_after, contrast_ratios
+    from o3d_seqcc.evaluation.metrics import contrast_ratios
+    from o3d_seqcc.evaluation.table2 import before_after
 
     images, maps = _gained_setup()  # 3 views x 768 mappings per pair
     paths = {0: [0], 1: [1, 0], 2: [2, 1, 0]}
@@ -322,7 +323,7 @@ def test_before_after_thinned_scores_weight_pairs_by_their_full_counts():
 def test_before_after_reads_lazy_images_once_per_set_with_the_same_numbers():
     """Lazy image sequences: each view is read once per image set (sampled at all its pairs' mappings, the
     contrast ratios from the same samples), and Table 2 is the one of the image lists, to the bit."""
-    from o3d_seqcc.evaluation.metrics import before_after
+    from o3d_seqcc.evaluation.table2 import before_after
     from o3d_seqcc.imaging.sequences import ImageSequence
 
     class Counted(ImageSequence):

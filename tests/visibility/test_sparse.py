@@ -14,7 +14,7 @@ from o3d_seqcc.imaging.sequences import FloatImages, SceneImages
 from o3d_seqcc.io.files import image_dtype, read_image
 from o3d_seqcc.mappings.compute import compute_mappings
 from o3d_seqcc.geometry.meshops import face_adjacency
-from o3d_seqcc.mappings.pairs import shared_counts
+from o3d_seqcc.mappings.counting import shared_counts
 from o3d_seqcc.texturing import select_views
 from o3d_seqcc.visibility import compute as visibility
 from o3d_seqcc.visibility.per_view import CHUNK_FACES, VisibilityJob
