@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from ..correction import available_methods
 from ..errors import InputError
@@ -18,6 +17,8 @@ from ..scene import DEPTH_SCALE_RANGE
 from ..settings import CorrectionSettings, RunSettings, VisibilitySettings
 from ..texturing import SELECTION_METHODS, TextureSettings
 from ..texturing.settings import DATA_TERMS, FALLBACKS, OUTLIER_REMOVALS, OVERFLOWS, UV_MODES
+from .console import add_progress_argument, progress_from_args
+from .parser import library_default
 
 __all__ = [
     "add_atlas_arguments",
@@ -316,31 +317,6 @@ def refuse_input_overwrite(path: str | Path, inputs: Any, option: str) -> None:
         The message names ``option`` and what ``path`` is.
     """
     check_output_file(path, option=option, inputs=inputs)
-
-
-def add_progress_argument(p: argparse.ArgumentParser) -> None:
-    """``--progress-lines``: machine-readable progress on stderr (``run``, ``texture``, ``correct``)."""
-    from .._shared.progress import LINE_PREFIX
-
-    p.add_argument("--progress-lines", action="store_true",
-                   help=f"write machine-readable progress lines to stderr, '{LINE_PREFIX} PERCENT TEXT' (PERCENT an "
-                   "integer 0-100 that never decreases), for programs that run this command (the MeshLab plugin)")
-
-
-def progress_from_args(args: argparse.Namespace):
-    """The :func:`o3d_seqcc._shared.progress.progress_lines` context of ``--progress-lines`` (a no-op without it),
-    with the command's plan (:data:`o3d_seqcc._shared.progress.PLANS`)."""
-    import sys
-
-    from .._shared.progress import PLANS, progress_lines
-
-    on = getattr(args, "progress_lines", False)
-    return progress_lines(sys.stderr if on else None, PLANS.get(getattr(args, "command", ""), ()))
-
-
-def library_default(fn: Callable) -> dict[str, Any]:
-    """The keyword defaults of a library function (so a command's defaults are the library's)."""
-    return {n: p.default for n, p in inspect.signature(fn).parameters.items() if p.default is not inspect.Parameter.empty}
 
 
 def print_run_summary(res, out: Path) -> None:
