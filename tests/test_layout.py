@@ -38,8 +38,8 @@ TREE: dict[str, set[str]] = {
            "export", "obj_text", "gltf_validator", "masks"},
     "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks"},
     "synthetic": {"__init__", "room", "generate", "occluder"},
-    "cli": {"__init__", "parser", "console", "runtime", "common", "run", "texture", "correct", "mappings", "evaluate",
-            "seams", "report", "info", "demo", "synthetic"},
+    "cli": {"__init__", "parser", "console", "runtime", "scene_flags", "correction_flags", "texture_flags", "common",
+            "run", "texture", "correct", "mappings", "evaluate", "seams", "report", "info", "demo", "synthetic"},
 }
 #: at most this many modules at the top level, besides the package's __init__ and __main__
 MAX_TOP_LEVEL = 8

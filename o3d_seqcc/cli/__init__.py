@@ -6,7 +6,7 @@ options and ``run(args) -> exit code`` calls the library and prints. The harness
 :mod:`.parser` (the parser, the global options, the command a command line names),
 :mod:`.console` (the log, the grouped warnings, -q, progress lines), :mod:`.runtime` (the
 process: exit, malloc, open3d's import, the environment, the Dask client); the options several
-commands share are in :mod:`.common`.
+commands share are in :mod:`.scene_flags`, :mod:`.correction_flags` and :mod:`.texture_flags`.
 """
 
 from __future__ import annotations

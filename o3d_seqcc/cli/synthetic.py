@@ -10,7 +10,7 @@ import argparse
 
 from ..synthetic import PHOTOMETRIC_MODES, make_synthetic_scene
 from ..synthetic.room import LAYOUTS
-from .common import library_default
+from .parser import library_default
 
 
 def add_synthetic_arguments(p: argparse.ArgumentParser, *, defaults: dict | None = None) -> None:
