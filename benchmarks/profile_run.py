@@ -136,7 +136,7 @@ def _child(argv: list[str]) -> int:
             rec.begin("between")
 
     # the CLI and the pipeline reach load_scene through these modules' globals
-    for mod in (load_mod, pipeline_mod, sys.modules.get("o3d_seqcc.cli.common"), sys.modules.get("o3d_seqcc.io")):
+    for mod in (load_mod, pipeline_mod, sys.modules.get("o3d_seqcc.cli.scene_flags"), sys.modules.get("o3d_seqcc.io")):
         if mod is not None and getattr(mod, "load_scene", None) is inner:
             mod.load_scene = timed_load
     import o3d_seqcc

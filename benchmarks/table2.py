@@ -71,7 +71,7 @@ sys.path.insert(0, str(REPO))
 from o3d_seqcc.io.files import write_json  # noqa: E402
 from o3d_seqcc.mappings.compute import compute_mappings  # noqa: E402
 from o3d_seqcc.evaluation.fit import evaluate_method  # noqa: E402
-from o3d_seqcc.cli.common import t_npm_value  # noqa: E402
+from o3d_seqcc.cli.correction_flags import t_npm_value  # noqa: E402
 from o3d_seqcc.correction.graph import build_graph, correction_paths, resolve_t_npm  # noqa: E402
 from o3d_seqcc.evaluation.metrics import contrast_ratios as library_contrast_ratios  # noqa: E402
 from o3d_seqcc.evaluation.metrics import image_delta_e  # noqa: E402

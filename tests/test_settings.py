@@ -77,7 +77,7 @@ def test_every_flag_of_a_settings_field_defaults_to_the_field():
 
 
 def test_default_command_lines_build_the_default_settings():
-    from o3d_seqcc.cli.common import run_options_from_args
+    from o3d_seqcc.cli.texture_flags import run_options_from_args
 
     subs = _subparsers()
     run = subs["run"].parse_args(["s.json", "--out", "o"])

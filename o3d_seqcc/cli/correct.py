@@ -18,16 +18,10 @@ import argparse
 from ..correction.graph import WEIGHTS
 from ..pipeline import correct_scene
 from ..settings import CorrectionSettings, RunSettings
-from .common import add_progress_argument
-from .common import (
-    add_correction_arguments,
-    add_scene_arguments,
-    add_split_argument,
-    prepare_out_dir,
-    print_report_path,
-    run_options_from_args,
-    scene_from_args,
-)
+from .console import add_progress_argument
+from .correction_flags import add_correction_arguments, add_split_argument
+from .scene_flags import add_scene_arguments, prepare_out_dir, print_report_path, scene_from_args
+from .texture_flags import run_options_from_args
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,10 +14,10 @@ from ..datasets import DatasetUnavailable
 from ..demo import DATASETS, DEMO_SCENE, run_demo
 from ..errors import InputError
 from ..run_folder.layout import DEMO_SUMMARY, REPORT_HTML, REPORT_JSON
-from .common import (
+from .correction_flags import add_t_npm_argument
+from .texture_flags import (
     add_atlas_arguments,
     add_export_arguments,
-    add_t_npm_argument,
     save_options_from_args,
     texture_settings_from_args,
 )

@@ -21,8 +21,9 @@ from ..errors import InputError
 from ..evaluation.fit import evaluate_scene
 from ..io.output import write_output_json
 from ..mappings.compute import MODES
+from .correction_flags import add_t_npm_argument
 from ..settings import keyword_defaults
-from .common import add_scene_arguments, add_t_npm_argument, refuse_input_overwrite, scene_from_args
+from .scene_flags import add_scene_arguments, refuse_input_overwrite, scene_from_args
 
 
 def _row(label: str, ev) -> str:

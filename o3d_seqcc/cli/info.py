@@ -19,7 +19,7 @@ from ..visibility.camera_checks import MIN_AREA_SEEN, check_cameras
 from ..errors import InputError
 from ..io.load import camera_fixes, detect_format
 from ..scene import summarise
-from .common import add_scene_arguments, scene_from_args, scene_options_from_args
+from .scene_flags import add_scene_arguments, scene_from_args, scene_options_from_args
 
 
 def run(args: argparse.Namespace) -> int:

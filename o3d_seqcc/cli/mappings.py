@@ -19,7 +19,7 @@ from ..mappings.compute import MODES, compute_mappings
 from ..evaluation.render import plot_pair
 from ..settings import CorrectionSettings, VisibilitySettings
 from ..visibility.settings import FILTERS, OBLIQUE_REFERENCES
-from .common import add_scene_arguments, scene_from_args
+from .scene_flags import add_scene_arguments, scene_from_args
 
 _D = VisibilitySettings.defaults()
 

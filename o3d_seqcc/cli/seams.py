@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ..io.output import write_output_json
 from ..evaluation.seams import seam_metric
-from .common import refuse_input_overwrite
+from .scene_flags import refuse_input_overwrite
 
 
 def _mesh_files(mesh: str) -> list[Path]:

@@ -13,14 +13,10 @@ from dataclasses import replace
 
 from .. import pipeline
 from ..io.files import read_view_images
-from .common import add_progress_argument
-from .common import (
-    add_scene_arguments,
-    add_split_argument,
-    add_texture_arguments,
-    print_run_summary,
-    texture_job_from_args,
-)
+from .console import add_progress_argument
+from .correction_flags import add_split_argument
+from .scene_flags import add_scene_arguments, print_run_summary
+from .texture_flags import add_texture_arguments, texture_job_from_args
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,7 +11,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc.cli import build_parser, main
-from o3d_seqcc.cli.common import texture_settings_from_args
+from o3d_seqcc.cli.texture_flags import texture_settings_from_args
 from o3d_seqcc.texturing import TextureSettings, bake_texture
 
 SMALL = ["--t-npm", "50", "--atlas-size", "1024"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from _mapping_scenes import H, K, W, box, down_cameras, grid, look_at, make_scene, merge, plane
-from o3d_seqcc.cli.common import t_npm_value
+from o3d_seqcc.cli.correction_flags import t_npm_value
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.correction.graph import AUTO_T_NPM_FRACTION, resolve_t_npm
 from o3d_seqcc.mappings.compute import compute_mappings
