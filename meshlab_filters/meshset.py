@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.io.files import write_image, write_json
+from o3d_seqcc.io.images import write_image
+from o3d_seqcc.io.json_files import write_json
 from o3d_seqcc.io.meshlab import MeshLayer, load_mlp, save_mlp
 from o3d_seqcc.io.output import check_output, output_folder
 from o3d_seqcc.scene import Scene

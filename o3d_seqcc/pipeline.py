@@ -38,7 +38,7 @@ from .correction import CorrectionResult, correct
 from .errors import InputError
 from .io.export import DEFAULT_FORMATS, check_export_options, parse_formats
 from .imaging.sequences import scene_photos
-from .io.files import write_json
+from .io.json_files import write_json
 from .io.load import as_scene, save_scene
 from .io.result_files import meshlab_project, scene_paths, with_mesh_file, write_images
 from .io.output import output_folder

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from .io.export import export_meshlab_ply, export_textured_mesh, float32_offset, texture_file_names
-from .io.files import atomic_write_bytes, write_json
+from .io.atomic import atomic_write_bytes
+from .io.json_files import write_json
 from .io.result_files import meshlab_project, write_images
 from ._shared.interrupts import held
 from ._shared.parallel import carried

@@ -28,7 +28,7 @@ COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate",
 
 def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
     """Options accepted before or after the command (``o3d-seqcc -q run ...`` and ``o3d-seqcc run ... -q``)."""
-    from ..io.files import MAX_IMAGE_PIXELS
+    from ..io.raster_checks import MAX_IMAGE_PIXELS
 
     d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
     p.add_argument("-v", "--verbose", action="count", default=d(0),
@@ -398,7 +398,7 @@ def _main(argv: list[str] | None) -> int:
             return int(e.code or 0)
         from joblib import parallel_config
 
-        from ..io.files import set_max_image_pixels
+        from ..io.raster_checks import set_max_image_pixels
         from .._shared.progress import show_progress
         from .common import progress_from_args
 

@@ -12,7 +12,7 @@ import argparse
 from dataclasses import replace
 
 from .. import pipeline
-from ..io.files import read_view_images
+from ..io.images import read_view_images
 from .common import add_progress_argument
 from .common import (
     add_scene_arguments,

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import InputError, warn
 from .._shared.parallel import current as current_executor
 from ..scene import Scene
-from .files import atomic_path, atomic_write_bytes, encode_image
+from .atomic import atomic_path, atomic_write_bytes
+from .images import encode_image
 from .meshlab import MeshLayer, save_mlp
 
 __all__ = ["meshlab_project", "scene_paths", "with_mesh_file", "write_images"]

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..io.files import atomic_write_bytes
+from ..io.atomic import atomic_write_bytes
 from ..io.output import add_output_file, check_output_file, write_output_file
 from .page import PageInputs, facts, render_page
 from .validate import page_bytes, read_report_json, read_selection

@@ -21,7 +21,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError, warn
-from ..io.files import open_regular, read_json
+from ..io.json_files import read_json
+from ..io.regular_files import open_regular
 from .schema import upgrade
 
 __all__ = ["page_bytes", "read_report_json", "read_selection", "validate_report"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.camera import inside_image, pixel_index, project_points
-from ..io.files import MAX_COORDINATE
+from ..io.mesh_files import MAX_COORDINATE
 from .settings import VisibilitySettings
 
 __all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud", "in_metres"]
@@ -19,8 +19,8 @@ __all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud", "in_metres"]
 class DepthImage:
     """A view's depth image in metres; a 16-bit depth map is held as its counts.
 
-    :func:`~o3d_seqcc.io.files.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
-    :data:`~o3d_seqcc.io.files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
+    :func:`~o3d_seqcc.io.depth.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
+    :data:`~o3d_seqcc.io.mesh_files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
     and converting at each look-up (:func:`in_metres`, the same elementwise arithmetic) gives the
     same values, bit for bit, without the float image.
 
@@ -58,8 +58,8 @@ class DepthImage:
 
 
 def in_metres(stored: np.ndarray, depth_scale: float) -> np.ndarray:
-    """float64 metres of depth values as stored (:func:`~o3d_seqcc.io.files.read_depth`'s conversion): divided by
-    ``depth_scale``, 0 where not finite, negative or beyond :data:`~o3d_seqcc.io.files.MAX_COORDINATE`."""
+    """float64 metres of depth values as stored (:func:`~o3d_seqcc.io.depth.read_depth`'s conversion): divided by
+    ``depth_scale``, 0 where not finite, negative or beyond :data:`~o3d_seqcc.io.mesh_files.MAX_COORDINATE`."""
     out = np.asarray(stored).astype(np.float64) / float(depth_scale)
     out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
     return out

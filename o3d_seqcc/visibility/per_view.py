@@ -33,7 +33,7 @@ from ..geometry.meshops import bounds, corner_mean, local_origin
 from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud, in_metres
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
-from ..io.files import read_depth
+from ..io.depth import read_depth
 from .masks import mask_image, masked_faces
 from .occlusion import occluded_view, same_positions, take_over
 
