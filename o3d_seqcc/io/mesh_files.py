@@ -27,7 +27,7 @@ __all__ = ["MAX_COORDINATE", "check_mesh_file", "read_corner_uv", "read_mesh", "
 
 #: mesh vertices and point-cloud points beyond +-this (in the scene's units) are not a scan: a corrupt
 #: value (1e300), or the wrong units; every computation on them would overflow or lose all precision
-#: (a depth beyond it is missing, :func:`~o3d_seqcc.io.depth.read_depth`)
+#: (a depth beyond it is missing, :func:`~o3d_seqcc.io.depth.depth_in_metres`)
 MAX_COORDINATE = 1e12
 
 
