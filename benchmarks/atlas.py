@@ -510,7 +510,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     from o3d_seqcc import load_scene
     from o3d_seqcc.correction import correct
-    from o3d_seqcc.io.files import write_image, write_json
+    from o3d_seqcc.io.images import write_image
+    from o3d_seqcc.io.json_files import write_json
 
     baseline = Baseline(args.baseline_commit)  # first: a wrong SHA stops before any work
     atexit.register(baseline.close)  # the worktree goes however the run ends

@@ -93,7 +93,7 @@ def write_colmap(syn, folder: Path, model: str, *, supersample=4, psf=0.5) -> Pa
     import pycolmap
 
     from o3d_seqcc.imaging.arrays import img_as_dtype
-    from o3d_seqcc.io.files import write_image
+    from o3d_seqcc.io.images import write_image
     from o3d_seqcc.evaluation.photometric import apply_photometric
     from o3d_seqcc.synthetic import room
 
@@ -184,7 +184,7 @@ def measure(size: tuple[int, int], views: int, root: Path) -> None:
 
         v = scenes[model].views[0]
         reads = {}
-        for name, fn in (("undistorted", v.load_image), ("plain", lambda: sc.io.files.read_image(v.image))):
+        for name, fn in (("undistorted", v.load_image), ("plain", lambda: sc.io.images.read_image(v.image))):
             ts = []
             for _ in range(20):
                 t = time.perf_counter()

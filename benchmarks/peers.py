@@ -38,7 +38,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.io.files import write_image, write_json
+from o3d_seqcc.io.images import write_image
+from o3d_seqcc.io.json_files import write_json
 from o3d_seqcc.io.meshlab import CENTER_SHIFT, save_mlp
 from o3d_seqcc.scene import Scene
 
@@ -278,7 +279,7 @@ def run_open3d(
     """
     import open3d as o3d
 
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
 
     out = _prepare_out(out_dir, overwrite)
     t0 = time.perf_counter()
@@ -755,7 +756,7 @@ def write_welded_ply(vertices: np.ndarray, faces: np.ndarray, path: str | os.Pat
         ``vertices_in``, ``vertices``, ``faces_in``, ``faces`` (after welding) and ``kept``
         ((F_kept,) int64 ids of the input faces written, in order).
     """
-    from o3d_seqcc.io.files import atomic_write_bytes
+    from o3d_seqcc.io.atomic import atomic_write_bytes
     from o3d_seqcc.geometry.meshops import weld_vertices
 
     v = np.asarray(vertices, dtype=np.float64)
@@ -820,7 +821,7 @@ def write_texrecon_scene(
         if isinstance(src, (str, os.PathLike)) and Path(src).suffix.lower() in (".jpg", ".jpeg", ".png"):
             shutil.copyfile(src, imgs / f"{name}{Path(src).suffix.lower()}")
         else:
-            from o3d_seqcc.io.files import read_image
+            from o3d_seqcc.io.images import read_image
 
             if src is None:
                 arr = v.load_image()
@@ -1140,7 +1141,7 @@ def _crops_picture(path: Path, crops: list, quality: int) -> Path:
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise RuntimeError("JPEG encoding failed")
-    from o3d_seqcc.io.files import atomic_write_bytes
+    from o3d_seqcc.io.atomic import atomic_write_bytes
 
     return atomic_write_bytes(path, buf.tobytes())
 

@@ -68,7 +68,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from o3d_seqcc.io.files import write_json  # noqa: E402
+from o3d_seqcc.io.json_files import write_json  # noqa: E402
 from o3d_seqcc.mappings.compute import compute_mappings  # noqa: E402
 from o3d_seqcc.evaluation.fit import evaluate_method  # noqa: E402
 from o3d_seqcc.cli.correction_flags import t_npm_value  # noqa: E402
@@ -118,7 +118,7 @@ def write_montage(path, images, corrected: dict, views) -> None:
     per view of ``views``; half size, labelled."""
     import cv2
 
-    from o3d_seqcc.io.files import write_image
+    from o3d_seqcc.io.images import write_image
 
     def cell(img, text):
         im = np.asarray(img)

@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
     from peers import meshlab_available, run_meshlab, run_open3d
-    from o3d_seqcc.io.files import write_image
+    from o3d_seqcc.io.images import write_image
     from o3d_seqcc.io.export import export_textured_mesh
     from o3d_seqcc.evaluation.render import raycast, render_selection, render_textured, sharpness
     from o3d_seqcc import load_scene
@@ -326,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
     crops += [np.full_like(crops[0], 255)] * (-len(crops) % 4)
     write_image(pics / f"closeup_view{sv}.png", _grid([crops[i:i + 4] for i in range(0, len(crops), 4)]))
 
-    from o3d_seqcc.io.files import write_json
+    from o3d_seqcc.io.json_files import write_json
 
     write_json(out / "results.json", {"rows": rows, "notes": notes, "t_visibility": t_vis, "t_correct": t_correct})
     print(f"\nwrote {out / 'results.json'} and pictures in {pics}")

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from o3d_seqcc.errors import InputError
-from o3d_seqcc.io.files import atomic_write_bytes
+from o3d_seqcc.io.atomic import atomic_write_bytes
 from o3d_seqcc.io.meshlab import vcg_camera_attributes
 from o3d_seqcc.scene import View
 

@@ -20,7 +20,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .geometry.distortion import Distortion
-from .io.files import check_depth_file, open_regular, read_depth, read_image
+from .io.depth import check_depth_file, read_depth
+from .io.images import read_image
+from .io.regular_files import open_regular
 from .io.missing import MissingImage, check_photo, missing_images, near_miss  # noqa: F401 (near_miss: moved there)
 from .io.masks import check_mask_file, mask_array, mask_distorted, view_mask
 from .io.mesh_files import read_mesh, read_point_cloud

@@ -37,7 +37,8 @@ TREE: dict[str, set[str]] = {
     "texturing": {"__init__", "settings", "selection", "data_costs", "outliers", "charts", "packing", "packing_child", "bake", "fill",
                   "atlas", "fallback", "leveling", "textured_mesh", "memory", "own_uv", "blocks"},
     "evaluation": {"__init__", "metrics", "table2", "fit", "photometric", "semireal", "seams", "sharpness", "render"},
-    "io": {"__init__", "files", "headers", "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
+    "io": {"__init__", "regular_files", "atomic", "raster_checks", "images", "depth", "json_files", "paths", "headers",
+           "mesh_files", "missing", "load", "scene_json", "meshlab", "meshroom", "rgbd_folder",
            "colmap", "openmvs", "nvm", "metashape", "mve", "bundler", "mappings_npz", "output", "manifest",
            "export", "obj_text", "gltf_validator", "masks"},
     "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks",
@@ -51,11 +52,12 @@ TREE: dict[str, set[str]] = {
 MAX_TOP_LEVEL = 8
 
 #: the layers, bottom up: a module imports only from its own layer and the layers below (the pipeline's
-#: one-way flow). io's file layer (files, headers, mesh_files) sits at the bottom, used by the scene model
-#: and the image sequences; its formats (readers and writers) sit above the stages whose objects they write.
+#: one-way flow). io's file layer (regular_files, atomic, raster_checks, images, depth, json_files, paths,
+#: headers, mesh_files, masks, missing) sits at the bottom, used by the scene model and the image sequences; its formats (readers and writers) sit above the stages whose objects they write.
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
-    ("_shared", "io.files", "io.headers", "io.mesh_files", "io.masks", "io.missing"),
+    ("_shared", "io.regular_files", "io.atomic", "io.raster_checks", "io.images", "io.depth", "io.json_files",
+     "io.paths", "io.headers", "io.mesh_files", "io.masks", "io.missing"),
     ("imaging",),
     ("geometry",),
     ("scene",),

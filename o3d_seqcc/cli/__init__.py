@@ -60,7 +60,7 @@ def _main(argv: list[str] | None) -> int:
             return int(e.code or 0)
         from joblib import parallel_config
 
-        from ..io.files import set_max_image_pixels
+        from ..io.raster_checks import set_max_image_pixels
         from .._shared.progress import show_progress
         from .console import progress_from_args
 

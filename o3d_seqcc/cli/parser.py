@@ -14,7 +14,7 @@ COMMANDS: tuple[str, ...] = ("info", "mappings", "correct", "seams", "evaluate",
 
 def _add_global_options(p: argparse.ArgumentParser, *, suppress: bool) -> None:
     """Options accepted before or after the command (``o3d-seqcc -q run ...`` and ``o3d-seqcc run ... -q``)."""
-    from ..io.files import MAX_IMAGE_PIXELS
+    from ..io.raster_checks import MAX_IMAGE_PIXELS
 
     d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
     p.add_argument("-v", "--verbose", action="count", default=d(0),

@@ -12,7 +12,7 @@ import argparse
 from dataclasses import replace
 
 from .. import pipeline
-from ..io.files import read_view_images
+from ..io.images import read_view_images
 from .console import add_progress_argument
 from .correction_flags import add_split_argument
 from .scene_flags import add_scene_arguments, print_run_summary

@@ -21,7 +21,8 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..io.files import atomic_write_bytes, write_image
+from ..io.atomic import atomic_write_bytes
+from ..io.images import write_image
 from ..geometry.meshops import local_origin
 from ..scene import View
 from .sharpness import gradient_similarity, sharpness  # noqa: F401 - public here too

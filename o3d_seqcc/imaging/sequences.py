@@ -164,7 +164,7 @@ class SceneImages(ImageSequence):
 
     def dtypes(self) -> list[np.dtype]:
         """uint8 / uint16 per view, from the file headers (PNG, JPEG) or the in-memory pixels."""
-        from ..io.files import image_dtype
+        from ..io.images import image_dtype
 
         return [np.asarray(v.pixels).dtype if v.pixels is not None else image_dtype(v.image) for v in self.views]
 

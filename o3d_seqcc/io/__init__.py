@@ -4,9 +4,29 @@ Scene formats (a mesh + registered views): ``scene_json`` (the native ``scene.js
 ``meshlab`` (MeshLab ``.mlp`` projects), ``rgbd_folder`` (Open3D RGB-D folders), ``colmap``
 (COLMAP text and binary models), ``meshroom`` (Meshroom / AliceVision ``cameras.sfm``).
 :func:`o3d_seqcc.io.load.load_scene` detects the format and calls its loader
-(:data:`o3d_seqcc.io.load.SCENE_FORMATS`); :mod:`o3d_seqcc.io.files` holds the file primitives
-(images, depth maps, JSON; every write atomic) that all of them use.
+(:data:`o3d_seqcc.io.load.SCENE_FORMATS`). Below them, the file layer that all of them use, one
+module an idea: :mod:`~o3d_seqcc.io.regular_files` (opening input files), :mod:`~o3d_seqcc.io.atomic`
+(every write atomic), :mod:`~o3d_seqcc.io.raster_checks` (the pixel budget, complete files),
+:mod:`~o3d_seqcc.io.images` (photos), :mod:`~o3d_seqcc.io.depth` (depth maps), :mod:`~o3d_seqcc.io.json_files`,
+:mod:`~o3d_seqcc.io.paths` (paths named by scene files), :mod:`~o3d_seqcc.io.mesh_files` (meshes and
+point clouds), :mod:`~o3d_seqcc.io.headers` (what a file's first bytes promise).
 
-This package's ``__init__`` imports nothing, so the scene model can use
-:mod:`o3d_seqcc.io.files` without an import loop.
+Every image, depth map, mesh and point cloud is read through that layer, with the same steps for
+every file, before any decoder sees it:
+
+1. **regular files only** (:func:`~o3d_seqcc.io.regular_files.open_regular`): a FIFO, a device, a socket or a
+   folder is an error naming it, found without blocking (opened non-blocking and checked with ``fstat``: a
+   named pipe never hangs a run);
+2. **any path bytes**: files are read through their descriptor (OpenCV decodes from memory, ``cv2.imdecode``;
+   Open3D gets an ASCII alias of the open file), so a folder name that is not UTF-8 works as in the shell;
+3. **budgets from the header, before decoding**: images and depth maps have at most
+   :data:`~o3d_seqcc.io.raster_checks.MAX_IMAGE_PIXELS` pixels (``--max-image-pixels``); a PLY / OFF / STL
+   header may not declare more elements than its file can hold (:mod:`o3d_seqcc.io.headers`);
+4. **complete files**: a JPEG's main image must end with its end-of-image marker after its first
+   scan (an EXIF thumbnail's marker does not count), a PNG's chunks must reach IEND;
+5. **sane values**: mesh vertices finite and within :data:`~o3d_seqcc.io.mesh_files.MAX_COORDINATE`;
+   point-cloud points that are not are dropped with a warning; depth that is not finite is "missing".
+
+This package's ``__init__`` imports nothing, so the scene model can use the file layer without an
+import loop.
 """

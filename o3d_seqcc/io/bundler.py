@@ -49,7 +49,8 @@ from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
-from .files import join_path, open_regular
+from .paths import join_path
+from .regular_files import open_regular
 from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["HEADER", "detect", "find_list", "load"]

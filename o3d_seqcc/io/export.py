@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import sample_bilinear
-from .files import atomic_path, atomic_write_bytes
+from .atomic import atomic_path, atomic_write_bytes
 from .obj_text import obj_lines
 from ..geometry.meshops import float32_offset, vertex_normals
 from ..geometry.orientation import UP_AXES

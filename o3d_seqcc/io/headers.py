@@ -2,7 +2,8 @@
 
 Pure functions over bytes (or a binary file object): the structure of JPEG and PNG files (is the
 main image complete?), the size an OpenEXR header declares, and the element counts of PLY, OFF
-and binary STL headers against the file's size. :mod:`o3d_seqcc.io.files` calls them before it
+and binary STL headers against the file's size. The file layer (:mod:`o3d_seqcc.io.raster_checks`,
+:mod:`o3d_seqcc.io.images`, :mod:`o3d_seqcc.io.depth`, :mod:`o3d_seqcc.io.mesh_files`) calls them before it
 hands a file to a decoder (OpenCV, Pillow, Open3D), so that a cut or hostile file is an error
 naming it, never a grey half-image, a multi-gigabyte allocation or a ``MemoryError``.
 """

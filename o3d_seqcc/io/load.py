@@ -20,7 +20,7 @@ from ..errors import InputError, MissingImagesError, warn
 from .._shared.registry import Registry
 from ..scene import Scene, View, check_scene_argument
 from . import bundler, colmap, meshlab, meshroom, metashape, mve, nvm, openmvs, rgbd_folder, scene_json
-from .files import find_file
+from .paths import find_file
 from .masks import attach_masks
 from .missing import MissingImage, missing_images
 

@@ -19,7 +19,8 @@ from ..mappings.compute import Mappings
 from ..mappings.pairs import LazyPairs, PairMapping, PairSource
 from ..scene import Mesh
 from ..visibility.compute import Visibility
-from .files import atomic_write_bytes, to_jsonable
+from .atomic import atomic_write_bytes
+from .json_files import to_jsonable
 
 __all__ = ["load_mappings", "save_mappings"]
 

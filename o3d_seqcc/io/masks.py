@@ -28,7 +28,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import InputError, warn
-from .files import _image_header, _read_all, open_regular
+from .images import image_header
+from .raster_checks import read_bounded
+from .regular_files import open_regular
 
 __all__ = ["MASK_SUFFIXES", "attach_masks", "check_mask_file", "find_mask", "mask_array", "mask_candidates",
            "mask_distorted", "read_mask", "view_mask"]
@@ -56,7 +58,7 @@ def check_mask_file(path: str | os.PathLike, *, shape: tuple[int, int], view: st
     path = Path(path)
     try:
         with open_regular(path, "mask") as f:
-            w, h, _ = _image_header(path, f, os.fstat(f.fileno()).st_size, what="mask")
+            w, h, _ = image_header(path, f, os.fstat(f.fileno()).st_size, what="mask")
     except InputError as e:
         raise InputError(f"view {view!r}: {e}") from None
     if (h, w) != tuple(shape):
@@ -75,8 +77,8 @@ def read_mask(path: str | os.PathLike, *, shape: tuple[int, int], view: str) -> 
 
     path = Path(path)
     try:
-        data = _read_all(path, "mask")
-        w, h, _ = _image_header(path, io.BytesIO(data), len(data), what="mask", full=True)
+        data = read_bounded(path, "mask")
+        w, h, _ = image_header(path, io.BytesIO(data), len(data), what="mask", full=True)
     except InputError as e:
         raise InputError(f"view {view!r}: {e}") from None
     if (h, w) != tuple(shape):

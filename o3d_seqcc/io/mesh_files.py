@@ -1,10 +1,10 @@
-"""Meshes and point clouds through the file layer (:mod:`o3d_seqcc.io.files`), checked before and after Open3D reads them.
+"""Meshes and point clouds through the file layer (:mod:`o3d_seqcc.io`), checked before and after Open3D reads them.
 
 Before: a regular file (no FIFO, device or folder; found without blocking), not empty, whose
 PLY / OFF / STL header declares no more elements than the file can hold
 (:func:`o3d_seqcc.io.headers.mesh_header_problem`: a 250-byte header declaring 2e9 vertices is
 an error, not a 24 GB allocation). Open3D reads the file through the open descriptor when its
-name is not UTF-8. After: vertices finite and within :data:`~o3d_seqcc.io.files.MAX_COORDINATE`,
+name is not UTF-8. After: vertices finite and within :data:`MAX_COORDINATE`,
 face indices inside the vertex array; point-cloud points that are not are dropped with a warning.
 """
 
@@ -20,10 +20,15 @@ from typing import BinaryIO, Iterator
 import numpy as np
 
 from ..errors import InputError, warn
-from . import files, headers
-from .files import open_regular
+from . import headers
+from .regular_files import file_size, open_regular
 
-__all__ = ["check_mesh_file", "read_corner_uv", "read_mesh", "read_point_cloud"]
+__all__ = ["MAX_COORDINATE", "check_mesh_file", "read_corner_uv", "read_mesh", "read_point_cloud"]
+
+#: mesh vertices and point-cloud points beyond +-this (in the scene's units) are not a scan: a corrupt
+#: value (1e300), or the wrong units; every computation on them would overflow or lose all precision
+#: (a depth beyond it is missing, :func:`~o3d_seqcc.io.depth.depth_in_metres`)
+MAX_COORDINATE = 1e12
 
 
 @contextmanager
@@ -54,7 +59,7 @@ def _decoder_name(path: Path, f: BinaryIO) -> Iterator[str]:
 
 
 def _check_geometry_header(path: Path, f: BinaryIO, what: str) -> int:
-    size = files._size(f)
+    size = file_size(f)
     if size == 0:
         raise InputError(f"{what} {path} is an empty file")
     f.seek(0)
@@ -75,11 +80,11 @@ def check_mesh_file(path: str | os.PathLike, what: str = "mesh") -> Path:
 
 def _far(path: Path, what: str, v: np.ndarray) -> None:
     a = np.abs(v)
-    bad = ~((a[:, 0] <= files.MAX_COORDINATE) & (a[:, 1] <= files.MAX_COORDINATE) & (a[:, 2] <= files.MAX_COORDINATE))
+    bad = ~((a[:, 0] <= MAX_COORDINATE) & (a[:, 1] <= MAX_COORDINATE) & (a[:, 2] <= MAX_COORDINATE))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         x = v[i]
-        kind = "non-finite" if not np.all(np.isfinite(x)) else f"beyond +-{files.MAX_COORDINATE:.0e}"
+        kind = "non-finite" if not np.all(np.isfinite(x)) else f"beyond +-{MAX_COORDINATE:.0e}"
         raise InputError(f"{what} {path} has {int(bad.sum())} vertices with {kind} coordinates (vertex {i} at "
                          f"({x[0]:.3g}, {x[1]:.3g}, {x[2]:.3g})): corrupt values, or the wrong units; clean the mesh "
                          "(remove those vertices)")
@@ -99,7 +104,7 @@ def read_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarr
     ------
     InputError
         Missing, not a regular file, empty, a header declaring more elements than the file holds,
-        no triangles, vertices that are not finite or beyond :data:`~o3d_seqcc.io.files.MAX_COORDINATE`, face indices
+        no triangles, vertices that are not finite or beyond :data:`MAX_COORDINATE`, face indices
         outside the vertex array.
     """
     import open3d as o3d
@@ -176,7 +181,7 @@ def read_corner_uv(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndar
 def read_point_cloud(path: str | os.PathLike) -> np.ndarray:
     """(M, 3) float64 points of a point-cloud file (PLY, PCD, ...), checked like :func:`read_mesh`.
 
-    Points that are not finite or lie beyond :data:`~o3d_seqcc.io.files.MAX_COORDINATE` are dropped with a warning
+    Points that are not finite or lie beyond :data:`MAX_COORDINATE` are dropped with a warning
     giving their number (organised clouds mark missing points with NaN).
 
     Raises
@@ -195,10 +200,10 @@ def read_point_cloud(path: str | os.PathLike) -> np.ndarray:
     pts = np.array(pc.points, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         raise InputError(f"point cloud {path} has no points (unreadable or empty file); give a PLY/PCD with points")
-    ok = (np.abs(pts) <= files.MAX_COORDINATE).all(axis=1)
+    ok = (np.abs(pts) <= MAX_COORDINATE).all(axis=1)
     if not ok.all():
         warn(f"point cloud {path}: {int((~ok).sum())} of {len(pts)} points are not finite or lie beyond "
-             f"+-{files.MAX_COORDINATE:.0e}: dropped")
+             f"+-{MAX_COORDINATE:.0e}: dropped")
         pts = pts[ok]
         if not len(pts):
             raise InputError(f"point cloud {path} has no finite point; give a PLY/PCD with points")

@@ -45,7 +45,8 @@ from ..geometry.distortion import Distortion
 from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..scene import Scene, View
-from .files import atomic_write_bytes, join_path
+from .atomic import atomic_write_bytes
+from .paths import join_path
 
 __all__ = [
     "CENTER_SHIFT",

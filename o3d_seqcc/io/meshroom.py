@@ -40,7 +40,7 @@ from ..geometry.distortion import Distortion
 from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..scene import Scene, View
-from .files import find_file
+from .paths import find_file
 from .masks import attach_masks
 
 __all__ = ["detect", "load"]

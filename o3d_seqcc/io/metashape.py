@@ -70,7 +70,7 @@ from .._shared.numbers import check_numbers
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
-from .files import open_regular
+from .regular_files import open_regular
 from .missing import MissingImage, missing_images
 
 __all__ = ["IMAGE_SUFFIXES", "MAX_XML_BYTES", "detect", "load"]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError, MissingImagesError
-from .files import check_image_file
+from .images import check_image_file
 
 __all__ = ["MissingImage", "check_photo", "missing_images", "near_miss"]
 
@@ -75,7 +75,7 @@ def near_miss(path: Path) -> str:
 
 
 def check_photo(view: str, path: str | os.PathLike, *, where: str = "") -> tuple[int, int] | MissingImage:
-    """The size of a photo from its header (:func:`~o3d_seqcc.io.files.check_image_file`), or what is wrong with it.
+    """The size of a photo from its header (:func:`~o3d_seqcc.io.images.check_image_file`), or what is wrong with it.
 
     Parameters
     ----------

@@ -72,7 +72,7 @@ from .._shared.numbers import parse_number
 from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import MAX_NAME_LENGTH, Scene, View
-from .files import open_regular
+from .regular_files import open_regular
 from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["CAM_IMAGE_SUFFIXES", "EMBEDDINGS", "calibration", "detect", "detect_cam_folder", "lens", "load",

@@ -60,7 +60,8 @@ from ..errors import InputError
 from ..geometry.distortion import Distortion
 from ..scene import Scene, View
 from .colmap import qvec_to_rotmat
-from .files import join_path, open_regular
+from .paths import join_path
+from .regular_files import open_regular
 from .missing import MissingImage, check_photo, missing_images
 
 __all__ = ["MAX_COUNT", "detect", "load"]

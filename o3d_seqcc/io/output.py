@@ -48,7 +48,7 @@ from typing import Iterable, Iterator
 
 from ..errors import InputError, warn
 from .._shared.interrupts import Terminated, interruptible
-from .files import atomic_path, atomic_write_bytes, default_mode
+from .atomic import atomic_path, atomic_write_bytes, default_mode
 from .manifest import MANIFEST, listing as _listing, manifest_bytes as _manifest, own_files as _own_files
 
 __all__ = ["MANIFEST", "Terminated", "add_output_file", "check_output", "check_output_file", "interruptible",
@@ -544,7 +544,7 @@ def write_output_file(path: str | os.PathLike, data: bytes, *, option: str = "--
 
 def write_output_json(path: str | os.PathLike, obj, *, option: str = "--json", inputs: Iterable = ()) -> Path:
     """``obj`` as JSON (numpy types converted, no NaN) to the output file ``path`` (:func:`output_file`)."""
-    from .files import to_jsonable
+    from .json_files import to_jsonable
 
     text = json.dumps(to_jsonable(obj), indent=1, allow_nan=False) + "\n"
     return write_output_file(path, text.encode("utf-8"), option=option, inputs=inputs)

@@ -31,7 +31,8 @@ import numpy as np
 from ..geometry.distortion import Distortion
 from ..errors import InputError
 from ..scene import FORMAT, Scene, View
-from .files import find_file, join_path, parse_json, write_json
+from .json_files import parse_json, write_json
+from .paths import find_file, join_path
 
 __all__ = ["FILE_NAME", "FORMAT", "detect", "load", "save"]
 
@@ -180,7 +181,7 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
     path = Path(path)
     if scene.in_memory:
         raise InputError(f"cannot save an in-memory scene as {path}: its mesh or images have no files; write them "
-                         "first (o3d_seqcc.io.files.write_image, open3d.io.write_triangle_mesh) and build the scene "
+                         "first (o3d_seqcc.io.images.write_image, open3d.io.write_triangle_mesh) and build the scene "
                          "from the files")
     root = path.parent
     root.mkdir(parents=True, exist_ok=True)
@@ -203,7 +204,7 @@ def save(scene: Scene, path: str | os.PathLike) -> Path:
             d["distortion"] = v.distortion.to_dict()
         if v.mask_map is not None:
             raise InputError(f"cannot save view {v.name!r} as {path}: its mask is in memory; write it as an image "
-                             "(o3d_seqcc.io.files.write_image) and give its path (View.mask)")
+                             "(o3d_seqcc.io.images.write_image) and give its path (View.mask)")
         if v.mask is not None:
             d["mask"] = _rel(v.mask, root)
             if v.mask_invert:

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from ..io.files import atomic_write_bytes
+from ..io.atomic import atomic_write_bytes
 from .page import PageInputs, render_page
 from .validate import page_bytes
 

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from ..imaging.arrays import img_as_uint8
-from ..io.files import encode_image
+from ..io.images import encode_image
 
 __all__ = [
     "CHANNEL_RGB",

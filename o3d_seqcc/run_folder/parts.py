@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import InputError, warn
 from .._shared.parallel import current as current_executor
 from ..scene import Scene
-from ..io.files import atomic_path, atomic_write_bytes, encode_image
+from ..io.atomic import atomic_path, atomic_write_bytes
+from ..io.images import encode_image
 from ..io.meshlab import MeshLayer, save_mlp
 from .layout import MESHLAB_PROJECT
 

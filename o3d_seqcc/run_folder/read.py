@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, warn
-from ..io.files import open_regular, read_json
+from ..io.json_files import read_json
+from ..io.regular_files import open_regular
 from ..io.output import add_output_file, check_output_file, write_output_file
 from ..report import metrics_sample
 from ..report.page import PageInputs, facts, render_page

@@ -36,7 +36,9 @@ from ..evaluation.seams import selection_seams_of
 from ..geometry.orientation import up_axis_transform
 from ..io.export import (DEFAULT_FORMATS, check_export_options, export_meshlab_ply, export_textured_mesh,
                          float32_offset, parse_formats, texture_file_names)
-from ..io.files import atomic_write_bytes, write_image, write_json
+from ..io.atomic import atomic_write_bytes
+from ..io.images import write_image
+from ..io.json_files import write_json
 from ..io.meshlab import save_mlp
 from ..io.load import save_scene
 from ..io.output import output_folder

@@ -37,8 +37,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import img_as_dtype
-from ..io import files as iofiles
-from ..io.files import atomic_path, atomic_write_bytes, read_image, write_image, write_json
+from ..io import raster_checks
+from ..io.atomic import atomic_path, atomic_write_bytes
+from ..io.images import read_image, write_image
+from ..io.json_files import write_json
 from ..io.load import load_scene, save_scene
 from ..io.output import check_output, output_folder
 from ..evaluation.photometric import (
@@ -254,9 +256,9 @@ def make_synthetic_scene(
         raise InputError(f"origin must be three finite numbers (metres), got {origin!r}")
     if n_views > 100:
         raise InputError(f"n_views must be <= 100 (names are v00..v99), got {n_views}")
-    if int(width) * int(height) > iofiles.MAX_IMAGE_PIXELS:
+    if int(width) * int(height) > raster_checks.MAX_IMAGE_PIXELS:
         raise InputError(f"width x height = {int(width) * int(height)} pixels, over the limit of "
-                         f"{iofiles.MAX_IMAGE_PIXELS} pixels (--max-image-pixels); choose smaller images")
+                         f"{raster_checks.MAX_IMAGE_PIXELS} pixels (--max-image-pixels); choose smaller images")
     check_output(out_dir, overwrite=overwrite)  # before the work: never into a file or over files not ours
     import open3d as o3d
 

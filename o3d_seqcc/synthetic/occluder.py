@@ -33,7 +33,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..imaging.arrays import delta_e_2000
-from ..io.files import read_image, write_image, write_json
+from ..io.images import read_image, write_image
+from ..io.json_files import write_json
 from ..io.load import load_scene, save_scene
 from ..io.output import output_folder
 from ..scene import Scene, View

@@ -11,18 +11,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.camera import inside_image, pixel_index, project_points
-from ..io.files import MAX_COORDINATE
+from ..io.depth import depth_in_metres
 from .settings import VisibilitySettings
 
-__all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud", "in_metres"]
+__all__ = ["DepthImage", "depth_edges", "depth_from_point_cloud"]
 
 class DepthImage:
     """A view's depth image in metres; a 16-bit depth map is held as its counts.
 
-    :func:`~o3d_seqcc.io.files.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
-    :data:`~o3d_seqcc.io.files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
-    and converting at each look-up (:func:`in_metres`, the same elementwise arithmetic) gives the
-    same values, bit for bit, without the float image.
+    :func:`~o3d_seqcc.io.depth.read_depth` gives ``counts / depth_scale`` in float64 (0 beyond
+    :data:`~o3d_seqcc.io.mesh_files.MAX_COORDINATE`); holding the counts (2 bytes a pixel instead of 8)
+    and converting at each look-up (:func:`~o3d_seqcc.io.depth.depth_in_metres`, the same function)
+    gives the same values, bit for bit, without the float image.
 
     Parameters
     ----------
@@ -50,19 +50,11 @@ class DepthImage:
         """(n,) float64 depths at the pixels ``(rows, cols)``."""
         if self.counts is None:
             return self.depth[rows, cols]
-        return in_metres(self.counts[rows, cols], self.scale)
+        return depth_in_metres(self.counts[rows, cols], self.scale)
 
     def image(self) -> np.ndarray:
         """(H, W) float64: the whole image."""
-        return self.depth if self.counts is None else in_metres(self.counts, self.scale)
-
-
-def in_metres(stored: np.ndarray, depth_scale: float) -> np.ndarray:
-    """float64 metres of depth values as stored (:func:`~o3d_seqcc.io.files.read_depth`'s conversion): divided by
-    ``depth_scale``, 0 where not finite, negative or beyond :data:`~o3d_seqcc.io.files.MAX_COORDINATE`."""
-    out = np.asarray(stored).astype(np.float64) / float(depth_scale)
-    out[~np.isfinite(out) | (out < 0) | (out > MAX_COORDINATE)] = 0.0
-    return out
+        return self.depth if self.counts is None else depth_in_metres(self.counts, self.scale)
 
 
 def depth_from_point_cloud(

@@ -30,10 +30,10 @@ import numpy as np
 
 from ..geometry.camera import project_columns
 from ..geometry.meshops import bounds, corner_mean, local_origin
-from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud, in_metres
+from .depthmaps import DepthImage, depth_edges, depth_from_point_cloud
 from ..errors import InputError, warn
 from ..imaging.sequences import LRUCache
-from ..io.files import read_depth
+from ..io.depth import depth_in_metres, read_stored_depth
 from .masks import mask_image, masked_faces
 from .occlusion import occluded_view, same_positions, take_over
 
@@ -303,10 +303,10 @@ def _depth_image(view, opts: dict):
     dist = view.distortion
     if (view.depth_map is None and view.depth is not None
             and (dist is None or not dist.depth or dist.is_zero)):  # load_depth is the map in metres
-        stored = read_depth(view.depth, view.depth_scale, shape=(view.height, view.width), stored=True)
+        stored = read_stored_depth(view.depth, shape=(view.height, view.width))
         if stored.dtype == np.uint16:
             return DepthImage(counts=stored, scale=view.depth_scale), "depth"
-        return DepthImage(in_metres(stored, view.depth_scale)), "depth"
+        return DepthImage(depth_in_metres(stored, view.depth_scale)), "depth"
     D = view.load_depth()  # raises InputError naming the file on wrong size / dtype
     if D is not None:
         return DepthImage(D), "depth"

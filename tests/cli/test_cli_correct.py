@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from o3d_seqcc.io.files import read_image, write_image
+from o3d_seqcc.io.images import read_image, write_image
 from o3d_seqcc.cli import main
 from o3d_seqcc import load_scene, save_scene
 

@@ -12,7 +12,7 @@ import pytest
 
 import o3d_seqcc as sc
 from o3d_seqcc.cli import main
-from o3d_seqcc.io.files import write_image
+from o3d_seqcc.io.images import write_image
 
 FAST = ["--t-npm", "50", "--atlas-size", "512", "--format", "glb", "--fallback", "flat", "--no-seams"]
 

@@ -29,7 +29,7 @@ def test_texture_writes_outputs_and_refuses_existing_folder(syn, tmp_path, capsy
         assert (out / name).is_file(), name
     rep = _report(out)
     # selection picture (Figure 9a) from the view that sees the most faces, at that view's size
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
 
     pic = read_image(out / "selection.png")
     assert pic.shape == (syn.scene.views[0].height, syn.scene.views[0].width, 3)

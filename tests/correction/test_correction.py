@@ -254,7 +254,7 @@ def test_lut_apply_levels_matches_float_path(rng, dtype):
 
 def test_seqcc_on_a_synthetic_room_gets_close_to_ground_truth(tmp_path):
     import o3d_seqcc.synthetic as synthetic
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
     from o3d_seqcc.evaluation.metrics import image_delta_e
 
     ss = synthetic.make_synthetic_scene(tmp_path / "s", n_views=6, width=160, height=120, seed=3)
@@ -306,7 +306,7 @@ def test_seqcc_stays_close_to_ground_truth_with_pose_error(tmp_path):
     recovers the true colours, while a conditional-mean CMF (vandermonde) that scores well on the
     misregistered pairs themselves drifts back toward the uncorrected error."""
     import o3d_seqcc.synthetic as synthetic
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
     from o3d_seqcc.mappings.compute import compute_mappings
     from o3d_seqcc.evaluation.metrics import image_delta_e
 

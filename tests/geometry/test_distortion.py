@@ -20,7 +20,7 @@ from o3d_seqcc import InputError, load_scene
 from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.geometry.distortion import Distortion
 from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_float, sample_colors
-from o3d_seqcc.io.files import read_image, write_image
+from o3d_seqcc.io.images import read_image, write_image
 from o3d_seqcc.io.meshlab import save_mlp
 from o3d_seqcc.evaluation.metrics import image_delta_e
 from o3d_seqcc.evaluation.render import render_textured

@@ -170,7 +170,8 @@ def test_non_utf8_folder_names_work(S, tmp_path):
     r = python(f"""
         import os, shutil, sys
         import o3d_seqcc as sc
-        from o3d_seqcc.io.files import read_image, read_depth
+        from o3d_seqcc.io.depth import read_depth
+        from o3d_seqcc.io.images import read_image
         src = os.fsencode({str(S)!r})
         dst = os.fsencode({str(tmp_path)!r}) + b"/sc\\xe9ne"
         shutil.copytree(src, dst)
@@ -301,7 +302,8 @@ def test_loader_refuses(S, name, prep, match):
 def test_max_image_pixels_applies_to_depth_maps(S, capsys):
     assert main(["-q", "--max-image-pixels", "2000", "info", str(S)]) == 2
     assert "over the limit of 2000 pixels" in capsys.readouterr().err
-    from o3d_seqcc.io.files import read_depth, set_max_image_pixels
+    from o3d_seqcc.io.depth import read_depth
+    from o3d_seqcc.io.raster_checks import set_max_image_pixels
 
     old = set_max_image_pixels(1000)
     try:
@@ -337,7 +339,7 @@ def test_cut_jpeg_with_a_thumbnail_end_marker_in_its_tail_is_truncated(S, tmp_pa
     cut = thumb_end + 60000  # the thumbnail's EOI lies in the last 64 KB of the cut file
     assert len(data) > cut + 1000
     jpg.write_bytes(data[:cut])
-    from o3d_seqcc.io.files import check_image_file, read_image
+    from o3d_seqcc.io.images import check_image_file, read_image
 
     for fn in (check_image_file, read_image):
         with pytest.raises(InputError, match=r"v01\.jpg is truncated"):

@@ -38,7 +38,7 @@ def test_png_exif_orientation_found_without_decoding_twice(tmp_path, monkeypatch
     headers, not by Pillow decoding the image (which doubled every photo read)."""
     from PIL import ImageFile
 
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
 
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)

@@ -10,7 +10,7 @@ import pytest
 
 import o3d_seqcc.synthetic as sc
 from o3d_seqcc.cli import main
-from o3d_seqcc.io.files import read_image
+from o3d_seqcc.io.images import read_image
 from o3d_seqcc.synthetic.occluder import add_occluder, load_occluder, occluder_faces
 from o3d_seqcc.texturing import load_textured_mesh
 

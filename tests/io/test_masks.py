@@ -14,7 +14,7 @@ import pytest
 import o3d_seqcc.synthetic as sc
 from o3d_seqcc.errors import InputError, O3dSeqccWarning
 from o3d_seqcc.geometry.distortion import Distortion
-from o3d_seqcc.io.files import write_image
+from o3d_seqcc.io.images import write_image
 from o3d_seqcc.io.load import load_scene, save_scene
 from o3d_seqcc.scene import Scene
 

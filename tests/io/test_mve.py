@@ -18,7 +18,7 @@ import o3d_seqcc as sc
 from o3d_seqcc import InputError, load_scene
 from o3d_seqcc.cli import main
 from o3d_seqcc.geometry.camera import project_points
-from o3d_seqcc.io.files import read_image, write_image
+from o3d_seqcc.io.images import read_image, write_image
 
 # ------------------------------------------------------------------------------ the writers (from the specs)
 

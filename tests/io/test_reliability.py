@@ -27,8 +27,9 @@ import o3d_seqcc as sc
 from o3d_seqcc import InputError
 from o3d_seqcc.cli import main
 from o3d_seqcc.io import output as output_mod
-from o3d_seqcc.io.files import MAX_IMAGE_PIXELS, check_image_file, read_image
+from o3d_seqcc.io.images import check_image_file, read_image
 from o3d_seqcc.io.output import MANIFEST, check_output, output_folder
+from o3d_seqcc.io.raster_checks import MAX_IMAGE_PIXELS
 
 FAST = ["--t-npm", "50", "--atlas-size", "1024", "--no-seams", "--selection-view", "none"]
 
@@ -120,7 +121,7 @@ def test_decompression_bomb_refused_before_decoding(S, capsys):
 def test_max_image_pixels_option(S, capsys):
     assert main(["-q", "info", str(S), "--max-image-pixels", "1000"]) == 2
     assert "= 19200 pixels, over the limit of 1000 pixels" in capsys.readouterr().err
-    assert output_mod is not None and MAX_IMAGE_PIXELS == sc.io.files.MAX_IMAGE_PIXELS == 100_000_000  # restored
+    assert output_mod is not None and MAX_IMAGE_PIXELS == sc.io.raster_checks.MAX_IMAGE_PIXELS == 100_000_000  # restored
     assert main(["-q", "info", str(S)]) == 0
 
 
@@ -239,16 +240,19 @@ def test_concurrent_runs_on_one_out_the_second_fails_clearly(tmp_path):
 
 
 def test_full_or_read_only_disk_is_a_message(S, tmp_path, monkeypatch, capsys):
-    import o3d_seqcc.io.files as files
+    import o3d_seqcc.io.atomic as atomic
+    import o3d_seqcc.io.images as images
+    import o3d_seqcc.io.json_files as json_files
 
-    real = files.atomic_write_bytes
+    real = atomic.atomic_write_bytes
 
     def full(path, data):
         if "report" in str(path):
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real(path, data)
 
-    monkeypatch.setattr(files, "atomic_write_bytes", full)
+    for module in (images, json_files):  # the writers that look atomic_write_bytes up in their module
+        monkeypatch.setattr(module, "atomic_write_bytes", full)
     assert main(["-q", "correct", str(S), "--out", str(tmp_path / "f"), "--t-npm", "50", "--no-metrics"]) == 2
     err = capsys.readouterr().err
     assert "cannot write the output folder" in err and "the disk is full" in err

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from o3d_seqcc.io.meshlab import CENTER_SHIFT, MeshLayer, load_mlp, project_meshlab, save_mlp, vcg_camera_attributes
-from o3d_seqcc.io.files import write_image
+from o3d_seqcc.io.images import write_image
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.scene import Scene, View
 

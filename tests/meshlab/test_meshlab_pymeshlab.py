@@ -28,7 +28,7 @@ from o3d_seqcc import pipeline
 from o3d_seqcc.geometry.camera import project_points
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.imaging.arrays import delta_e_2000, img_as_float, sample_colors
-from o3d_seqcc.io.files import read_image
+from o3d_seqcc.io.images import read_image
 from o3d_seqcc.io.meshlab import MeshLayer, save_mlp
 from o3d_seqcc.scene import Scene, View
 from o3d_seqcc.texturing import TextureSettings
@@ -112,7 +112,7 @@ def test_project_saved_by_pymeshlab_loads_in_ours(tmp_path):
         ext[:3, 3] = -R @ np.array(C)
         K = np.array([[f[0], 0, c[0]], [0, f[1], c[1]], [0, 0, 1]])
         img = tmp_path / f"v{k}.png"
-        sc.io.files.write_image(img, np.zeros((h, w, 3), np.uint8))
+        sc.io.images.write_image(img, np.zeros((h, w, 3), np.uint8))
         views.append(View(name=f"v{k}", image=img, intrinsic=K, extrinsic=ext, width=w, height=h))
     trimesh.creation.box().export(tmp_path / "box.ply")
     scene = Scene(mesh=tmp_path / "box.ply", views=tuple(views))

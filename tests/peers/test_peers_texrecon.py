@@ -98,7 +98,7 @@ def test_scene_folder(tmp_path):
     # fixed-width names: "view_0001" must not be a prefix of another view's files
     assert names == sorted([f"view_{i:04d}.cam" for i in range(12)] + [f"view_{i:04d}.png" for i in range(12)])
     assert info["names"][10] == "view_0010"
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
 
     np.testing.assert_array_equal(read_image(info["images"] / "view_0007.png"), views[7].pixels)
     assert (info["images"] / "view_0003.cam").read_text() == texrecon_cam(views[3])

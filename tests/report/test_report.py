@@ -215,7 +215,7 @@ def test_correct_writes_a_report_with_the_full_table(scene, tmp_path):
 def test_the_report_renders_in_headless_chromium(run_dir, tmp_path):
     from scipy import ndimage
 
-    from o3d_seqcc.io.files import read_image
+    from o3d_seqcc.io.images import read_image
 
     shot = tmp_path / "shot.png"
     with tempfile.TemporaryDirectory() as profile:

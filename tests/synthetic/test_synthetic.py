@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from o3d_seqcc import load_scene
-from o3d_seqcc.io.files import read_depth, read_image
+from o3d_seqcc.io.depth import read_depth
+from o3d_seqcc.io.images import read_image
 from o3d_seqcc.errors import InputError
 from o3d_seqcc.synthetic import ALBEDO_RANGE, apply_photometric, load_synthetic, make_synthetic_scene
 from o3d_seqcc.synthetic.room import ROOM

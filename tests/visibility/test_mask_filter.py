@@ -13,7 +13,7 @@ import pytest
 import o3d_seqcc.synthetic as sc
 from o3d_seqcc.cli import main
 from o3d_seqcc.errors import InputError, O3dSeqccWarning
-from o3d_seqcc.io.files import write_image
+from o3d_seqcc.io.images import write_image
 from o3d_seqcc.scene import Scene
 from o3d_seqcc.visibility.compute import compute_visibility
 from o3d_seqcc.visibility.masks import MASK_MARGIN, mask_image, masked_faces, masked_points

@@ -11,7 +11,7 @@ import pytest
 from _mapping_scenes import box, look_at, make_scene, merge, plane
 from o3d_seqcc.correction import CorrectedImages, correct
 from o3d_seqcc.imaging.sequences import FloatImages, SceneImages
-from o3d_seqcc.io.files import image_dtype, read_image
+from o3d_seqcc.io.images import image_dtype, read_image
 from o3d_seqcc.mappings.compute import compute_mappings
 from o3d_seqcc.geometry.meshops import face_adjacency
 from o3d_seqcc.mappings.counting import shared_counts
