@@ -27,7 +27,7 @@ import numpy as np
 from ...geometry.meshops import float32_offset
 from ..files import atomic_path
 from .common import _check, _face_page, _geometry, _page_uv
-from .textures import TEXTURE_FORMATS, _check_format, _encoded_pages
+from .textures import TEXTURE_FORMATS, _check_format, _encoded_pages, _given_pages
 
 __all__ = ["export_glb", "glb_bytes"]
 
@@ -55,8 +55,7 @@ def _glb_parts(
     """The GLB file as consecutive parts (the textures' bytes among them as given, not copied)."""
     _check(textured)
     fmt = _check_format(texture_format, quality)
-    if png is not None and encoded is None and fmt == "png":
-        encoded = [png]
+    encoded = _given_pages(encoded, png, fmt)
     images_data = _encoded_pages(textured, fmt, quality, png_compression, encoded)
     verts, normals = _geometry(textured, transform)
     shift = float32_offset(verts)  # float32 positions: relative to the node's translation when far away

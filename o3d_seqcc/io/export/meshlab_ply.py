@@ -18,7 +18,7 @@ from ...errors import InputError
 from ..files import atomic_write_bytes
 from .common import _check, _face_page, _page_uv
 from .ply import _ply_vertices
-from .textures import _encoded_pages, texture_file_names
+from .textures import _encoded_pages, _given_pages, texture_file_names
 
 __all__ = ["export_meshlab_ply"]
 
@@ -72,7 +72,7 @@ def export_meshlab_ply(
     pages = int(getattr(textured, "pages", 1))
     if texture is None:
         names = texture_file_names(path.stem, "png", pages)
-        data = [png] if png is not None and pages == 1 else _encoded_pages(textured, "png", 90, png_compression, None)
+        data = _encoded_pages(textured, "png", 90, png_compression, _given_pages(None, png if pages == 1 else None, "png"))
         files = [path.with_name(n) for n in names]
         for f, b in zip(files, data):
             atomic_write_bytes(f, b)

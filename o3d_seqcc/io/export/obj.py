@@ -21,7 +21,7 @@ import numpy as np
 from ..files import atomic_path, atomic_write_bytes
 from .common import _check, _face_page, _geometry, _page_uv
 from .obj_text import obj_lines
-from .textures import _check_format, _encoded_pages, texture_file_names
+from .textures import _check_format, _encoded_pages, _given_pages, texture_file_names
 
 __all__ = ["export_obj"]
 
@@ -74,8 +74,7 @@ def export_obj(
     fmt = _check_format(texture_format, quality)
     path = Path(path)
     stem = path.stem
-    if png is not None and encoded is None and fmt == "png":
-        encoded = [png]
+    encoded = _given_pages(encoded, png, fmt)
     n_pages = len(encoded) if isinstance(encoded, (list, tuple)) else int(getattr(textured, "pages", 1))
     names = texture_file_names(stem, fmt, n_pages)
     mtl_name = f"{stem}.mtl"

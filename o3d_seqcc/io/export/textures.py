@@ -30,42 +30,56 @@ def _check_format(texture_format: str, quality: int) -> str:
     return fmt
 
 
-def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
-    """PNG bytes of an (H, W, 3) uint8 RGB image (OpenCV encoder; ``compression`` 0-9)."""
-    import cv2
-
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1]), [cv2.IMWRITE_PNG_COMPRESSION, int(compression)])
-    if not ok:  # pragma: no cover
-        raise OSError("OpenCV could not encode the texture as PNG")
-    return buf.tobytes()
-
-
 def encode_texture(image: np.ndarray, texture_format: str = "png", *, quality: int = 90,
                    png_compression: int = 1) -> bytes:
-    """Bytes of an (H, W, 3) uint8 RGB image as PNG, JPEG or WebP (OpenCV encoders).
+    """Bytes of an (H, W, 3) uint8 RGB image as PNG, JPEG or WebP: the exports' one image encoder (OpenCV's).
 
     Parameters
     ----------
+    image : (H, W, 3) uint8
+        RGB (OpenCV is given it as BGR).
     texture_format : {"png", "jpg", "webp"}
+        "jpeg" is "jpg"; anything else raises InputError.
     quality : int, default 90
         JPEG / WebP quality (1-100); PNG is lossless.
     png_compression : int, default 1
         zlib level of a PNG (0-9).
+
+    Returns
+    -------
+    bytes
+        The encoded file.
     """
     import cv2
 
     fmt = _check_format(texture_format, quality)
     if fmt == "png":
-        return encode_png(image, compression=png_compression)
-    flag = cv2.IMWRITE_JPEG_QUALITY if fmt == "jpg" else cv2.IMWRITE_WEBP_QUALITY
-    ok, buf = cv2.imencode(f".{fmt}", np.ascontiguousarray(image[..., ::-1]), [flag, int(quality)])
+        flag, value = cv2.IMWRITE_PNG_COMPRESSION, png_compression
+    else:
+        flag, value = (cv2.IMWRITE_JPEG_QUALITY if fmt == "jpg" else cv2.IMWRITE_WEBP_QUALITY), quality
+    ok, buf = cv2.imencode(f".{fmt}", np.ascontiguousarray(image[..., ::-1]), [flag, int(value)])
     if not ok:  # pragma: no cover
-        raise OSError(f"OpenCV could not encode the texture as {fmt}")
+        raise OSError(f"OpenCV could not encode the texture as {'PNG' if fmt == 'png' else fmt}")
     return buf.tobytes()
+
+
+def encode_png(image: np.ndarray, *, compression: int = 1) -> bytes:
+    """PNG bytes of an (H, W, 3) uint8 RGB image (:func:`encode_texture`; ``compression`` 0-9)."""
+    return encode_texture(image, "png", png_compression=compression)
+
+
+def _given_pages(encoded: list[bytes] | Callable[[], list[bytes]] | None, png: bytes | None,
+                 texture_format: str) -> list[bytes] | Callable[[], list[bytes]] | None:
+    """The already encoded pages a writer was given: ``encoded``, else ``[png]`` for a PNG texture, else None."""
+    if png is not None and encoded is None and texture_format == "png":
+        return [png]
+    return encoded
 
 
 def _encoded_pages(textured: Any, texture_format: str, quality: int, png_compression: int,
                    encoded: list[bytes] | Callable[[], list[bytes]] | None) -> list[bytes]:
+    """The atlas pages' files: ``encoded`` (a list, or a callable waiting for another thread's), else every page of
+    ``textured.texture`` through :func:`encode_texture`."""
     if encoded is not None:  # given, or being encoded on another thread (a callable waiting for it)
         return list(encoded() if callable(encoded) else encoded)
     return [encode_texture(p, texture_format, quality=quality, png_compression=png_compression)
@@ -73,6 +87,7 @@ def _encoded_pages(textured: Any, texture_format: str, quality: int, png_compres
 
 
 def _pages(textured: Any) -> list[np.ndarray]:
+    """The (S, S, 3) uint8 pages of ``textured.texture`` ((pages * S, S, 3), stacked vertically), as views."""
     tex = textured.texture
     n = int(getattr(textured, "pages", 1))
     h = tex.shape[0] // n
