@@ -85,9 +85,7 @@ def check_export_options(*, up_axis: str = "y", texture_format: str = "png", jpe
     """
     if str(up_axis).lower() not in EXPORT_UP_AXES:
         raise InputError(f"unknown up axis {up_axis!r}; valid: {', '.join(EXPORT_UP_AXES)}")
-    fmt = "jpg" if str(texture_format).lower() == "jpeg" else str(texture_format).lower()
-    if fmt not in TEXTURE_FORMATS:
-        raise InputError(f"unknown texture format {texture_format!r}; valid: {', '.join(TEXTURE_FORMATS)}")
+    fmt = _check_format(texture_format, 90)  # the format's name; the quality's message names jpeg_quality
     if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= int(jpeg_quality) <= 100:
         raise InputError(f"jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
     return fmt
