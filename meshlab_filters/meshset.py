@@ -105,7 +105,7 @@ def meshset_scene(ms: Any, folder: str | Path) -> Scene:
 
 def _write_obj_with_corner_uv(path: Path, v: np.ndarray, f: np.ndarray, uv: np.ndarray) -> None:
     """An OBJ of ``v`` and ``f`` with ``uv`` (F, 3, 2) as one ``vt`` per face corner."""
-    from o3d_seqcc.io.obj_text import general_field, int_field, rows
+    from o3d_seqcc.io.export.obj_text import general_field, int_field, rows
 
     v, t = np.asarray(v, dtype=np.float64), np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     f = np.asarray(f, dtype=np.int64) + 1

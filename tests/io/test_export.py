@@ -213,7 +213,7 @@ def _adversarial(rng) -> np.ndarray:
 
 @pytest.mark.parametrize("spec", ["g1", "g6", "g9", "g12", "g15", "g17", "f0", "f5", "f7", "d"])
 def test_obj_numbers_are_pythons_text(rng, spec):
-    from o3d_seqcc.io.obj_text import fixed_field, general_field, int_field, rows
+    from o3d_seqcc.io.export.obj_text import fixed_field, general_field, int_field, rows
 
     x = _adversarial(rng)
     if spec == "d":
@@ -237,7 +237,7 @@ def _python_obj_lines(verts, vt, normals, faces, digits) -> str:
 
 @pytest.mark.parametrize("shift", [0.0, 3.2e6])
 def test_obj_lines_are_the_python_formatted_obj(rng, monkeypatch, shift):
-    from o3d_seqcc.io import obj_text
+    from o3d_seqcc.io.export import obj_text
 
     monkeypatch.setattr(obj_text, "OBJ_CHUNK_ROWS", 1000)  # several chunks
     m, f = 4321, 7000
@@ -245,7 +245,7 @@ def test_obj_lines_are_the_python_formatted_obj(rng, monkeypatch, shift):
     verts[:10] = 0.0
     vt, normals = rng.uniform(-0.01, 1.01, size=(m, 2)), rng.normal(size=(m, 3))
     faces = rng.integers(0, m, size=(f, 3))
-    from o3d_seqcc.io.export import _digits
+    from o3d_seqcc.io.export.obj import _digits
 
     d = _digits(verts)
     got = b"".join(obj_text.obj_lines(verts, vt, normals, faces, np.zeros(f, int), 1, digits=d)).decode("ascii")
@@ -259,7 +259,7 @@ def test_glb_file_is_glb_bytes(tmp_path, textured):
 def test_textures_encoded_beside_the_obj_text_give_the_same_files(tmp_path, textured):
     """export_textured_mesh encodes on a thread while the OBJ's text is written: the files of one writer after the
     other; export_obj takes the encoded pages as a callable too."""
-    from o3d_seqcc.io.export import _encoded_pages
+    from o3d_seqcc.io.export.textures import _encoded_pages
 
     out = export_textured_mesh(textured, tmp_path / "a", formats=("glb", "obj"))
     assert list(out) == ["glb", "obj"]

@@ -4,7 +4,7 @@ Millions of numbers (the OBJ's ``v`` / ``vt`` / ``vn`` / ``f`` lines) formatted 
 Python hold the interpreter for a second (the report's threads wait) and build a Python float
 per number; here each column becomes a character matrix with a mask of the characters kept
 (:class:`Field`), :func:`rows` joins the fields of every row into one block of bytes, and
-:func:`obj_lines` gives an OBJ's lines in chunks (:func:`o3d_seqcc.io.export.export_obj` writes them).
+:func:`obj_lines` gives an OBJ's lines in chunks (:func:`o3d_seqcc.io.export.obj.export_obj` writes them).
 
 The digits are exactly Python's: a float is scaled by a power of ten (exact up to 10**22) and
 rounded to an integer, which is the correctly rounded decimal unless the scaled value lies
