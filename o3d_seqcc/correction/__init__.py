@@ -54,6 +54,7 @@ from .base import (
     Transform,
     apply_transform,
 )
+from .._shared.lazy import lazy_exports
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "CorrectedImages", "CorrectionContext", "CorrectionResult", "CorrectionSettings",
            "FunctionTransform",
@@ -251,3 +252,14 @@ def correct(
         edge_luts=dict(sorted(ctx.edge_luts.items())), settings=settings,
         edge_residuals=dict(sorted(ctx.edge_residuals.items())),
     )
+
+# the names the other stages use, imported from their modules on first use
+__getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("OUT_OF_LINE_LEVELS", "OUT_OF_LINE_RATIO"), "base"),
+    **dict.fromkeys(("PAPER_T_NPM", "WEIGHTS", "build_graph", "choose_reference", "mappings_summary",
+                     "resolve_t_npm"), "graph"),
+    "joint_histogram": "jih",
+    "compose_luts": "luts",
+    **dict.fromkeys(("colour_inliers", "quantile_luts"), "methods.seqcc"),
+})

@@ -16,6 +16,13 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("image_delta_e", "thin_indices"), "metrics"),
+    **dict.fromkeys(("CAMERA_CHANGE_RANGES", "HARD_CHANGE_RANGES", "apply_photometric", "identity_photometric",
+                     "sample_camera_change", "sample_photometric"), "photometric"),
+    **dict.fromkeys(("Casters", "RayHits", "picture_view", "raycast", "resized_view", "selection_palette",
+                     "write_selection_picture"), "render"),
+    **dict.fromkeys(("SelectionSeams", "photo_colors", "selection_seams_of"), "seams"),
     **dict.fromkeys(("Evaluation", "evaluate", "psnr"), "metrics"),
     "before_after": "table2",
     **dict.fromkeys(("MethodEvaluation", "evaluate_method", "evaluate_scene"), "fit"),

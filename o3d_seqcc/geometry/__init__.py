@@ -13,6 +13,11 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("inside_image", "pixel_index", "project_columns"), "camera"),
+    **dict.fromkeys(("bounds", "corner_mean", "face_normals", "float32_offset", "local_origin",
+                     "oriented_face_normals", "row_norms", "vertex_normals"), "meshops"),
+    "UP_AXES": "orientation",
     "project_points": "camera",
     "Distortion": "distortion",
     **dict.fromkeys(("face_adjacency", "edge_topology", "weld_vertices"), "meshops"),

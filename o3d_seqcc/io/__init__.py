@@ -27,6 +27,32 @@ every file, before any decoder sees it:
 5. **sane values**: mesh vertices finite and within :data:`~o3d_seqcc.io.mesh_files.MAX_COORDINATE`;
    point-cloud points that are not are dropped with a warning; depth that is not finite is "missing".
 
-This package's ``__init__`` imports nothing, so the scene model can use the file layer without an
-import loop.
+This package's ``__init__`` imports none of its modules (the names below load lazily), so the scene
+model can use the file layer without an import loop.
 """
+
+from .._shared.lazy import lazy_exports
+
+# the names the other stages use, imported from their modules on first use
+__getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("atomic_path", "atomic_write_bytes"), "atomic"),
+    **dict.fromkeys(("check_depth_file", "depth_in_metres", "read_depth", "read_stored_depth"), "depth"),
+    **dict.fromkeys(("DEFAULT_FORMATS", "EXPORT_UP_AXES", "FILE_SUFFIXES", "FORMATS", "TEXTURE_FORMATS",
+                     "check_export_options", "export_meshlab_ply", "export_textured_mesh", "float32_offset",
+                     "glb_bytes", "parse_formats", "texture_file_names"), "export"),
+    **dict.fromkeys(("encode_image", "image_dtype", "read_image", "read_view_images", "write_image"), "images"),
+    **dict.fromkeys(("read_json", "write_json"), "json_files"),
+    **dict.fromkeys(("AXES", "EXTRINSIC_CONVENTIONS", "as_scene", "camera_fixes", "detect_format", "load_scene",
+                     "save_scene"), "load"),
+    "save_mappings": "mappings_npz",
+    **dict.fromkeys(("check_mask_file", "mask_array", "mask_distorted", "view_mask"), "masks"),
+    **dict.fromkeys(("read_corner_uv", "read_mesh", "read_point_cloud"), "mesh_files"),
+    **dict.fromkeys(("MeshLayer", "save_mlp"), "meshlab"),
+    **dict.fromkeys(("MissingImage", "check_photo", "missing_images", "near_miss"), "missing"),
+    **dict.fromkeys(("add_output_file", "check_output", "check_output_file", "output_file", "output_folder",
+                     "write_output_file", "write_output_json"), "output"),
+    **dict.fromkeys(("MAX_IMAGE_PIXELS", "set_max_image_pixels"), "raster_checks"),
+    "open_regular": "regular_files",
+    "SCENE_JSON": "scene_json",
+})

@@ -34,10 +34,10 @@ from ..scene import FORMAT, Scene, View
 from .json_files import parse_json, write_json
 from .paths import find_file, join_path
 
-__all__ = ["FILE_NAME", "FORMAT", "detect", "load", "save"]
+__all__ = ["FORMAT", "SCENE_JSON", "detect", "load", "save"]
 
 #: the manifest's file name in a scene's folder (and in the folder ``o3d-seqcc correct`` writes)
-FILE_NAME = "scene.json"
+SCENE_JSON = "scene.json"
 
 _VIEW_KEYS = ("name", "image", "width", "height", "intrinsic", "extrinsic")
 _OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion", "mask", "mask_invert")
@@ -45,7 +45,7 @@ _OPTIONAL_KEYS = ("depth", "depth_scale", "point_cloud", "distortion", "mask", "
 
 def detect(path: Path) -> Path | None:
     """The manifest to read for ``path`` (a ``.json`` file, or a folder holding ``scene.json``), or None."""
-    return find_file(path, name=FILE_NAME, suffix=".json")
+    return find_file(path, name=SCENE_JSON, suffix=".json")
 
 
 def _join(root: Path, rel: object, where: str) -> Path:

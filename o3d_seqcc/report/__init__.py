@@ -51,6 +51,7 @@ import numpy as np
 from ..io.atomic import atomic_write_bytes
 from .page import PageInputs, render_page
 from .validate import page_bytes
+from .._shared.lazy import lazy_exports
 
 __all__ = ["IMAGE_CACHE_BYTES", "METRICS_ALL_UP_TO", "METRICS_MAX_PER_PAIR", "PageInputs", "cached_images",
            "metrics_sample", "html_report", "write_report"]
@@ -152,3 +153,12 @@ def html_report(source: Any, *, report: dict | None = None, thumb_width: int = 1
 def write_report(source: Any, path: str | os.PathLike, *, report: dict | None = None, thumb_width: int = 160) -> Path:
     """Write :func:`html_report` of ``source`` to ``path`` atomically; returns the path."""
     return atomic_write_bytes(Path(path), page_bytes(html_report(source, report=report, thumb_width=thumb_width)))
+
+# the names the other stages use, imported from their modules on first use
+__getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("BackgroundReport", "table2_metrics"), "background"),
+    **dict.fromkeys(("build_page", "facts", "render_page"), "page"),
+    **dict.fromkeys(("correction_section", "document", "upgrade"), "schema"),
+    **dict.fromkeys(("page_bytes", "validate_report"), "validate"),
+})

@@ -24,7 +24,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..io.export import FILE_SUFFIXES
-from ..io.scene_json import FILE_NAME as SCENE_JSON
+from ..io.scene_json import SCENE_JSON
 
 __all__ = ["DEMO_SUMMARY", "IMAGES_DIR", "MESHLAB_LAYER", "MESHLAB_PROJECT", "MESH_FORMATS", "MESH_STEM",
            "REPORT_HTML", "REPORT_JSON", "SCENE_JSON", "SCENE_MESH", "SELECTION_NPY", "SELECTION_PNG", "mesh_file",

@@ -13,6 +13,7 @@ from ..evaluation.photometric import (
 )
 from .generate import PHOTOMETRIC_MODES, SYNTHETIC_FORMAT, SyntheticScene, load_synthetic, make_synthetic_scene, perturb_poses
 from .room import ALBEDO_RANGE, DEFAULT_CELL_SIZE, ring_slots
+from .._shared.lazy import lazy_exports
 
 __all__ = [
     "ALBEDO_RANGE",
@@ -31,3 +32,9 @@ __all__ = [
     "sample_camera_change",
     "sample_photometric",
 ]
+
+# the names the other stages use, imported from their modules on first use
+__getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    "LAYOUTS": "room",
+})

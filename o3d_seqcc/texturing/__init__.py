@@ -23,6 +23,10 @@ from .._shared.lazy import lazy_exports
 
 # names imported from their modules on first use: a child process that packs (packing_child) imports packing alone
 __getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("gutter_texels", "rasterize_faces"), "bake"),
+    **dict.fromkeys(("bake_own_uv", "check_corner_uv"), "own_uv"),
+    **dict.fromkeys(("DATA_TERMS", "FALLBACKS", "OUTLIER_REMOVALS", "OVERFLOWS", "UV_MODES"), "settings"),
     "bake_texture": "atlas",
     "seam_leveling_offsets": "leveling",
     **dict.fromkeys(("SELECTION_METHODS", "count_transitions", "register_selection", "select_views",

@@ -17,6 +17,10 @@ from __future__ import annotations
 from .._shared.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
+    # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
+    **dict.fromkeys(("FLIP", "MIN_AREA_SEEN"), "camera_checks"),
+    **dict.fromkeys(("DenseVisibility", "VisibilityLike"), "dense"),
+    "coverage": "refine",
     **dict.fromkeys(("Visibility", "compute_visibility", "UsableFaces"), "compute"),
     **dict.fromkeys(("VisibilitySettings", "FILTERS", "OBLIQUE_REFERENCES"), "settings"),
     **dict.fromkeys(("ViewRecord", "view_record"), "per_view"),
