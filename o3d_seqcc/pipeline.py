@@ -47,7 +47,7 @@ from ._shared.progress import stage as _stage
 from .visibility.refine import coverage
 from .run_folder.parts import scene_paths
 from .run_folder.write import correction_page_inputs, run_page_inputs, save_correction, save_run
-from .report.page import PageInputs
+from .report.inputs import PageInputs
 from .report.background import BackgroundReport
 from .report.schema import correction_section, document
 from .scene import Scene, resolve_view

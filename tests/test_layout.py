@@ -43,7 +43,7 @@ TREE: dict[str, set[str]] = {
            "gltf_validator", "masks"},
     "io.export": {"__init__", "common", "textures", "obj", "obj_text", "glb", "ply", "meshlab_ply"},
     "report": {"__init__", "schema", "page", "parts", "viewer", "comparison", "figures", "html", "validate", "background", "masks",
-               "style"},
+               "style", "inputs", "table2"},
     "run_folder": {"__init__", "layout", "write", "parts", "read"},
     "synthetic": {"__init__", "room", "generate", "occluder"},
     "cli": {"__init__", "parser", "console", "runtime", "scene_flags", "correction_flags", "texture_flags",

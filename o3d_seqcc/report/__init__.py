@@ -24,7 +24,7 @@ from an output folder. Sections, each only when the command produced its data:
 - seam metric, timings and the run's settings.
 
 At run time everything comes from memory: the page is drawn from the result objects the command
-returns (:class:`~o3d_seqcc.report.page.PageInputs`: the images, the correction with its per-edge
+returns (:class:`~o3d_seqcc.report.inputs.PageInputs`: the images, the correction with its per-edge
 lookup tables, the mappings, the selection, the textured mesh, the visibility's usable counts),
 and no stage runs again (``tests/test_report_schema.py`` makes every stage raise while a run is
 saved). :meth:`~o3d_seqcc.pipeline.RunResult.save` scores Table 2 on at most
@@ -49,7 +49,8 @@ from typing import Any
 import numpy as np
 
 from ..io.atomic import atomic_write_bytes
-from .page import PageInputs, render_page
+from .inputs import PageInputs
+from .page import render_page
 from .validate import page_bytes
 from .._shared.lazy import lazy_exports
 
@@ -158,7 +159,8 @@ def write_report(source: Any, path: str | os.PathLike, *, report: dict | None = 
 __getattr__, __dir__ = lazy_exports(__name__, {
     # used by the other stages and the pipeline (tests/test_layout.py: nothing else is imported across)
     **dict.fromkeys(("BackgroundReport", "table2_metrics"), "background"),
-    **dict.fromkeys(("build_page", "facts", "render_page"), "page"),
+    **dict.fromkeys(("build_page", "render_page"), "page"),
+    "facts": "inputs",
     **dict.fromkeys(("correction_section", "document", "upgrade"), "schema"),
     **dict.fromkeys(("page_bytes", "validate_report"), "validate"),
 })

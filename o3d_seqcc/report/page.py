@@ -1,6 +1,6 @@
 """The report page: one section per figure of the paper, assembled into one self-contained HTML string.
 
-:class:`PageInputs` is what a page is drawn from (the ``report.json`` content and the run's data,
+:class:`~o3d_seqcc.report.inputs.PageInputs` is what a page is drawn from (the ``report.json`` content and the run's data,
 in memory or recomputed); :func:`render_page` draws it. Figures come from
 :mod:`o3d_seqcc.report.figures`; images are embedded as base64 data URIs, the graph as inline SVG.
 """
@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,18 +17,19 @@ import numpy as np
 from ..imaging.arrays import img_as_uint8
 from .._shared.parallel import carried
 from ..evaluation.render import Casters, render_selection, render_textured, resized_view, selection_palette
-from ..scene import Scene
 from ..evaluation.seams import selection_seams_of
 from .comparison import correction_section
 from .figures import graph_svg, jih_panel, jpeg, png, thumbnail, view_layout
 from .parts import JIH_BITS, JIH_MAX_MAPPINGS, edge_jihs, jih_thumbnails, path_edges, view_thumbnails
 from .html import esc, img, num
 from .style import CSS as _CSS
+from .inputs import PageInputs, facts
 from .masks import masks_rows, masks_section
+from .table2 import table2_section
 from .viewer import model_section
 
-__all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "Page", "PageInputs", "build_page",
-           "facts", "render_page"]
+__all__ = ["JIH_BITS", "JIH_MAX_MAPPINGS", "MAX_DETAIL_EDGES", "SELECTION_WIDTH", "Page", "build_page",
+           "render_page"]
 
 logger = logging.getLogger(__name__)
 
@@ -37,27 +37,6 @@ logger = logging.getLogger(__name__)
 SELECTION_WIDTH = 640
 #: rows (edges) of the detailed JIH / CMF figure (about 0.1 s each; a longer path shows its first and last edges)
 MAX_DETAIL_EDGES = 3
-
-
-@dataclass(frozen=True, eq=False)
-class PageInputs:
-    """What a report is drawn from: the report.json content and the run's data (None = absent)."""
-
-    rep: dict
-    scene: Scene
-    photos: list | None  # the images before correction (or the images textured)
-    corrected: list | None
-    correction: Any = None  # CorrectionResult
-    mappings: Any = None
-    selection: np.ndarray | None = None
-    mesh: tuple | None = None  # (vertices, faces) of the scene's mesh
-    textured: Any = None  # TexturedMesh
-    usable: np.ndarray | None = None  # (V,) faces usable per view
-    selection_png: Any = None  # selection.png of the folder (rendered from the view report.json names), or a callable
-    # returning it (the picture still being written beside the page)
-    selection_seams: dict | None = None  # {"photos", "corrected"}: seams.SelectionSeams (computed when absent)
-    casters: Any = None  # evaluation.render.Casters: the meshes' ray-casting scenes, each built once (made when absent)
-    parts: Any = None  # parts.CorrectionParts: the JIHs and thumbnails computed before the page (computed when absent)
 
 
 _esc, _img, _num = esc, img, num
@@ -73,18 +52,6 @@ def _selection_seams(inp: PageInputs) -> dict:
 
 def _name(inp: PageInputs, v: int) -> str:
     return f"#{v} {inp.scene.names[v]}"
-
-
-# ----------------------------------------------------------------------------------------- facts
-def facts(rep: dict) -> dict[str, Any]:
-    """The fields the page needs, from a report.json of :mod:`o3d_seqcc.report.schema` (any command)."""
-    c = rep.get("correction") or {}
-    settings = c.get("settings") or {}
-    command = rep.get("command", "run")
-    return {"command": command, "method": c.get("method"), "t_npm": settings.get("t_npm", c.get("t_npm")),
-            "t_npm_effective": c.get("t_npm"), "mappings": c.get("mappings"), "settings": settings,
-            "timings": rep.get("timings_s") or {}, "correction_timings": c.get("timings_s") or {},
-            "metrics": rep.get("metrics")}
 
 
 def t_npm_text(f: dict) -> str:
@@ -255,68 +222,6 @@ def _grid_section(inp: PageInputs, small: list, small_after: list | None) -> str
     return f'<figure data-fig="10"><div class="grid views">{"".join(cells)}</div><figcaption>{cap}</figcaption></figure>'
 
 
-# ------------------------------------------------------------------------------------- Table 2
-def correct_command(inp: PageInputs) -> str:
-    """The ``o3d-seqcc correct`` command line that runs this report's correction (and scores every mapping)."""
-    import shlex
-
-    rep, c = inp.rep, inp.correction
-    f = facts(rep)
-    s = f["settings"]
-    scene = rep.get("scene_path") or rep.get("scene") or "SCENE"
-    words = ["o3d-seqcc", "correct", scene]
-    if rep.get("mesh") and Path(scene).suffix.lower() not in (".json", ".mlp", ".sfm"):
-        words += ["--mesh", rep["mesh"]]  # formats without a mesh of their own
-    words += ["--reference", inp.scene.names[c.reference], "--method", c.method, "--t-npm", str(f["t_npm"]),
-              "--mappings", str(f["mappings"] or "vertices")]
-    if s.get("graph_weight", "paper") != "paper":
-        words += ["--graph-weight", s["graph_weight"]]
-    if int(s.get("seed", 0) or 0):
-        words += ["--seed", str(s["seed"])]
-    return " ".join(shlex.quote(str(w)) for w in words + ["--out", "OUT"])
-
-
-def _table2_section(inp: PageInputs, metrics: dict | None) -> str:
-    if not metrics or "before" not in metrics:
-        return "<p>No metrics in report.json (the command ran with --no-metrics).</p>"
-    b, a = metrics["before"], metrics["after"]
-    con = metrics.get("contrast", {})
-
-    def cells(m: dict, key: str) -> str:
-        return "".join(f'<td data-key="{key}.{metric}.{s}">{_num(m[metric][s])}</td>'
-                       for metric in ("psnr", "ciede2000") for s in ("mean", "weighted_mean", "std"))
-
-    def contrast(key: str) -> str:
-        d = con.get(key) or {}
-        return "".join(f'<td data-key="contrast.{key}.{s}">{_num(d.get(s), 3)}</td>' for s in ("mean", "min"))
-
-    method = _esc(inp.correction.method) if inp.correction is not None else "corrected"
-    scored = ""
-    if inp.rep.get("command") == "run" and inp.correction is not None:
-        cmd = f"<code>{_esc(correct_command(inp))}</code>"
-        if b.get("max_per_pair"):
-            scored = (f'<p class="callout">To get this table from <code>o3d-seqcc correct</code>, give it this run\'s '
-                      f"settings: {cmd} (its defaults, reference auto and vertex mappings, correct differently and so "
-                      f"score differently). It scores all {b['n_mappings']} mappings; this table, written beside the "
-                      f"run, a sample of at most {b['max_per_pair']} evenly spaced ones per pair ({b['n_scored']}; the "
-                      f"weighted means still weight every pair by its full count), so its means differ from correct's "
-                      f"by the sampling error.</p>")
-        else:
-            scored = (f'<p class="callout">{cmd} gives this very table: the same correction, scored on all '
-                      f"{b['n_mappings']} mappings (its defaults, reference auto and vertex mappings, correct "
-                      f"differently and so score differently).</p>")
-    return (f'{scored}<table class="t2"><tr><th></th><th colspan="3">PSNR dB (higher: more similar)</th>'
-            f'<th colspan="3">CIEDE2000 (lower: more similar)</th><th colspan="2">contrast ratio (~1)</th></tr>'
-            f"<tr><th></th>{'<th>mean</th><th>w. mean</th><th>std</th>' * 2}<th>mean</th><th>min</th></tr>"
-            f"<tr><td>before (photos)</td>{cells(b, 'before')}{contrast('before')}</tr>"
-            f"<tr><td>after ({method})</td>{cells(a, 'after')}{contrast('after')}</tr></table>"
-            f"<p class=\"note\">Paper Table 2 over the {b['n_pairs']} view pairs with mappings ({b['n_mappings']} "
-            f"mappings): mean, mean weighted by each pair's number of mappings, standard deviation over pairs. "
-            f"Contrast ratio: std of the target view's colours over the source view's at the mappings of every pair at "
-            f"different path depths, averaged over channels (below 1: the correction washes images out, which the "
-            f"pairwise scores reward at misregistered mappings).</p>")
-
-
 # -------------------------------------------------------------------- selection and renders (9, 12-13)
 def _render_views(inp: PageInputs) -> tuple[int, int]:
     """The view seeing the most faces (or the one selection.png used), and a second one far from it."""
@@ -440,6 +345,12 @@ def _settings(inp: PageInputs, f: dict) -> dict:
     if vis:
         keys = ("valid", "occluded", "depth_inconsistent", "oblique", "masked", "usable")
         s["visibility"] = {k: vis[k] for k in keys if k in vis}
+        if "views_without_depth" in vis:  # a filter turned off is named here, not only in a warning
+            off = vis["views_without_depth"]
+            s["visibility"]["depth_consistency"] = (
+                "on for every photo" if not off else
+                f"off for {len(off)} of {vis.get('n_views', len(inp.scene.views))} photos (no depth map or point "
+                f"cloud): {', '.join(off)}")
     return s
 
 
@@ -480,7 +391,7 @@ def _sections(inp: PageInputs, f: dict, width: int, pool) -> list[tuple[str, str
     if masks_rows(inp.rep):
         add("masks", "Masks: the masked area per photo", masks_section, inp.rep)
     if c is not None:
-        add("table2", "Image-based metrics (Table 2)", _table2_section, inp, f["metrics"])
+        add("table2", "Image-based metrics (Table 2)", table2_section, inp, f["metrics"])
     if c is not None and after is not None:
         change = [float(np.abs(x.astype(np.int16) - y).mean()) for x, y in zip(before, after)]
         cands = [v for v, p in sorted(c.paths.items()) if len(p) > 1]

@@ -217,7 +217,9 @@ def model_section(tm: Any, view: View, scene, photos, corrected, *, method: str 
             f"texture reduced to {w}×{h} texels"
             + (f" (<i>full resolution</i> shows the atlas at {fw}×{fh}, decoded when chosen)" if (fh, fw) != (h, w)
                else "") +
-            f"; the other textures are the same layout filled from each face's "
-            f"photo directly, so switching between them shows what the correction (and the seam leveling) changes. "
+            "; the other textures are the same layout filled from each face's "
+            "photo directly, so switching between them shows what "
+            + ("the seam leveling changes (this command corrects no colours). " if corrected is None else
+               "the correction (and the seam leveling) changes. ") +
             f"The first view is the camera of {esc(view.name)}.")
     return viewer_html(small, view, rotation, len(scene.views), modes, note=note)

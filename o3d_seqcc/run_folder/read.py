@@ -21,7 +21,8 @@ from ..io.json_files import read_json
 from ..io.regular_files import open_regular
 from ..io.output import add_output_file, check_output_file, write_output_file
 from ..report import metrics_sample
-from ..report.page import PageInputs, facts, render_page
+from ..report.inputs import PageInputs, facts
+from ..report.page import render_page
 from ..report.schema import upgrade
 from ..report.validate import page_bytes, validate_report
 from .layout import MESH_FORMATS, REPORT_HTML, REPORT_JSON, SELECTION_NPY, SELECTION_PNG, mesh_file, read_back_files

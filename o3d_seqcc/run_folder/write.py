@@ -47,7 +47,8 @@ from .._shared.parallel import carried
 from .._shared.progress import stage as _stage
 from ..report import cached_images, html_report
 from ..report.background import table2_metrics
-from ..report.page import PageInputs, build_page
+from ..report.inputs import PageInputs
+from ..report.page import build_page
 from ..report.validate import page_bytes
 from .layout import (IMAGES_DIR, MESH_STEM, MESHLAB_LAYER, MESHLAB_PROJECT, REPORT_HTML, REPORT_JSON, SCENE_JSON,
                      SCENE_MESH, SELECTION_NPY, SELECTION_PNG)
