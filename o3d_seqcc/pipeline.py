@@ -415,6 +415,16 @@ def run(
         heavy work; bad scenes.
     UnknownSettingError
         An option name no settings object has (a ``TypeError``; the message lists the valid ones).
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> res = sc.pipeline.run(room.scene, t_npm=10, atlas_size=512)
+    >>> files = res.save(room.root.parent / 'out', formats='glb')  # staged, then swapped in
+    >>> sorted(k for k in files if k in ('glb', 'report_html', 'meshlab_project'))
+    ['glb', 'meshlab_project', 'report_html']
     """
     source = str(scene) if not isinstance(scene, Scene) else ""
     timings: dict[str, float] = {}

@@ -140,6 +140,15 @@ def correct(
         ``TypeError``) or other option value, unknown reference (lists the valid names), no edge
         left at ``t_npm`` (says the largest pair count), a reference without edges, images not
         matching the scene, neither a scene nor images and mappings.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> res = sc.correct(room.scene, method='reinhard', reference='v00')
+    >>> len(res.images), res.reference, res.images[0].dtype
+    (3, 0, dtype('uint8'))
     """
     if isinstance(mappings, str):
         options["mappings"], mappings = mappings, None

@@ -332,6 +332,14 @@ def fit_cmf(
         Unknown pairing or aggregate (lists the valid ones).
     InputError
         x, y, weights of different lengths, non-finite values, negative weights.
+
+    Examples
+    --------
+    >>> import numpy as np, o3d_seqcc as sc
+    >>> x = np.repeat(np.linspace(0.05, 0.95, 60), 40)  # the image to correct, at the mappings
+    >>> lut = sc.fit_cmf(x, 0.8 * x)  # the source is 20 % darker: f(x) = 0.8 x comes back
+    >>> lut.shape, round(float(lut[200]), 2), round(0.8 * 200 / 255, 2)
+    ((256,), 0.62, 0.63)
     """
     CMF_METHODS.check(method)
     if pairing not in ("joint", "quantile"):

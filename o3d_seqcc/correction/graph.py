@@ -150,6 +150,15 @@ def build_graph(
     ------
     InputError
         Negative counts, a pair of a view with itself, or view indices out of range.
+
+    Examples
+    --------
+    >>> import o3d_seqcc as sc
+    >>> g = sc.build_graph({(0, 1): 900, (1, 2): 500, (0, 2): 100}, 3, t_npm=400)  # (0, 2) is below t_npm
+    >>> sorted(g.edges())
+    [(0, 1), (1, 2)]
+    >>> round(g[0][1]['weight'], 3)  # 1 - n / (sum of n over all pairs)
+    0.4
     """
     if weight not in WEIGHTS:
         raise ValueError(f"unknown graph weight {weight!r}; valid: {', '.join(WEIGHTS)}")
@@ -224,6 +233,12 @@ def choose_reference(graph: nx.Graph) -> int:
     -------
     int
         View index.
+
+    Examples
+    --------
+    >>> import o3d_seqcc as sc
+    >>> sc.choose_reference(sc.build_graph({(0, 1): 900, (1, 2): 500}, 3, t_npm=400))  # the centre of the chain
+    1
     """
     if graph.number_of_nodes() == 0:
         raise InputError("the graph has no views")

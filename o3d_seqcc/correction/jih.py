@@ -54,6 +54,14 @@ def joint_histogram(target_values: np.ndarray, source_values: np.ndarray, *, bit
     numpy.ndarray
         (C, 2**bits, 2**bits) int64, ``jih[c, x, y]`` = number of mappings whose target value is
         x and source value is y in channel c (C = 3 for RGB).
+
+    Examples
+    --------
+    >>> import numpy as np, o3d_seqcc as sc
+    >>> source = np.arange(256, dtype=np.uint8)
+    >>> jih = sc.joint_histogram(source // 2, source)  # target, source
+    >>> jih.shape, int(jih.sum()), int(jih[0, 100, 200])  # one channel: (1, 256, 256)
+    ((1, 256, 256), 256, 1)
     """
     bits = int(bits)
     if not 1 <= bits <= 12:

@@ -31,6 +31,14 @@ def project_points(
         Pixel coordinates (pixel centres at integers); NaN where ``z <= 0``.
     z : (n,) float64
         Camera-frame depth.
+
+    Examples
+    --------
+    >>> import numpy as np, o3d_seqcc as sc
+    >>> K = np.array([[100.0, 0, 50], [0, 100, 40], [0, 0, 1]])
+    >>> uv, depth = sc.project_points(np.array([[0.0, 0, 2], [0.2, -0.1, 2]]), K, np.eye(4))
+    >>> uv.tolist(), depth.tolist()
+    ([[50.0, 40.0], [60.0, 35.0]], [2.0, 2.0])
     """
     X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     u, v, z = project_columns(np.ascontiguousarray(X.T), np.asarray(intrinsic, np.float64), np.asarray(extrinsic, np.float64))

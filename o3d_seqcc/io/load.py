@@ -224,6 +224,15 @@ def load_scene(
         missing files, malformed cameras, duplicate names, cameras that look like another
         convention, a mesh the photos do not show, ...; missing or unreadable photos are one
         :class:`~o3d_seqcc.errors.MissingImagesError` listing them all.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> scene = sc.load_scene(room.root)  # the folder of its scene.json
+    >>> scene.names, scene.views[0].width
+    (['v00', 'v01', 'v02'], 96)
     """
     fmt, target = detect_format(path, format)
     p = Path(path)
@@ -432,5 +441,14 @@ def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
     -------
     pathlib.Path
         The manifest path.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> path = sc.save_scene(room.scene, room.root / 'copy.json')
+    >>> sc.load_scene(path).names == room.scene.names
+    True
     """
     return scene_json.save(scene, path)

@@ -335,6 +335,15 @@ def compute_mappings(
         Unknown filter option, or filter options together with ``visibility``.
     InputError
         No pair of views shares a usable face.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> maps = sc.compute_mappings(room.scene)  # surface mappings by default
+    >>> maps.mode, maps.total > 0
+    ('surface', True)
     """
     from ..visibility.compute import compute_visibility
 

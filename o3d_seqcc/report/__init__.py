@@ -147,6 +147,15 @@ def html_report(source: Any, *, report: dict | None = None, thumb_width: int = 1
     -------
     str
         The HTML document; images embedded as base64 PNG / JPEG, no external resource.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> page = sc.html_report(sc.pipeline.texture(room.scene, atlas_size=512, seams=False))
+    >>> page.startswith('<!DOCTYPE html>'), 'Per-face image selection' in page
+    (True, True)
     """
     return render_page(_page_inputs(source, report), width=int(thumb_width))
 

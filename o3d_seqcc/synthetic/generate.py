@@ -239,6 +239,16 @@ def make_synthetic_scene(
     ------
     InputError
         ``out_dir`` is a file or non-empty without ``overwrite``; invalid sizes or mode.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> sorted(p.name for p in room.root.iterdir() if p.is_dir())
+    ['depth', 'face_ids', 'gt', 'images', 'points']
+    >>> len(room.scene.views)
+    3
     """
     out_dir = Path(out_dir)
     if photometric not in PHOTOMETRIC_MODES:

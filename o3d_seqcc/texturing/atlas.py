@@ -170,6 +170,17 @@ def bake_texture(
         Selection / visibility / image shapes that do not match, a face assigned to a view where
         its vertices are not projected (NaN) or project outside the image, or a selection where
         no face is seen.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> vis = sc.compute_visibility(room.scene)
+    >>> photos = [v.load_image() for v in room.scene.views]
+    >>> tm = sc.bake_texture(vis.mesh, photos, vis, sc.select_views(vis), atlas_size=512)
+    >>> tm.texture.ndim, len(tm.faces) == len(vis.mesh.faces)
+    (3, True)
     """
     s = (settings or TextureSettings()).updated(**options) if options else (settings or TextureSettings())
     with steps("bake", 7) as step:

@@ -400,6 +400,16 @@ def select_views(
         Unknown method or option (the message lists the valid ones; an unknown option's is also a
         ``TypeError``); no face is usable in any view (wrong cameras or mesh, or filters too strict); ``"gmi"``
         or outlier removal without ``images``.
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> vis = sc.compute_visibility(room.scene)
+    >>> labels = sc.select_views(vis, method='largest-area')
+    >>> labels.shape == (len(vis.mesh.faces),), int(labels.max()) <= 2
+    (True, True)
     """
     from .data_costs import score_visibility
 

@@ -412,6 +412,15 @@ def check_cameras(
     InputError
         ``raise_on_mistake`` and a likely mistake: the message names it, the numbers and the fix;
         or a mesh the photos do not show (:meth:`CameraReport.unseen_message`).
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> report = sc.check_cameras(room.scene)
+    >>> report.mistake is None, report.hardly_seen()
+    (True, False)
     """
     t0 = time.perf_counter()
     views = scene.views

@@ -347,6 +347,15 @@ def compute_visibility(
         an unknown filter or ``oblique_reference``, out-of-range thresholds (a ``ValueError``).
     UnknownSettingError
         An option that is not a field of the settings (a ``TypeError``).
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> vis = sc.compute_visibility(room.scene)
+    >>> len(vis.usable_counts()), bool((vis.usable_counts() > 0).all())
+    (3, True)
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}

@@ -53,5 +53,12 @@ def register_method(name: str, *, needs_graph: bool = True) -> Callable[[Callabl
 
 
 def available_methods() -> list[str]:
-    """Sorted names of the registered correction methods."""
+    """Sorted names of the registered correction methods.
+
+    Examples
+    --------
+    >>> import o3d_seqcc as sc
+    >>> 'seqcc' in sc.available_methods() and sc.DEFAULT_METHOD in sc.available_methods()
+    True
+    """
     return METHODS.names()

@@ -169,6 +169,16 @@ def export_glb(
     Returns
     -------
     pathlib.Path
+
+    Examples
+    --------
+    >>> import tempfile, o3d_seqcc as sc
+    >>> room = sc.make_synthetic_scene(tempfile.mkdtemp() + '/room', n_views=3, width=96, height=72, seed=1,
+    ...                                seen_only=True)
+    >>> tm = sc.pipeline.texture(room.scene, atlas_size=512, seams=False).textured
+    >>> path = sc.export_glb(tm, room.root / 'mesh.glb')
+    >>> path.read_bytes()[:4]
+    b'glTF'
     """
     path = Path(path)
     parts = _glb_parts(textured, unlit=unlit, png_compression=png_compression, png=png, texture_format=texture_format,
