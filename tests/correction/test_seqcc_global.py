@@ -458,7 +458,7 @@ def test_responses_continue_above_their_data_along_their_slope():
     """Knots above the segment of a view's highest latent are set by nothing but the smoothing (on Fountain such a
     response fell from 149 to 99 above its data and its monotone projection made the correction a cliff to white):
     they follow the steeper of the last supported segment's slope and the mean slope up to it."""
-    from o3d_seqcc.correction.methods.joint_curves import _continue_above_data, _highest_latent
+    from o3d_seqcc.correction.methods.curve_adjust import continue_above_data as _continue_above_data, highest_latent as _highest_latent
 
     knots = np.linspace(0.0, 1.0, 6)
     phi = np.array([[0.0, 0.1, 0.2, 0.3, 0.25, 0.2],    # top latent 0.5: knots 0.8 and 1.0 are free
