@@ -18,10 +18,10 @@ from .._shared.lazy import lazy_exports
 
 # names imported from their modules on first use: the layout's names cost nothing to import
 __getattr__, __dir__ = lazy_exports(__name__, {
-    **dict.fromkeys(("correction_page_inputs", "report_prelude", "run_page_inputs", "save_correction", "save_run",
-                     "write_run_folder"), "write"),
+    **dict.fromkeys(("FolderPlan", "correction_page_inputs", "report_prelude", "run_page_inputs", "save_correction",
+                     "save_rasters", "save_run", "write_run_folder"), "write"),
     **dict.fromkeys(("read_report_json", "read_selection", "regenerate_report"), "read"),
 }, submodules=("layout",))
 
-__all__ = ["correction_page_inputs", "layout", "read_report_json", "read_selection", "regenerate_report",
-           "report_prelude", "run_page_inputs", "save_correction", "save_run", "write_run_folder"]
+__all__ = ["FolderPlan", "correction_page_inputs", "layout", "read_report_json", "read_selection", "regenerate_report",
+           "report_prelude", "run_page_inputs", "save_correction", "save_rasters", "save_run", "write_run_folder"]

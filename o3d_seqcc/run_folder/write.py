@@ -26,6 +26,7 @@ import logging
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -55,16 +56,51 @@ from .layout import (IMAGES_DIR, MESH_STEM, MESHLAB_LAYER, MESHLAB_PROJECT, REPO
 from .parts import meshlab_project, with_mesh_file, write_images
 from .read import selection_png as _folder_selection_png
 
-__all__ = ["correction_page_inputs", "report_prelude", "run_page_inputs", "save_correction", "save_rasters", "save_run",
+__all__ = ["FolderPlan", "correction_page_inputs", "report_prelude", "run_page_inputs", "save_correction", "save_rasters", "save_run",
            "write_run_folder"]
 
 logger = logging.getLogger(__name__)
 
 
-def _mesh_files(res: Any, stage: Path, *, fmts: list[str], tfmt: str, quality: int, unlit: bool, rotation: Any,
-                save_images: bool) -> tuple[dict[str, Path], dict[str, Path], float]:
+@dataclass(frozen=True)
+class FolderPlan:
+    """What :func:`write_run_folder` writes, checked and resolved by :func:`save_run` before anything is.
+
+    Attributes
+    ----------
+    formats : list of str
+        Export formats (``glb``, ``obj``, ``ply``).
+    texture_format : str
+        ``png``, ``jpg`` or ``webp``; ``quality`` its JPEG / WebP quality (1-100).
+    unlit : bool
+        GLB material with ``KHR_materials_unlit``.
+    rotation : (3, 3) float or None
+        The export's up-axis rotation (None: the scene's frame); ``orientation`` its record for the report.
+    picture : bool
+        Write ``selection.png`` (from ``view``; None: the view seeing the most faces).
+    save_images : bool
+        Also write the images used to ``images/``.
+    report : bool
+        Also write ``report.html`` and Table 2.
+    """
+
+    formats: list
+    texture_format: str
+    quality: int
+    unlit: bool
+    rotation: Any
+    orientation: dict
+    picture: bool
+    view: Any
+    save_images: bool
+    report: bool
+
+
+def _mesh_files(res: Any, stage: Path, plan: FolderPlan) -> tuple[dict[str, Path], dict[str, Path], float]:
     """The textured mesh's files, selection.npy, the images, the MeshLab project: (files before the selection
     picture, files after it, seconds)."""
+    fmts, tfmt, quality, unlit, rotation = plan.formats, plan.texture_format, plan.quality, plan.unlit, plan.rotation
+    save_images = plan.save_images
     t = time.perf_counter()
     written = {k: Path(v) for k, v in export_textured_mesh(
         res.textured, stage, formats=fmts, unlit=unlit, texture_format=tfmt, quality=int(quality),
@@ -94,9 +130,7 @@ def _selection_picture(res: Any, path: Path, view: Any, casters: Casters, mesh: 
     return write_selection_picture(res.scene, res.visibility, res.selection, path, view, caster=casters.get(mesh))
 
 
-def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt: str, quality: int, unlit: bool,
-                     rotation: Any, orientation: dict, picture: bool, view: Any, save_images: bool,
-                     report: bool) -> dict[str, str]:
+def write_run_folder(res: Any, stage: Path, out: Path, plan: FolderPlan) -> dict[str, str]:
     """Write ``res``'s folder into ``stage`` (later swapped in as ``out``); returns kind -> final path.
 
     Parameters
@@ -104,17 +138,11 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
     res : pipeline.RunResult
     stage, out : pathlib.Path
         The staging folder, and the folder it becomes (the paths the report names).
-    fmts, tfmt, quality, unlit
-        Export formats, texture format, JPEG / WebP quality, unlit GLB material.
-    rotation : (3, 3) float or None
-        The export's up-axis rotation (None: the scene's frame); ``orientation`` its record.
-    picture : bool
-        Write ``selection.png`` (from ``view``; None: the view seeing the most faces).
-    save_images : bool
-        Also write the images used to ``images/``.
-    report : bool
-        Also write ``report.html`` and Table 2.
+    plan : FolderPlan
+        What to write.
     """
+    fmts, tfmt, quality, unlit, orientation = plan.formats, plan.texture_format, plan.quality, plan.unlit, plan.orientation
+    picture, view, report = plan.picture, plan.view, plan.report
     table2 = report and res.correction is not None and res.mappings is not None and res.originals is not None
     images = cached_images(*((res.originals, res.images) if res.originals else (res.images, None)))
     export = {"formats": fmts, "texture_format": tfmt, "jpeg_quality": int(quality), "unlit": bool(unlit),
@@ -124,8 +152,7 @@ def write_run_folder(res: Any, stage: Path, out: Path, *, fmts: list[str], tfmt:
     pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="o3d_seqcc-save")
     try:
         with held():  # a signal inside submit's Thread.start would leave a writer that shutdown does not join
-            files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, fmts=fmts, tfmt=tfmt,
-                                quality=quality, unlit=unlit, rotation=rotation, save_images=save_images)
+            files = pool.submit(carried(_mesh_files, "save: mesh files"), res, stage, plan)
             pic = pool.submit(carried(_selection_picture, "save: selection picture"), res, stage / SELECTION_PNG,
                               view, casters, mesh) if picture else None
             prelude = pool.submit(carried(report_prelude, "save: table 2 and seam steps"), res, table2,
@@ -182,10 +209,11 @@ def save_run(res: Any, out: str | os.PathLike, *, overwrite: bool = False,
         res.scene.index(view)
     with output_folder(out, overwrite=overwrite, inputs=res.scene.input_paths(), command=res.command) as stage, \
             _stage("export"):
-        return write_run_folder(res, stage, Path(out), fmts=fmts, tfmt=tfmt, quality=int(jpeg_quality), unlit=unlit,
-                                rotation=None if up_axis == "none" else rotation, orientation=orientation,
-                                picture=selection_view is None or view is not None, view=view,
-                                save_images=save_images, report=report)
+        return write_run_folder(res, stage, Path(out), FolderPlan(
+            formats=fmts, texture_format=tfmt, quality=int(jpeg_quality), unlit=bool(unlit),
+            rotation=None if up_axis == "none" else rotation, orientation=orientation,
+            picture=selection_view is None or view is not None, view=view, save_images=bool(save_images),
+            report=bool(report)))
 
 
 def save_correction(run: Any, out: str | os.PathLike, *, overwrite: bool = False, report: bool = True) -> Path:
