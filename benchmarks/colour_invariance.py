@@ -24,7 +24,8 @@ Oracle rows (no method can do better with per-channel curves):
 
 - ``oracle inverse``: the exact inverse of each hidden change (quantisation and clipping only);
 - ``oracle fit``: per photo and channel, the monotone curve fitted on the exact truth pairs (the changed and
-  the untouched value of every covered pixel of that photo): the floor of the curve model.
+  the untouched value of every covered pixel of that photo): the floor of the curve model (on ``hard-room``,
+  the photo and its true colours).
 
 The error breakdown (printed under each scene): *correspondence* = a method's truth score with the
 registration error minus the same with exact poses (generated scenes); *curve fit* = ``oracle fit`` minus
@@ -82,6 +83,9 @@ METHOD_SPECS = {
     "global 32 levels": ("seqcc-global", {"levels": 32}),
     "global no guard": ("seqcc-global", {"guard": False}),
     "global sequential": ("seqcc-global", {"refine": False}),
+    "global no clip levels": ("seqcc-global", {"clip_levels": False}),
+    "global encoded power": ("seqcc-global", {"light": "encoded"}),
+    "global no direct prior": ("seqcc-global", {"prior_direct": None}),
     "reinhard": ("reinhard", {}),
     "none": ("none", {}),
 }
@@ -276,6 +280,9 @@ def run_scene(name: str, data: dict, methods: list[str], args) -> dict:
             if data["truth"] is not None:
                 seed_rows["oracle inverse"]["truth"] = view_errors(undone, truth, masks, skip=(ref,), stride=stride)
                 seed_rows["oracle fit"]["truth"] = view_errors(fit, truth, masks, skip=(ref,), stride=stride)
+        elif data["truth"] is not None:  # the scene's own changes: the curves fitted on its photos' exact truth pairs
+            fit = _oracle_fit(changed, data["truth"], masks, ref)
+            seed_rows["oracle fit"] = {"truth": view_errors(fit, data["truth"], masks, skip=(ref,), stride=stride)}
         per_seed.append(seed_rows)
     # averaged over seeds, per photo
     for label in per_seed[0]:
@@ -318,6 +325,10 @@ def _print_scene(name: str, scene, ref: int, rows: dict, hidden: bool) -> None:
     if "default" in rows and "invariance" in rows["default"]:
         print("per photo invariance, default:", " ".join(f"{x:.2f}" if x is not None else "-"
                                                      for x in rows["default"]["invariance"]["per_photo"]))
+    for label in ("default", "oracle fit"):
+        if label in rows and "truth" in rows[label]:
+            print(f"per photo truth, {label}:", " ".join(f"{x:.2f}" if x is not None else "-"
+                                                      for x in rows[label]["truth"]["per_photo"]))
     if "oracle fit" in rows and "invariance" in rows["oracle fit"]:
         fit, inv = rows["oracle fit"]["invariance"]["mean"], rows["oracle inverse"]["invariance"]["mean"]
         parts = [f"curve fit {fit - inv:+.2f}"]

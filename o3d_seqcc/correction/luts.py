@@ -78,17 +78,33 @@ def compose_luts(luts: list[np.ndarray], *, n_out: int | None = None, extrapolat
     return np.clip(out, 0.0, 1.0)
 
 
-def extend_curve(
-    lut: np.ndarray, lo: float, hi: float, *, stretch: float = 0.5, beta_range: tuple[float, float] = (0.33, 3.0)
-) -> np.ndarray:
-    """Continue a curve beyond its observed input range ``[lo, hi]`` as power laws.
+def _srgb_decode(x: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1)."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
 
-    Above ``hi``: ``f(x) = f(hi) (x / hi)^beta_hi``; below ``lo``: ``f(x) = f(lo) (x / lo)^beta_lo``
-    (which runs to black, ``f(0) = 0``). Each ``beta`` is the least-squares slope of
-    ``log f`` on ``log x`` over the ``stretch`` of the observed range next to that end, clipped to
-    ``beta_range``. A change of exposure, white balance and gamma is a power law per channel,
-    so this continuation is exact for it, where a straight line or a clamp is not; fitted over a
-    long stretch, the slope is not at the mercy of the noise of the last few observations.
+
+def _srgb_encode(x: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] -> sRGB-encoded values (the inverse of :func:`_srgb_decode`); above 1 continued."""
+    x = np.maximum(np.asarray(x, dtype=np.float64), 0.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1.0 / 2.4) - 0.055)
+
+
+def extend_curve(
+    lut: np.ndarray, lo: float, hi: float, *, stretch: float = 0.5, beta_range: tuple[float, float] = (0.33, 3.0),
+    light: str = "linear",
+) -> np.ndarray:
+    """Continue a curve beyond its observed input range ``[lo, hi]`` as power laws in linear light.
+
+    With ``x`` and ``f`` in linear light (``light="linear"``: the curve's sRGB-encoded inputs and outputs
+    decoded): above ``hi``, ``f(x) = f(hi) (x / hi)^beta_hi``; below ``lo``, ``f(x) = f(lo) (x / lo)^beta_lo``
+    (which runs to black, ``f(0) = 0``). Each ``beta`` is the least-squares slope of ``log f`` on ``log x``
+    over the ``stretch`` of the observed range next to that end, clipped to ``beta_range``. A camera's change
+    of exposure and white balance is a gain in linear light, and with a change of gamma a power law per
+    channel, so this continuation is exact for it, where a straight line or a clamp is not; in the encoded
+    values (``light="encoded"``) it is only close (sRGB's linear toe and offset bend the power law: on a
+    generated room whose reference saw no shadows, 8 levels off in the shadows). Fitted over a long stretch,
+    the slope is not at the mercy of the noise of the last few observations.
 
     Parameters
     ----------
@@ -99,12 +115,17 @@ def extend_curve(
     stretch : float, default 0.5
         Share of ``hi - lo`` next to each end over which its slope is fitted.
     beta_range : (float, float), default (0.33, 3.0)
+    light : {"linear", "encoded"}, default "linear"
+        Where the power laws are: in linear light (sRGB-decoded inputs and outputs) or in the values as given.
 
     Returns
     -------
     numpy.ndarray
         (L,) float64, monotone non-decreasing, not clipped.
     """
+    if light not in ("linear", "encoded"):
+        raise ValueError(f"light must be 'linear' or 'encoded', got {light!r}")
+    dec, enc = (_srgb_decode, _srgb_encode) if light == "linear" else (np.asarray, np.asarray)
     lut = np.asarray(lut, dtype=np.float64)
     out = lut.copy()
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
@@ -112,23 +133,25 @@ def extend_curve(
     L = lut.size
     grid = np.linspace(0.0, 1.0, L)
     d = max(float(stretch) * (hi - lo), 2.0 / (L - 1))
-    eps = 1e-4
+    eps = 1e-4 if light == "encoded" else 1e-6
     b0, b1 = (float(b) for b in beta_range)
 
     def loglog_slope(x0: float, x1: float) -> float:
-        xs = np.linspace(max(x0, eps), x1, 32)
-        fs = np.interp(xs, grid, lut)
-        ok = fs > eps
-        if ok.sum() < 2 or np.ptp(np.log(xs[ok])) <= 0:
+        xs = np.linspace(max(x0, 1e-4), x1, 32)
+        ts, fs = dec(xs), dec(np.interp(xs, grid, lut))
+        ok = (fs > eps) & (ts > eps)
+        if ok.sum() < 2 or np.ptp(np.log(ts[ok])) <= 0:
             return 1.0
-        return float(np.clip(np.polyfit(np.log(xs[ok]), np.log(fs[ok]), 1)[0], b0, b1))
+        return float(np.clip(np.polyfit(np.log(ts[ok]), np.log(fs[ok]), 1)[0], b0, b1))
 
     if hi < 1.0:
         up = grid > hi
-        out[up] = max(float(np.interp(hi, grid, lut)), eps) * (grid[up] / hi) ** loglog_slope(max(hi - d, lo), hi)
+        f_hi = max(float(dec(np.interp(hi, grid, lut))), eps)
+        out[up] = enc(f_hi * (dec(grid[up]) / float(dec(hi))) ** loglog_slope(max(hi - d, lo), hi))
     if lo > 0.0:
         dn = grid < lo
-        out[dn] = max(float(np.interp(lo, grid, lut)), 0.0) * (grid[dn] / lo) ** loglog_slope(lo, min(lo + d, hi))
+        f_lo = max(float(dec(np.interp(lo, grid, lut))), 0.0)
+        out[dn] = enc(f_lo * (dec(grid[dn]) / float(dec(lo))) ** loglog_slope(lo, min(lo + d, hi)))
     return np.maximum.accumulate(out)
 
 

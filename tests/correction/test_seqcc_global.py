@@ -127,10 +127,28 @@ def test_half_range_overlap_extrapolated_by_a_power_law(albedo, s_curve):
     maps = _mappings({(0, 1): (6000, low)}, 2)
     de = {}
     for ext in ("power", "line"):
-        res = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", extrapolate=ext)
+        res = correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", extrapolate=ext,
+                      light="encoded")  # the change is a power law in the encoded values
         de[ext] = _de(res.images[1], truth, ~low)
     assert de["power"] < 2.0, de
     assert de["power"] < de["line"], de
+
+
+def test_a_change_in_linear_light_is_extrapolated_in_linear_light(albedo):
+    """A camera's exposure, white balance and gamma in linear light (the semi-real protocol's change): seen only
+    over the dark half of its range, the photo's bright half is continued by a power law in linear light far
+    closer to the truth than by one in the encoded values."""
+    from o3d_seqcc.evaluation.semireal import apply_camera_change
+
+    p = {"gain": 0.5, "white_balance": [1.15, 0.95, 0.85], "gamma": [1.4, 1.2, 0.7], "s_curve": 0.0}
+    truth = from_float(albedo, np.uint8)
+    images = [truth, apply_camera_change(truth, p)]
+    low = _lower_half(albedo)
+    maps = _mappings({(0, 1): (6000, low)}, 2)
+    de = {light: _de(correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global",
+                             light=light).images[1], truth, ~low) for light in ("linear", "encoded")}
+    assert de["linear"] < 1.0, de
+    assert de["linear"] < 0.5 * de["encoded"], de  # measured 0.83 against 2.95
 
 
 def _ring_observations(
@@ -222,14 +240,26 @@ def test_refine_curves_validation():
 
 
 def test_extend_curve_continues_a_power_law():
+    """In the encoded values (``light="encoded"``) and in linear light (the default: a gain and a gamma in linear
+    light, seen through the sRGB encoding), the power law that made the trusted stretch comes back beyond it."""
+    from o3d_seqcc.evaluation.semireal import linear_to_srgb, srgb_to_linear
+
     grid = np.linspace(0, 1, 256)
-    f = 1.3 * grid**0.7
     lo, hi = grid[51], grid[127]
-    lut = np.where((grid >= lo) & (grid <= hi), f, 0.0)  # only [0.2, 0.5] is trusted
-    out = extend_curve(lut, lo, hi)
+    trusted = (grid >= lo) & (grid <= hi)  # only [0.2, 0.5] is trusted
+    f = 1.3 * grid**0.7
+    out = extend_curve(np.where(trusted, f, 0.0), lo, hi, light="encoded")
     np.testing.assert_allclose(out, f, atol=2e-3)
     assert np.all(np.diff(out) >= 0)
-    np.testing.assert_array_equal(extend_curve(lut, np.nan, hi), lut)
+    np.testing.assert_array_equal(extend_curve(np.where(trusted, f, 0.0), np.nan, hi), np.where(trusted, f, 0.0))
+    g = linear_to_srgb(np.clip(1.6 * srgb_to_linear(grid), 0, None) ** 0.8)  # below its clip at 1
+    lin = extend_curve(np.where(trusted, g, 0.0), lo, hi)
+    enc = extend_curve(np.where(trusted, g, 0.0), lo, hi, light="encoded")
+    below = grid < 0.8
+    np.testing.assert_allclose(lin[below], g[below], atol=2e-3)
+    assert np.abs(enc - g)[below].max() > 5 * np.abs(lin - g)[below].max()
+    with pytest.raises(ValueError, match="light"):
+        extend_curve(g, lo, hi, light="log")
 
 
 def test_edge_quantiles_and_flat_sampler_match_the_reference_implementations(rng):
@@ -524,3 +554,47 @@ def test_auto_holds_out_every_third_edge_off_the_paths():
     # off the tree: (0, 2), (0, 3), (1, 3) (no mappings: never), (3, 4) -> every third from the second: (0, 3)
     np.testing.assert_array_equal(np.flatnonzero(_held_out(obs, paths)), [4])
     assert not _held_out(obs.subset(np.array([1, 1, 1, 0, 0, 0, 1, 0], bool)), paths).any()
+
+
+def test_a_clipped_level_goes_to_the_middle_of_the_values_it_hides(albedo):
+    """A photo over-exposed by 1.5x clips a share of its channels at 255: the correction maps that level to the
+    median of the true values the clipped pixels hide (a curve continued from below the clip maps it to the
+    bottom of their range), and the clipped pixels come out closer to the truth."""
+    p = {"gain": 1.5, "white_balance": [1.0, 1.0, 1.0], "gamma": [1.0, 1.0, 1.0], "s_curve": 0.0}
+    images = _images(albedo, [identity_photometric(), p])
+    truth = from_float(albedo, np.uint8)
+    maps = _mappings({(0, 1): (8000, _full())}, 2)
+    res = {flag: correct(_scene(2), images=images, mappings=maps, reference=0, method="seqcc-global", clip_levels=flag)
+           for flag in (True, False)}
+    for c in range(3):
+        clipped = images[1][..., c] == 255
+        assert 0.03 < clipped.mean() < 0.5, clipped.mean()  # a real share of the channel is clipped
+        hidden = float(np.median(truth[..., c][clipped]))
+        got = {flag: float(r.images[1][..., c][clipped][0]) for flag, r in res.items()}
+        assert abs(got[True] - hidden) <= 3.0, (c, got, hidden)
+        assert got[False] < hidden - 3.0, (c, got, hidden)  # the continued curve: the bottom of the range
+    err = {flag: _de(r.images[1], truth, (images[1] == 255).any(axis=2)) for flag, r in res.items()}
+    assert err[True] < 0.8 * err[False], err
+    np.testing.assert_array_equal(res[True].images[1][images[1].max(axis=2) < 250],
+                                  res[False].images[1][images[1].max(axis=2) < 250])
+
+
+def test_a_per_view_prior_holds_that_view_to_its_start_and_frees_the_others():
+    """refine_curves with one weight per view: a view pulled hard toward its start (a measured curve 0.03 off)
+    keeps it, where the weak prior lets the edges bring it to its known response; equal weights give exactly
+    the scalar prior's result."""
+    responses = _responses(4, seed=3)
+    obs = _ring_observations(4, responses, seed=3, partial=False)
+    grid, kx = np.linspace(0, 1, 256), np.linspace(0, 1, responses.shape[2])
+    truth = np.stack([[np.interp(grid, responses[v, c], kx) for c in range(3)] for v in range(4)])
+    start = truth.copy()
+    start[1] = np.clip(truth[1] + 0.03, 0, 1)
+    np.testing.assert_array_equal(refine_curves(obs, n_views=4, reference=0, init=start, prior=1e-6).luts,
+                                  refine_curves(obs, n_views=4, reference=0, init=start, prior=np.full(4, 1e-6)).luts)
+    held = refine_curves(obs, n_views=4, reference=0, init=start, prior=np.array([1e-6, 1e3, 1e-6, 1e-6]))
+    loose = refine_curves(obs, n_views=4, reference=0, init=start, prior=1e-6)
+    mid = (grid > 0.05) & (grid < 0.8)
+    off = lambda r, ref, v: float(np.abs(r.luts[v] - ref[v])[:, mid].mean())  # noqa: E731
+    assert off(held, start, 1) < 0.002 and off(held, truth, 1) > 0.025  # measured 0.0005, 0.030
+    for v in (1, 2, 3):
+        assert off(loose, truth, v) < 0.002, v  # measured 0.0002-0.0004

@@ -28,7 +28,8 @@ class ChannelProblem:
     ``keep_e`` (E,) the edges kept, ``base_w`` (E,) their weights; ``col`` (V,): each view's unknown block (-1:
     fixed), ``free`` (F,) the free views; ``phi`` (V, K): starting responses (the reference's the identity);
     ``start_luts`` (V, L): starting corrections, which place the latents; ``uk`` (K,) the knots, ``grid`` (L,) the
-    lookup tables' values, ``D`` and ``reg_block`` the smoothing operator and its block; ``channel`` 0-2.
+    lookup tables' values, ``D`` and ``reg_block`` the smoothing operator and its block (K, K), or each free
+    view's (F, K, K) when their priors differ; ``channel`` 0-2.
     """
 
     a: np.ndarray
@@ -54,7 +55,7 @@ class Solver:
     """The solver's settings (:func:`~o3d_seqcc.correction.methods.joint_curves.refine_curves` documents each)."""
 
     smooth: float
-    prior: float
+    prior: np.ndarray  # (F,) each free view's pull toward its start
     anchor: np.ndarray  # (K,) the black anchor's weight per knot
     iterations: int
     plain_iterations: int
@@ -114,7 +115,7 @@ def adjust_channel(problem: ChannelProblem, solver: Solver):
     starting corrections, which place the latents. Returns ``(phi, edge rms residual (E,),
     edge weights (E,))`` or None when no edge has an uncensored observation.
     """
-    from scipy.linalg import cho_factor, cho_solve
+    from scipy.linalg import block_diag, cho_factor, cho_solve
 
     a, b, ma, mb, seen, keep_e = problem.a, problem.b, problem.ma, problem.mb, problem.seen, problem.keep_e
     base_w, col, free, phi, start_luts = problem.base_w, problem.col, problem.free, problem.phi, problem.start_luts
@@ -157,7 +158,11 @@ def adjust_channel(problem: ChannelProblem, solver: Solver):
     two = np.bincount(r_lat, minlength=J) == 2
     first = order[starts]
     second = order[np.minimum(starts + 1, len(order) - 1)]
-    reg_full = np.kron(np.eye(F), reg_block)
+    reg_full = block_diag(*reg_block) if reg_block.ndim == 3 else np.kron(np.eye(F), reg_block)
+    one_prior = bool(np.all(prior == prior[0])) if F else True
+
+    def prior_cost(d):  # one weight: the plain sum (the same sums as a scalar prior)
+        return float(prior[0]) * np.sum(d * d) if one_prior else np.sum(prior[:, None] * d * d)
     ew = np.ones(E)
 
     def evaluate(phi_, u_):
@@ -169,7 +174,7 @@ def adjust_channel(problem: ChannelProblem, solver: Solver):
     def cost(r, phi_, w_):  # r: evaluate(phi_, u_)[0]
         d = phi_[free] - phi_start
         return float(
-            np.sum(w_ * r * r) + smooth * np.sum((phi_[free] @ D.T) ** 2) + prior * np.sum(d * d)
+            np.sum(w_ * r * r) + smooth * np.sum((phi_[free] @ D.T) ** 2) + prior_cost(d)
             + np.sum(anchor * phi_[free] ** 2)
         )
 
@@ -201,7 +206,7 @@ def adjust_channel(problem: ChannelProblem, solver: Solver):
                 h_idx.append(idx[fr_rows, p_] * U + idx[fr_rows, q_])
                 h_val.append((w * vals[:, p_] * vals[:, q_])[fr_rows])
         Hpp = np.bincount(np.concatenate(h_idx), weights=np.concatenate(h_val), minlength=U * U) + reg_full.reshape(-1)
-        gp += (smooth * (phi[free] @ D.T) @ D + prior * (phi[free] - phi_start) + anchor * phi[free]).reshape(-1)
+        gp += (smooth * (phi[free] @ D.T) @ D + prior[:, None] * (phi[free] - phi_start) + anchor * phi[free]).reshape(-1)
 
 
         Huu = np.bincount(r_lat, weights=w * sl * sl, minlength=J)

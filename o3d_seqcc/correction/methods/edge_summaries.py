@@ -26,6 +26,8 @@ __all__ = ["SATURATION", "TRIM", "EdgeObservations", "edge_observations", "edge_
 TRIM = 0.005
 #: values within this of 0 or 1 are censored (clipped by the camera) and not used as observations
 SATURATION = 1.5 / 255
+#: values within this of 0 or 1 are a photo's clipped end levels (:func:`clipped_ends`)
+CLIPPED = 0.5 / 255
 
 
 def _sorted_quantiles(sorted_rows: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -183,8 +185,42 @@ def _sample_view_task(item: tuple[int, list], images, interpolation: str, source
     return _sample_image(images[v], uv, interpolation)
 
 
+def clipped_ends(sa: np.ndarray, sb: np.ndarray) -> np.ndarray:
+    """What each side's clipped end levels hide, from an edge's two sorted (3, n) colour rows.
+
+    Where view a clipped a channel (values within :data:`CLIPPED` of 1, or of 0), its pixels hold one level
+    for a range of true values. Matched by rank, as the quantile summaries are, those pixels are the other
+    view's same share of its highest (lowest) values; the middle of that range, the other view's quantile at
+    ``1 - share / 2`` (``share / 2``), is what the clipped level stands for (the median of the hidden values:
+    what a correction should map the clipped level to; it is equivariant to either view's monotone change).
+
+    Returns
+    -------
+    (2, 3, 2, 2) float64
+        ``[side, channel, end, (share, other)]``: side 0 is view a, 1 view b; end 0 the low end, 1 the high end;
+        the share of the side's values at that end level and the other side's value in the middle of their ranks.
+    """
+    out = np.zeros((2, 3, 2, 2))
+    n = sa.shape[1]
+    if n == 0:
+        return out
+    for side, (own, other) in enumerate(((sa, sb), (sb, sa))):
+        lo = (own <= CLIPPED).sum(axis=1) / n
+        hi = (own >= 1.0 - CLIPPED).sum(axis=1) / n
+        out[side, :, 0, 0], out[side, :, 1, 0] = lo, hi
+        out[side, :, 0, 1] = _sorted_quantiles_each(other, lo / 2.0)
+        out[side, :, 1, 1] = _sorted_quantiles_each(other, 1.0 - hi / 2.0)
+    return out
+
+
+def _sorted_quantiles_each(sorted_rows: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(C,) the quantile at level ``q[c]`` of each ascending row ``c`` of a (C, n) array (plotting positions)."""
+    return np.array([_sorted_quantiles(sorted_rows[c : c + 1], np.array([q[c]]))[0, 0] for c in range(len(q))])
+
+
 def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k: float | None):
-    """One edge's task: (ca, cb) float32 colours, channels as rows (3, n) -> (qa (3, P), qb (3, P), n kept)."""
+    """One edge's task: (ca, cb) float32 colours, channels as rows (3, n) -> (qa (3, P), qb (3, P), n kept,
+    :func:`clipped_ends` (2, 3, 2, 2))."""
     ca, cb = item
     sb = np.sort(cb, axis=1)
     if outlier_k is not None and ca.shape[1] >= 10:
@@ -197,7 +233,7 @@ def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k:
             sb = np.sort(cb[:, keep], axis=1)
     else:
         sa = np.sort(ca, axis=1)
-    return _sorted_quantiles(sa, q), _sorted_quantiles(sb, q), sa.shape[1]
+    return _sorted_quantiles(sa, q), _sorted_quantiles(sb, q), sa.shape[1], clipped_ends(sa, sb)
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,6 +257,8 @@ class EdgeObservations:
         Which quantiles of view a (``seen[0]``) and of view b (``seen[1]``) are not censored (clipped by the
         camera), when they were summarised in other values than the views' own (:meth:`through`); None: the
         quantiles more than :data:`SATURATION` from 0 and 1.
+    clipped : (E, 2, 3, 2, 2) float64 or None
+        Per edge, :func:`clipped_ends` of its colours in the views' own values (the same in every value space).
     """
 
     a: np.ndarray
@@ -230,6 +268,7 @@ class EdgeObservations:
     n: np.ndarray
     normalisers: np.ndarray | None = None
     seen: np.ndarray | None = None
+    clipped: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         e = len(self.a)
@@ -243,7 +282,8 @@ class EdgeObservations:
         """These summaries of the edges where ``keep`` (E,) bool is true."""
         keep = np.asarray(keep, dtype=bool)
         return EdgeObservations(a=self.a[keep], b=self.b[keep], qa=self.qa[keep], qb=self.qb[keep], n=self.n[keep],
-                                normalisers=self.normalisers, seen=None if self.seen is None else self.seen[:, keep])
+                                normalisers=self.normalisers, seen=None if self.seen is None else self.seen[:, keep],
+                                clipped=None if self.clipped is None else self.clipped[keep])
 
     def through(self, normalisers: np.ndarray) -> "EdgeObservations":
         """These summaries with every view's values through its monotone (3, L) table ``normalisers[v]`` (the
@@ -263,7 +303,7 @@ class EdgeObservations:
 
         seen = np.stack([np.stack(self.observed(c), axis=0) for c in range(3)], axis=2)  # (2, E, 3, P)
         return EdgeObservations(a=self.a, b=self.b, qa=mapped(self.a, self.qa), qb=mapped(self.b, self.qb), n=self.n,
-                                normalisers=norm, seen=seen)
+                                normalisers=norm, seen=seen, clipped=self.clipped)
 
     def observed(self, c: int) -> tuple[np.ndarray, np.ndarray]:
         """(E, P) masks of channel ``c``'s quantiles of view a and of view b that are not censored."""
@@ -373,10 +413,11 @@ def edge_observations(
     def summarise(items: list) -> EdgeObservations:
         # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
         qa, qb, ns = np.zeros((E, 3, P)), np.zeros((E, 3, P)), np.zeros(E, dtype=np.int64)
-        for i, (qa_i, qb_i, n_i) in zip(live, local.map(_summary_task, [items[i] for i in live], q, outlier_k,
+        clipped = np.zeros((E, 2, 3, 2, 2))
+        for i, (qa_i, qb_i, n_i, clip_i) in zip(live, local.map(_summary_task, [items[i] for i in live], q, outlier_k,
                                                        desc="edge summaries", unit="edge")):
-            qa[i], qb[i], ns[i] = qa_i, qb_i, n_i
-        return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns)
+            qa[i], qb[i], ns[i], clipped[i] = qa_i, qb_i, n_i, clip_i
+        return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns, clipped=clipped)
 
     own = summarise(pairs)
     if normalise_to is None:
@@ -404,5 +445,6 @@ def edge_observations(
                 lo = np.interp(SATURATION, grid, norm[v, c]) if (own_c <= SATURATION).any() else -np.inf
                 hi = np.interp(1.0 - SATURATION, grid, norm[v, c]) if (own_c >= 1.0 - SATURATION).any() else np.inf
                 seen[side, sel, c] = (qs[sel, c] > lo) & (qs[sel, c] < hi)
-    return own, EdgeObservations(a=out.a, b=out.b, qa=out.qa, qb=out.qb, n=out.n, normalisers=norm, seen=seen)
+    return own, EdgeObservations(a=out.a, b=out.b, qa=out.qa, qb=out.qb, n=out.n, normalisers=norm, seen=seen,
+                                 clipped=own.clipped)
 

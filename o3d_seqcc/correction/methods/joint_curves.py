@@ -140,7 +140,7 @@ def refine_curves(
     knots: int = 11,
     lut_size: int = 256,
     smooth: float = 1e-3,
-    prior: float = 1e-6,
+    prior: float | np.ndarray = 1e-6,
     iterations: int = 10,
     plain_iterations: int = 3,
     edge_robust_c: float | None = 2.0,
@@ -196,8 +196,8 @@ def refine_curves(
         Weight of the squared second differences of each response (divided by the knot
         spacing, relative to even spacing), relative to one edge's data term (each edge's
         residuals sum to twice its weight).
-    prior : float, default 1e-6
-        Weight of the squared distance of each knot value to the start.
+    prior : float or (V,) float array, default 1e-6
+        Weight of the squared distance of each knot value to the start (one for every view, or each view's).
     iterations : int, default 10
         Levenberg-Marquardt iterations per channel and phase (each phase stops earlier when
         the cost improves by less than 0.01 %).
@@ -256,11 +256,15 @@ def refine_curves(
     # black: cameras keep black black -- every response starts at 0 (a stiff spring on knot 0)
     anchor = np.zeros(K)
     anchor[0] = BLACK_WEIGHT if black else 0.0
-    reg_block = smooth * (D.T @ D) + prior * np.eye(K) + np.diag(anchor)
+    prior_free = np.broadcast_to(np.asarray(prior, dtype=np.float64), (n_views,))[free].copy()
+    if np.all(prior_free == float(np.max(prior_free, initial=0.0))):
+        reg_block = smooth * (D.T @ D) + float(np.max(prior_free, initial=0.0)) * np.eye(K) + np.diag(anchor)
+    else:  # each free view's own pull toward its start
+        reg_block = np.stack([smooth * (D.T @ D) + p * np.eye(K) + np.diag(anchor) for p in prior_free])
     ew_all = np.ones((3, E))
     from threadpoolctl import threadpool_limits
 
-    solver = Solver(smooth=smooth, prior=prior, anchor=anchor, iterations=int(iterations),
+    solver = Solver(smooth=smooth, prior=prior_free, anchor=anchor, iterations=int(iterations),
                     plain_iterations=int(plain_iterations), edge_robust_c=edge_robust_c, monotone_steps=monotone_steps)
 
     # small dense systems: one BLAS thread (threaded BLAS on a busy 2-core machine was 100x slower)
