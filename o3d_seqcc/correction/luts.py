@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..imaging.arrays import linear_to_srgb, srgb_to_linear
+
 __all__ = ["apply_lut", "compose_luts", "extend_curve", "extend_line", "interp_extrapolate"]
 
 
@@ -78,18 +80,6 @@ def compose_luts(luts: list[np.ndarray], *, n_out: int | None = None, extrapolat
     return np.clip(out, 0.0, 1.0)
 
 
-def _srgb_decode(x: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1)."""
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def _srgb_encode(x: np.ndarray) -> np.ndarray:
-    """Linear light in [0, 1] -> sRGB-encoded values (the inverse of :func:`_srgb_decode`); above 1 continued."""
-    x = np.maximum(np.asarray(x, dtype=np.float64), 0.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1.0 / 2.4) - 0.055)
-
-
 def extend_curve(
     lut: np.ndarray, lo: float, hi: float, *, stretch: float = 0.5, beta_range: tuple[float, float] = (0.33, 3.0),
     light: str = "linear",
@@ -125,7 +115,7 @@ def extend_curve(
     """
     if light not in ("linear", "encoded"):
         raise ValueError(f"light must be 'linear' or 'encoded', got {light!r}")
-    dec, enc = (_srgb_decode, _srgb_encode) if light == "linear" else (np.asarray, np.asarray)
+    dec, enc = (srgb_to_linear, linear_to_srgb) if light == "linear" else (np.asarray, np.asarray)
     lut = np.asarray(lut, dtype=np.float64)
     out = lut.copy()
     if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:

@@ -30,7 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..imaging.arrays import img_as_dtype, img_as_float
+from ..imaging.arrays import img_as_dtype, img_as_float, linear_to_srgb, srgb_to_linear
 from .photometric import CAMERA_CHANGE_RANGES, apply_photometric, identity_photometric, sample_camera_change
 
 __all__ = [
@@ -47,18 +47,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-
-def srgb_to_linear(values: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1), float64, clipped to [0, 1]."""
-    c = np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(values: np.ndarray) -> np.ndarray:
-    """Linear light in [0, 1] -> sRGB-encoded values (inverse of :func:`srgb_to_linear`), float64."""
-    c = np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
 def apply_camera_change(image: np.ndarray, params: dict[str, Any]) -> np.ndarray:

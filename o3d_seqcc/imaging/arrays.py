@@ -28,9 +28,11 @@ __all__ = [
     "img_as_dtype",
     "img_as_float",
     "img_as_uint8",
+    "linear_to_srgb",
     "rgb_to_lab",
     "sample_bilinear",
     "sample_colors",
+    "srgb_to_linear",
 ]
 
 INTERPOLATIONS = ("bilinear", "nearest")
@@ -212,6 +214,19 @@ def sample_colors(image: np.ndarray, uv: np.ndarray, *, interpolation: str = "bi
     xi = np.minimum(np.floor(np.clip(uv[:, 0], 0.0, w - 1.0) + 0.5).astype(np.intp), w - 1)
     yi = np.minimum(np.floor(np.clip(uv[:, 1], 0.0, h - 1.0) + 0.5).astype(np.intp), h - 1)
     return img[yi, xi].astype(np.float64)
+
+
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1), float64, clipped to [0, 1] first."""
+    c = np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(values: np.ndarray) -> np.ndarray:
+    """Linear light >= 0 -> sRGB-encoded values (inverse of :func:`srgb_to_linear` on [0, 1]), float64;
+    negatives clipped to 0, values above 1 continued along the same curve (a curve's extrapolation)."""
+    c = np.maximum(np.asarray(values, dtype=np.float64), 0.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
 def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
