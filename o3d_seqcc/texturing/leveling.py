@@ -20,6 +20,7 @@ leave).
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any
 
@@ -29,6 +30,16 @@ from ..errors import InputError
 from .._shared.sets import unique
 from ..imaging.arrays import sample_bilinear
 from .settings import LEVELING_SMOOTHNESS
+
+logger = logging.getLogger(__name__)
+
+#: unknowns up to which :func:`seam_leveling_offsets` factors its system (SuperLU); above, conjugate gradients.
+#: The factors grow faster than the unknowns (760 MB for 772k unknowns, 1.4 GB of RSS while factoring, on a
+#: 2.2M-face street), the iterative solve's memory is the matrix's (issue 36)
+DIRECT_MAX_UNKNOWNS = 500_000
+#: relative residual at which the conjugate gradients stop: offsets within 1e-4 levels of the direct solve's
+#: (5e-5 at most on the 772k-unknown street, 0.0064 at 1e-6)
+CG_RTOL = 1e-8
 
 __all__ = ["corner_colors", "local_seam_leveling", "seam_leveling_offsets", "solve_corner_offsets"]
 
@@ -73,7 +84,8 @@ def seam_leveling_offsets(
 
     through its normal equations (a sparse SPD system: SuperLU with a minimum-degree ordering of
     ``A^T + A`` and symmetric pivoting, ``scipy.sparse.linalg.splu``, a third less fill than
-    ``spsolve``'s default column ordering).
+    ``spsolve``'s default column ordering; above :data:`DIRECT_MAX_UNKNOWNS` unknowns, whose factors
+    would outgrow the mesh, Jacobi-preconditioned conjugate gradients to :data:`CG_RTOL`).
     ``w_ij = min(1, huber / |f_i - f_j|)`` (one Huber reweighting) limits the pull of seams
     whose two sides show different things (registration errors, occlusions).
 
@@ -156,10 +168,13 @@ def seam_leveling_offsets(
     if len(pairs):
         np.add.at(b, pairs[:, 0], -w[:, None] * diff)
         np.add.at(b, pairs[:, 1], w[:, None] * diff)
-    # SPD: minimum degree on A^T + A, diagonal pivots (186 MB -> 131 MB of factors at 189k unknowns, 300k faces)
-    lu = splu(L.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    g = np.asarray(lu.solve(b), dtype=np.float64).reshape(M, 3)
-    del lu
+    if M <= DIRECT_MAX_UNKNOWNS:
+        # SPD: minimum degree on A^T + A, diagonal pivots (186 MB -> 131 MB of factors at 189k unknowns, 300k faces)
+        lu = splu(L.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        g = np.asarray(lu.solve(b), dtype=np.float64).reshape(M, 3)
+        del lu
+    else:
+        g = _solve_cg(L.tocsr(), b)
     g[~used] = 0.0
     after = (f + g)[pairs[:, 0]] - (f + g)[pairs[:, 1]] if len(pairs) else np.zeros((0, 3))
     stats = {
@@ -170,6 +185,26 @@ def seam_leveling_offsets(
         "seam_step_after": float(np.linalg.norm(after, axis=1).mean()) if len(pairs) else 0.0,
     }
     return g, stats
+
+
+def _solve_cg(L, b: np.ndarray) -> np.ndarray:
+    """(M, 3) float64 solution of the SPD system ``L g = b``, channel by channel, by Jacobi-preconditioned
+    conjugate gradients to :data:`CG_RTOL` (memory: the matrix and a few (M,) vectors)."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import cg
+
+    t0 = time.perf_counter()
+    pre = sp.diags(1.0 / L.diagonal())
+    g = np.zeros(b.shape, dtype=np.float64)
+    for c in range(b.shape[1]):
+        if not np.any(b[:, c]):
+            continue
+        g[:, c], info = cg(L, b[:, c], rtol=CG_RTOL, atol=0.0, M=pre, maxiter=20 * int(np.sqrt(len(b))) + 1000)
+        if info > 0:
+            logger.warning("seam leveling: conjugate gradients stopped short of %.0e after %d iterations (channel %d)",
+                           CG_RTOL, info, c)
+    logger.info("seam leveling: %d unknowns solved by conjugate gradients in %.1f s", len(b), time.perf_counter() - t0)
+    return g
 
 
 def _rasterize_uv(txy: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -490,6 +490,31 @@ def test_seam_leveling_offsets_known_answer():
         seam_leveling_offsets(colors[:3], faces, group)
 
 
+def test_seam_leveling_iterative_solve_matches_the_direct_one(monkeypatch):
+    """Above ``DIRECT_MAX_UNKNOWNS`` the system is solved by conjugate gradients (issue 36: SuperLU's factors
+    outgrow the mesh): on two 40 x 40 grids meeting along a seam with a colour step and noise, the offsets are
+    the factorisation's to 1e-3 levels, and the step is leveled as much."""
+    from o3d_seqcc.texturing import leveling, seam_leveling_offsets
+
+    n = 40
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    grid = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    m = (n + 1) ** 2
+    faces = np.concatenate([grid, grid + m])
+    group = np.r_[np.arange(m), np.arange(m) + m]
+    seam = idx[:, -1]
+    group[m + idx[:, 0]] = seam  # the second grid's left column is the first's right column
+    rng = np.random.default_rng(3)
+    colors = np.r_[np.full((m, 3), 100.0), np.full((m, 3), 130.0)] + rng.normal(0, 2.0, (2 * m, 3))
+    direct, st_d = seam_leveling_offsets(colors, faces, group, smoothness=0.03)
+    monkeypatch.setattr(leveling, "DIRECT_MAX_UNKNOWNS", 10)
+    iterative, st_i = seam_leveling_offsets(colors, faces, group, smoothness=0.03)
+    assert np.abs(direct).max() > 5.0  # the seam is really leveled
+    np.testing.assert_allclose(iterative, direct, atol=1e-3)
+    assert abs(st_i["seam_step_after"] - st_d["seam_step_after"]) < 1e-3 < st_d["seam_step_before"] - st_d["seam_step_after"]
+
+
 def test_smooth_fallback_interpolates_neighbour_colours():
     """Faces seen by no view, inside a region textured with a linear colour ramp: they are welded
     into the chart around them (no UV seam, no extra vertex) and the Gouraud fallback reproduces
