@@ -285,14 +285,19 @@ def reference_timing(sizes=(400, 1000), seed: int = 0) -> None:
 
 
 def _same_outputs(a: Path, b: Path) -> dict:
-    """Whether two run folders hold the same selection, texture and Table 2 (the cluster's against the local run)."""
+    """Whether two run folders hold the same selection, texture, GLB bytes and Table 2 (the cluster's against the
+    local run)."""
+    import hashlib
+
     import cv2
 
     sel = bool(np.array_equal(np.load(a / "selection.npy"), np.load(b / "selection.npy")))
     ta, tb = (cv2.imread(str(p / "mesh.png"), cv2.IMREAD_UNCHANGED) for p in (a, b))
     tex = ta is not None and tb is not None and ta.shape == tb.shape and bool(np.array_equal(ta, tb))
     ma, mb = (json.loads((p / "report.json").read_text()).get("metrics") for p in (a, b))
-    return {"selection": sel, "texture": tex, "table2": ma == mb}
+    ga, gb = (hashlib.sha256((p / "mesh.glb").read_bytes()).hexdigest() if (p / "mesh.glb").is_file() else None
+              for p in (a, b))
+    return {"selection": sel, "texture": tex, "glb": ga is not None and ga == gb, "table2": ma == mb}
 
 
 def _faces(s: str) -> int:
