@@ -11,6 +11,7 @@ of a block; :func:`o3d_seqcc.io.output.output_folder` and the command line enter
 
 from __future__ import annotations
 
+import _thread
 import signal
 import threading
 from contextlib import contextmanager
@@ -37,9 +38,32 @@ def _interrupt(signum: int) -> KeyboardInterrupt:
     return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
 
 
+#: how long a signal that arrived where its exception would be dropped waits before it is delivered again (s)
+REDELIVER_S = 0.01
+
+
+def _dropped_here(frame) -> bool:
+    """Whether an exception raised at ``frame`` would be printed and dropped instead of propagated.
+
+    Python calls weakref callbacks from C, and an exception raised inside one is reported as
+    "Exception ignored in ..." and dropped. importlib's module locks have one (``_get_module_lock``'s
+    ``cb``), so a Ctrl-C that lands in it while a module is imported printed a traceback, and the
+    command went on as if nothing had happened.
+    """
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "cb" and code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _raise_terminated(signum: int, frame) -> None:
     if _HOLD["depth"]:  # inside held(): raised when the block ends
         _HOLD["pending"] = int(signum)
+        return
+    if _dropped_here(frame):  # delivered again a moment later, once out of the callback
+        threading.Timer(REDELIVER_S, _thread.interrupt_main, args=(int(signum),)).start()
         return
     raise _interrupt(signum)
 
@@ -76,6 +100,8 @@ def interruptible() -> Iterator[None]:
     """SIGTERM and SIGHUP raise :class:`Terminated` (a KeyboardInterrupt) inside the block, so that what
     cleans up after Ctrl-C (the staging folder, the lock) cleans up after them too.
 
+    Ctrl-C still raises KeyboardInterrupt, but never where Python would drop it (inside importlib's
+    module-lock callback, see :func:`_dropped_here`): there it is raised again 10 ms later.
     Only in the main thread, and only for signals whose handler is the default one (a SIGHUP that
     ``nohup`` ignores stays ignored; a program's own handlers are kept). Re-entrant.
     """
@@ -86,6 +112,8 @@ def interruptible() -> Iterator[None]:
     for sig in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)):
         if sig is not None and signal.getsignal(sig) is signal.SIG_DFL:
             saved[sig] = signal.signal(sig, _raise_terminated)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # Ctrl-C: KeyboardInterrupt, never dropped
+        saved[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_terminated)
     try:
         yield
     finally:
