@@ -20,7 +20,7 @@ from ...mappings.pairs import BATCH_PAIRS, LazyPairs, thinned_many
 from ..._shared.parallel import LocalExecutor, current as current_executor
 from .value_space import histogram_normalisers_from_colours, map_rows
 
-__all__ = ["SATURATION", "TRIM", "EdgeObservations", "edge_observations", "edge_quantiles"]
+__all__ = ["SATURATION", "TRIM", "EdgeObservations", "edge_observations", "edge_quantiles", "rank_inliers"]
 
 #: quantile levels this close to 0 or 1 are left out of the edge summaries
 TRIM = 0.005
@@ -92,6 +92,100 @@ def _rank_inliers(ca: np.ndarray, cb: np.ndarray, order_a: np.ndarray, sorted_b:
     z = (r - med) / np.maximum(mad, np.float32(1.0 / 255))[:, None]
     z *= z
     return np.sqrt((z[0] + z[1]) + z[2]) <= k * np.sqrt(3.0)
+
+
+#: :func:`rank_inliers` ranks values on this many bins of [0, 1] (a quarter of an 8-bit level): values in one bin
+#: are tied
+RANK_BINS = 1024
+
+
+class _TiedRanks:
+    """The bins of one (C, n) set of values in [0, 1] (:data:`RANK_BINS`, values in one bin tied), so that the
+    mid-rank of every value among any subset of them costs a bincount (:meth:`among`)."""
+
+    def __init__(self, rows: np.ndarray) -> None:
+        self.group = np.clip(np.rint(np.asarray(rows, dtype=np.float64) * (RANK_BINS - 1)), 0, RANK_BINS - 1).astype(np.int64)
+        self.n_groups = RANK_BINS
+        self.flat = (self.group + (np.arange(rows.shape[0]) * RANK_BINS)[:, None]).ravel()
+
+    def among(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(mid, half)`` (C, n): each value's mid-rank CDF position among the values where ``keep`` (n,), and half
+        the share its tied values take there."""
+        C, G = self.group.shape[0], max(self.n_groups, 1)
+        cnt = np.bincount(self.flat, weights=np.tile(keep, C).astype(np.float64), minlength=C * G).reshape(C, G)
+        hi = np.cumsum(cnt, axis=1).ravel()
+        scale = 1.0 / (2.0 * max(int(keep.sum()), 1))
+        hi_v = hi[self.flat].reshape(self.group.shape)
+        lo_v = hi_v - cnt.ravel()[self.flat].reshape(self.group.shape)
+        return (lo_v + hi_v) * scale, (hi_v - lo_v) * scale
+
+
+def rank_inliers(ca: np.ndarray, cb: np.ndarray, *, k: float = 3.0, rounds: int = 5) -> np.ndarray:
+    """Mappings whose two colours hold the same rank in their views, jointly over the channels, iterated.
+
+    Each mapping's residual is, per channel, the difference of its colour's mid-rank position (the empirical
+    CDF) in view b and in view a, among the mappings kept so far, less the half-widths of the two values' tied
+    ranks (a level of an 8-bit photo holds a range of ranks): a monotone change of either view's values (a
+    camera's exposure, white balance, gamma or tone curve) does not move it, so the same mappings are kept
+    whatever the cameras did. Residuals are centred and scaled per channel by their median and 1.4826 MAD over
+    the kept mappings (at least 0.001) and summed in quadrature; a mapping is an outlier when that norm exceeds
+    ``k * sqrt(3)`` (the rule of :func:`o3d_seqcc.correction.methods.seqcc.colour_inliers`). The first round
+    ranks among all mappings; each further round among the last round's inliers, every mapping measured again
+    (one dropped too early can come back), until at most one in a thousand changes. An occluder that one view shows
+    over a tenth of the pair's surface shifts every rank above its colour in the first round; among the inliers
+    it stands out.
+
+    Parameters
+    ----------
+    ca, cb : (3, n) float arrays
+        The two views' colours at the pair's mappings, channels as rows.
+    k : float, default 3.0
+        Robust sigmas (> 0).
+    rounds : int, default 5
+        Rounds after the first (>= 0).
+
+    Returns
+    -------
+    (n,) bool
+        Inliers; all true when fewer than 10 mappings would be kept.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> a = rng.uniform(0.1, 0.9, (3, 4000))
+    >>> b = a ** 2.2  # another camera: a gamma
+    >>> b[:, :400] = 0.3  # an occluder in view b over a tenth of the pairs
+    >>> keep = rank_inliers(a, b)
+    >>> bool(keep[:400].mean() < 0.5), bool(keep[400:].mean() > 0.95)
+    (True, True)
+    """
+    ca = np.asarray(ca)
+    cb = np.asarray(cb)
+    n = ca.shape[1]
+    keep = np.ones(n, dtype=bool)
+    if n < 10:
+        return keep
+    both = _TiedRanks(np.concatenate([ca, cb]))  # view a's channels, then view b's
+    C = ca.shape[0]
+    for _ in range(1 + int(rounds)):
+        pos, half = both.among(keep)
+        pa, pb, ha, hb = pos[:C], pos[C:], half[:C], half[C:]
+        # within the two values' tied ranks the residual is 0: quantisation, not a wrong mapping
+        r = np.sign(pb - pa) * np.maximum(np.abs(pb - pa) - (ha + hb), 0.0)
+        sub = r[:, :: max(1, n // 2000)]
+        med = _median_rows(sub)[:, None]
+        mad = 1.4826 * _median_rows(np.abs(sub - med))
+        z = (r - med) / np.maximum(mad, 1e-3)[:, None]
+        z *= z
+        new = np.sqrt((z[0] + z[1]) + z[2]) <= float(k) * np.sqrt(3.0)
+        if new.sum() < 10:
+            break
+        changed = int(np.count_nonzero(new != keep))
+        keep = new
+        if changed <= n // 1000:  # settled (a few mappings on the threshold may swap for ever)
+            break
+    return keep
 
 
 class _PlaneValues:
@@ -218,12 +312,19 @@ def _sorted_quantiles_each(sorted_rows: np.ndarray, q: np.ndarray) -> np.ndarray
     return np.array([_sorted_quantiles(sorted_rows[c : c + 1], np.array([q[c]]))[0, 0] for c in range(len(q))])
 
 
-def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k: float | None):
+def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k: float | None,
+                  outlier_rounds: int | None = None):
     """One edge's task: (ca, cb) float32 colours, channels as rows (3, n) -> (qa (3, P), qb (3, P), n kept,
-    :func:`clipped_ends` (2, 3, 2, 2))."""
+    :func:`clipped_ends` (2, 3, 2, 2)). ``outlier_rounds`` None: the one-pass rule in view b's values
+    (:func:`_rank_inliers`); an integer: :func:`rank_inliers` with that many further rounds."""
     ca, cb = item
-    sb = np.sort(cb, axis=1)
-    if outlier_k is not None and ca.shape[1] >= 10:
+    if outlier_k is not None and ca.shape[1] >= 10 and outlier_rounds is not None:
+        keep = rank_inliers(ca, cb, k=float(outlier_k), rounds=int(outlier_rounds))
+        if 10 <= keep.sum() < len(keep):
+            ca, cb = ca[:, keep], cb[:, keep]
+        sa, sb = np.sort(ca, axis=1), np.sort(cb, axis=1)
+    elif outlier_k is not None and ca.shape[1] >= 10:
+        sb = np.sort(cb, axis=1)
         oa = np.argsort(ca, axis=1)
         sa = np.take_along_axis(ca, oa, axis=1)
         keep = _rank_inliers(ca, cb, oa, sb, k=float(outlier_k))
@@ -232,7 +333,7 @@ def _summary_task(item: tuple[np.ndarray, np.ndarray], q: np.ndarray, outlier_k:
             sa = np.stack([sa[c][keep[oa[c]]] for c in range(3)])
             sb = np.sort(cb[:, keep], axis=1)
     else:
-        sa = np.sort(ca, axis=1)
+        sa, sb = np.sort(ca, axis=1), np.sort(cb, axis=1)
     return _sorted_quantiles(sa, q), _sorted_quantiles(sb, q), sa.shape[1], clipped_ends(sa, sb)
 
 
@@ -322,6 +423,7 @@ def edge_observations(
     levels: int = 64,
     max_mappings: int | None = 8000,
     outlier_k: float | None = 3.0,
+    outlier_rounds: int | None = None,
     normalise_to: int | None = None,
     n_jobs: int | None = None,
 ) -> EdgeObservations | tuple[EdgeObservations, EdgeObservations]:
@@ -343,6 +445,10 @@ def edge_observations(
         Drop mappings whose colours disagree with the pair's quantile-quantile curve by more
         than this many robust sigmas jointly over the channels
         (:func:`o3d_seqcc.correction.methods.seqcc.colour_inliers`); None keeps all.
+    outlier_rounds : int or None, default None
+        None: that rule in one pass, the residuals in view b's values against the pair's quantile-quantile curve;
+        an integer: :func:`rank_inliers` (the same rule on the colours' ranks, which no monotone change of either
+        view moves) with this many further rounds among the inliers.
     normalise_to : int or None, default None
         A view index: also summarise the same colours with every other view's through its histogram normaliser
         toward that view (:func:`~o3d_seqcc.correction.methods.value_space.histogram_normalisers_from_colours`),
@@ -414,7 +520,7 @@ def edge_observations(
         # the per-edge summaries: numpy's sorts, gathers and medians release the GIL, local threads
         qa, qb, ns = np.zeros((E, 3, P)), np.zeros((E, 3, P)), np.zeros(E, dtype=np.int64)
         clipped = np.zeros((E, 2, 3, 2, 2))
-        for i, (qa_i, qb_i, n_i, clip_i) in zip(live, local.map(_summary_task, [items[i] for i in live], q, outlier_k,
+        for i, (qa_i, qb_i, n_i, clip_i) in zip(live, local.map(_summary_task, [items[i] for i in live], q, outlier_k, outlier_rounds,
                                                        desc="edge summaries", unit="edge")):
             qa[i], qb[i], ns[i], clipped[i] = qa_i, qb_i, n_i, clip_i
         return EdgeObservations(a=arr[:, 0].copy(), b=arr[:, 1].copy(), qa=qa, qb=qb, n=ns, clipped=clipped)

@@ -16,13 +16,56 @@ quantisation and clipping), so a solve run on ``T_v``-mapped colours sees the sa
 whatever the camera did; the correction of view ``v`` is then the solved curve composed with
 ``T_v``. ``T_v`` is only a change of variables: it brings each view near the reference's scale,
 and the joint solve (:mod:`~o3d_seqcc.correction.methods.joint_curves`) finds the rest.
+
+:func:`log_light` and :func:`log_light_inverse` are the change of variables of the solve in the photos' own values:
+the sRGB-encoded values decoded to linear light, then ``log(1 + light / floor)`` scaled to [0, 1]. There a
+camera's exposure and white balance are shifts and a gamma is a slope, so a response made of those is a straight
+line: the joint solve's piecewise-linear responses and their smoothness penalty (second differences) then cost
+nothing for what cameras do and continue it into values no edge observed (a photo's shadows that only photos far
+from the reference share).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["histogram_normaliser", "histogram_normalisers_from_colours", "map_rows"]
+from ...imaging.arrays import linear_to_srgb, srgb_to_linear
+
+__all__ = ["LOG_LIGHT_FLOOR", "histogram_normaliser", "histogram_normalisers_from_colours", "log_light",
+           "log_light_inverse", "map_rows"]
+
+#: the default ``floor`` of :func:`log_light`: linear light below it is compressed (sensor noise and the 8-bit
+#: steps of the darkest levels; 1e-3 is level 0.8 of 255 in sRGB)
+LOG_LIGHT_FLOOR = 1e-3
+
+
+def log_light(values: np.ndarray, floor: float = LOG_LIGHT_FLOOR) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> ``log(1 + linear / floor) / log(1 + 1 / floor)`` in [0, 1] (module docstring).
+
+    Parameters
+    ----------
+    values : float array in [0, 1]
+        Any shape (clipped to [0, 1]).
+    floor : float, default :data:`LOG_LIGHT_FLOOR`
+        Linear light at which the logarithm starts (> 0): a gain is a shift above it.
+
+    Returns
+    -------
+    float64 array, same shape, monotone increasing, 0 at 0 and 1 at 1.
+    """
+    f = float(floor)
+    if not f > 0:
+        raise ValueError(f"log_light: floor must be > 0, got {floor!r}")
+    return np.log1p(srgb_to_linear(values) / f) / np.log1p(1.0 / f)
+
+
+def log_light_inverse(values: np.ndarray, floor: float = LOG_LIGHT_FLOOR) -> np.ndarray:
+    """The inverse of :func:`log_light` (values clipped to [0, 1]): sRGB-encoded values in [0, 1], float64."""
+    f = float(floor)
+    if not f > 0:
+        raise ValueError(f"log_light_inverse: floor must be > 0, got {floor!r}")
+    y = np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
+    return np.clip(linear_to_srgb(np.expm1(y * np.log1p(1.0 / f)) * f), 0.0, 1.0)
 
 
 def _mid_ranks(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
