@@ -677,3 +677,38 @@ def test_ctrl_c_inside_importlibs_lock_callback_is_not_dropped(guard, expected):
     r = python(_CALLBACK_SIGINT.replace("{guard}", guard), timeout=60)
     assert r.stdout.strip() == expected, r.stdout + r.stderr
     assert ("Exception ignored" in r.stderr) == (expected != "interrupted"), r.stderr
+
+
+_CUT_SHORT = """
+import sys
+import open3d as o3d
+import o3d_seqcc.cli as cli
+
+class Holder:
+    pass
+
+def cut_short(argv=None):  # a stage that holds an Open3D tensor in a cycle when Ctrl-C lands
+    h = Holder()
+    h.self = h
+    h.tensor = o3d.core.Tensor.ones((4,))
+    raise KeyboardInterrupt
+
+cli._main = cut_short
+if sys.argv[1] == "console":
+    cli.console_main()
+else:
+    sys.exit(cli.main())
+"""
+
+
+@pytest.mark.parametrize("entry, code", [("console", 130), ("sys.exit(main())", 1)])
+def test_ctrl_c_exits_130_though_open3d_still_holds_tensors(tmp_path, entry, code):
+    # CI under load: `o3d-seqcc correct` interrupted at 0.9 s printed "interrupted" and exited 1 in 4 runs of 10:
+    # Open3D's MemoryManagerStatistic destructor ends a process that still holds tensor allocations with status 1,
+    # after main() returned 130. The console entry (console_main) ends the process before the C++ destructors; the
+    # plain sys.exit(main()) shows the exit status it had.
+    script = tmp_path / "cut_short.py"
+    script.write_text(_CUT_SHORT)
+    r = subprocess.run([sys.executable, str(script), entry], env=ENV, capture_output=True, text=True, timeout=120)
+    assert r.returncode == code, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
+    assert "o3d-seqcc: interrupted" in r.stderr
