@@ -82,12 +82,14 @@ def cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
 
 
 def default_signals() -> None:
-    """A child's SIGTERM and SIGHUP at their default action, as in a terminal.
+    """A child's SIGINT, SIGTERM and SIGHUP at their default action, as in a terminal.
 
     Under ``nohup`` (or another parent that ignores SIGHUP) a child inherits the ignored disposition, and
-    o3d-seqcc rightly keeps a SIGHUP its caller ignores; the signal cases test the terminal's case.
+    o3d-seqcc rightly keeps a SIGHUP its caller ignores; a background job of a non-interactive shell (``cmd &``)
+    ignores SIGINT, and Python then installs no KeyboardInterrupt handler. The signal cases test the terminal's
+    case.
     """
-    for sig in (signal.SIGTERM, signal.SIGHUP):
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_DFL)
 
 

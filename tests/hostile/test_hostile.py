@@ -47,9 +47,10 @@ def checksums(folder: Path) -> dict[str, str]:
 
 
 def python(code: str, *, cwd: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
-    """``code`` in a fresh interpreter (for what crashed or hung the process before)."""
+    """``code`` in a fresh interpreter (for what crashed or hung the process before), its signals at their default
+    action (:func:`default_signals`: a run started in the background must not ignore the Ctrl-C a test sends)."""
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=ENV, cwd=cwd, capture_output=True,
-                          text=True, errors="replace", timeout=timeout)
+                          text=True, errors="replace", timeout=timeout, preexec_fn=default_signals)
 
 
 @pytest.fixture(scope="module")
@@ -709,6 +710,7 @@ def test_ctrl_c_exits_130_though_open3d_still_holds_tensors(tmp_path, entry, cod
     # plain sys.exit(main()) shows the exit status it had.
     script = tmp_path / "cut_short.py"
     script.write_text(_CUT_SHORT)
-    r = subprocess.run([sys.executable, str(script), entry], env=ENV, capture_output=True, text=True, timeout=120)
+    r = subprocess.run([sys.executable, str(script), entry], env=ENV, capture_output=True, text=True, timeout=120,
+                       preexec_fn=default_signals)
     assert r.returncode == code, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
     assert "o3d-seqcc: interrupted" in r.stderr
