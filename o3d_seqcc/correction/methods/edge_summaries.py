@@ -105,14 +105,14 @@ class _TiedRanks:
 
     def __init__(self, rows: np.ndarray) -> None:
         self.group = np.clip(np.rint(np.asarray(rows, dtype=np.float64) * (RANK_BINS - 1)), 0, RANK_BINS - 1).astype(np.int64)
-        self.n_groups = RANK_BINS
         self.flat = (self.group + (np.arange(rows.shape[0]) * RANK_BINS)[:, None]).ravel()
 
     def among(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(mid, half)`` (C, n): each value's mid-rank CDF position among the values where ``keep`` (n,), and half
         the share its tied values take there."""
-        C, G = self.group.shape[0], max(self.n_groups, 1)
-        cnt = np.bincount(self.flat, weights=np.tile(keep, C).astype(np.float64), minlength=C * G).reshape(C, G)
+        C = self.group.shape[0]
+        cnt = np.bincount(self.flat, weights=np.tile(keep, C).astype(np.float64),
+                          minlength=C * RANK_BINS).reshape(C, RANK_BINS)
         hi = np.cumsum(cnt, axis=1).ravel()
         scale = 1.0 / (2.0 * max(int(keep.sum()), 1))
         hi_v = hi[self.flat].reshape(self.group.shape)
@@ -128,7 +128,8 @@ def rank_inliers(ca: np.ndarray, cb: np.ndarray, *, k: float = 3.0, rounds: int 
     ranks (a level of an 8-bit photo holds a range of ranks): a monotone change of either view's values (a
     camera's exposure, white balance, gamma or tone curve) does not move it, so the same mappings are kept
     whatever the cameras did. Residuals are centred and scaled per channel by their median and 1.4826 MAD over
-    the kept mappings (at least 0.001) and summed in quadrature; a mapping is an outlier when that norm exceeds
+    all the mappings (at least 0.001: a scale taken over the inliers shrank every round and never settled) and
+    summed in quadrature; a mapping is an outlier when that norm exceeds
     ``k * sqrt(3)`` (the rule of :func:`o3d_seqcc.correction.methods.seqcc.colour_inliers`). The first round
     ranks among all mappings; each further round among the last round's inliers, every mapping measured again
     (one dropped too early can come back), until at most one in a thousand changes. An occluder that one view shows
